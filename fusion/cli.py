@@ -1,0 +1,102 @@
+"""Command-line interface (CONTRACT.md): ``fusion run | simulate | validate | plugins``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from fusion.errors import FusionError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Fuse body-worn pedestrian navigation systems under body distance constraints.")
+
+SetOption = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: KEY=VALUE (dotted path).")]
+
+
+@app.command()
+def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
+        out: Annotated[Optional[Path], typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
+        set_: SetOption = None,
+        seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
+    """Run a layout and write metrics.json, trajectories.csv and plots."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from fusion.run import run as run_layout
+
+    result, out_dir = run_layout(config, set_ or [], out, seed)
+    console = Console(stderr=False)
+    table = Table(title=f"{result.loaded.name} → {out_dir}")
+    for col in ("system", "samples", "distance m", "h-RMSE m", "h-max m", "% dist", "loop m"):
+        table.add_column(col, justify="right")
+    import json
+
+    doc = json.loads((out_dir / "metrics.json").read_text())
+    for name, block in doc["systems"].items():
+        h = block.get("horizontal_error_m", {})
+
+        def fmt(v: float | None, spec: str = ".3f") -> str:
+            return "-" if v is None else format(v, spec)
+
+        table.add_row(name, str(block["samples"]), fmt(block.get("distance_m"), ".1f"), fmt(h.get("rmse")),
+                      fmt(h.get("max")), fmt(block.get("final_error_pct_distance"), ".2f"), fmt(block.get("loop_closure_m")))
+    console.print(table)
+    rt = doc["runtime"]
+    console.print(f"{rt['samples']} samples, navigation {rt['navigation_s']:.2f} s "
+                  f"({rt['samples_per_s']:,.0f} samples/s), total {rt['wall_s']:.2f} s")
+
+
+@app.command()
+def simulate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
+             out: Annotated[Path, typer.Option("--out", help="Output folder.")],
+             seed: Annotated[int, typer.Option("--seed")] = 0,
+             set_: SetOption = None) -> None:
+    """Simulate a walk: sensor files, truth.csv and a ready config.yaml."""
+    from fusion.sim import simulate as simulate_scenario
+
+    result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [])
+    typer.echo(f"wrote {result.config_path}")
+
+
+@app.command()
+def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
+    """Check a layout (both stages: layout and each plugin's section)."""
+    from fusion.config import load_layout
+
+    loaded = load_layout(config, set_ or [])
+    typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
+
+
+@app.command()
+def plugins() -> None:
+    """List the installed plugins, the systems each provides, and its package and version."""
+    from fusion.plugins import get_registry
+
+    for info in get_registry().describe():
+        typer.echo(f"{', '.join(info.systems):<20} {info.module:<32} {info.package} {info.version}")
+
+
+def main() -> None:
+    """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
+    try:
+        app(standalone_mode=False)
+    except FusionError as err:
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    except (typer.Abort, KeyboardInterrupt):
+        print("aborted", file=sys.stderr)
+        sys.exit(130)
+    except Exception as err:  # click usage errors
+        import click
+
+        if isinstance(err, click.ClickException):
+            err.show()
+            sys.exit(err.exit_code)
+        raise
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,317 @@
+"""Layouts: the YAML file that says which systems are worn, their data, and how they are fused.
+
+Validation is strict (unknown keys are refused) and two-staged: the core checks the
+layout's shape here; each system's own section is then checked by its plugin's
+``Config`` model (see :mod:`fusion.plugins`). Every error names the file and the
+dotted path of the offending key. Relative paths resolve against the config file's folder.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
+
+from fusion.errors import ConfigError
+
+
+def _resolve_path(value: Path, info: ValidationInfo) -> Path:
+    base = (info.context or {}).get("base_dir")
+    value = Path(value).expanduser()
+    if base is not None and not value.is_absolute():
+        value = Path(base) / value
+    return value
+
+
+DataPath = Annotated[Path, AfterValidator(_resolve_path)]
+"""A file path; relative paths resolve against the folder of the layout file."""
+
+
+class StrictModel(BaseModel):
+    """Base of every layout section: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class SystemSection(BaseModel):
+    """A system's section as the core sees it: its plugin name; the rest is the plugin's."""
+
+    model_config = ConfigDict(extra="allow")
+    plugin: str
+
+
+class ConstraintConfig(StrictModel):
+    """A distance limit between two systems' positions (m), horizontal by default."""
+
+    between: tuple[str, str]
+    kind: Literal["max", "min", "fixed"] = "max"
+    distance_m: float = Field(gt=0)
+    horizontal: bool = True
+    lever_arms_m: dict[str, tuple[float, float, float]] = Field(default_factory=dict)
+
+
+class FuserConfig(StrictModel):
+    """How constraints are enforced. ``none``: systems run independently."""
+
+    method: Literal["none"] = "none"
+
+
+class SmootherConfig(StrictModel):
+    kind: Literal["none"] = "none"
+
+
+class HeadingAlignmentConfig(StrictModel):
+    """Puts systems worn together in one navigation frame.
+
+    Systems whose ``initial.heading_deg`` is ``auto`` are rotated about their start so
+    that their first ``distance_m`` of travel points the same way as the reference
+    system's (the first system with a numeric heading, unless ``reference`` names one).
+    """
+
+    reference: str | None = None
+    distance_m: float = Field(default=3.0, gt=0)
+
+
+class TruthConfig(StrictModel):
+    """Reference positions (ENU, m) for scoring; ``loop`` when the walk ends where it began.
+
+    ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
+    ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
+    """
+
+    path: DataPath | None = None
+    format: Literal["wide", "long"] = "wide"
+    systems: dict[str, tuple[str, str, str]] = Field(default_factory=dict)
+    time_column: str | None = None
+    time_scale: float = Field(default=1.0, gt=0)
+    rate_hz: float | None = Field(default=None, gt=0)
+    skip_rows: int = Field(default=0, ge=0)
+    delimiter: str = ","
+    sparse: bool = False
+    loop: bool = False
+    alignment: Literal["first_3m", "none"] = "first_3m"
+    alignment_distance_m: float = Field(default=3.0, gt=0)
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "TruthConfig":
+        if self.path is None or self.format == "long":
+            return self
+        if (self.time_column is None) == (self.rate_hz is None):
+            raise ValueError("give exactly one of time_column or rate_hz")
+        if not self.systems:
+            raise ValueError("systems: name the position columns of at least one system")
+        return self
+
+
+class OutputConfig(StrictModel):
+    dir: DataPath | None = None
+    plots: bool = True
+    decimate: int = Field(default=1, ge=1)
+
+
+class Layout(StrictModel):
+    """A whole body layout. ``systems`` maps a name to its plugin section."""
+
+    name: str | None = None
+    gravity_mps2: float | None = Field(default=None, gt=9.7, lt=9.9)
+    latitude_deg: float = Field(default=45.0, ge=-90, le=90)
+    height_m: float = 0.0
+    systems: dict[str, SystemSection]
+    heading_alignment: HeadingAlignmentConfig = Field(default_factory=HeadingAlignmentConfig)
+    constraints: list[ConstraintConfig] = Field(default_factory=list)
+    fuser: FuserConfig = Field(default_factory=FuserConfig)
+    smoother: SmootherConfig = Field(default_factory=SmootherConfig)
+    truth: TruthConfig | None = None
+    output: OutputConfig = Field(default_factory=OutputConfig)
+
+    @model_validator(mode="after")
+    def _cross_references(self) -> "Layout":
+        if not self.systems:
+            raise ValueError("systems: at least one system is needed")
+        names = set(self.systems)
+        ref = self.heading_alignment.reference
+        if ref is not None and ref not in names:
+            raise _KeyedError("heading_alignment.reference", f"unknown system {ref!r} (have {sorted(names)})")
+        for k, c in enumerate(self.constraints):
+            for side in c.between:
+                if side not in names:
+                    raise _KeyedError(f"constraints.{k}.between", f"unknown system {side!r} (have {sorted(names)})")
+            if c.between[0] == c.between[1]:
+                raise _KeyedError(f"constraints.{k}.between", "a constraint needs two different systems")
+            for side in c.lever_arms_m:
+                if side not in c.between:
+                    raise _KeyedError(f"constraints.{k}.lever_arms_m.{side}", "not one of the constrained systems")
+        bounds: dict[frozenset[str], dict[str, float]] = {}
+        for k, c in enumerate(self.constraints):
+            pair = bounds.setdefault(frozenset(c.between), {})
+            pair[c.kind] = c.distance_m
+            if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
+                raise _KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
+        if self.truth is not None:
+            for sys_name in self.truth.systems:
+                if sys_name not in names:
+                    raise _KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")
+        return self
+
+
+class _KeyedError(ValueError):
+    """A cross-field error that knows the dotted key it is about."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(reason)
+        self.key = key
+
+
+def _dotted(loc: tuple[Any, ...]) -> str:
+    return ".".join(str(p) for p in loc if p not in ("function-after", "function-before"))
+
+
+def _first_error(err: ValidationError, prefix: str = "") -> tuple[str, str]:
+    e = err.errors(include_url=False)[0]
+    loc = _dotted(e["loc"])
+    ctx_err = (e.get("ctx") or {}).get("error")
+    if isinstance(ctx_err, _KeyedError):
+        return ctx_err.key, str(ctx_err)
+    msg = e["msg"]
+    if e["type"] == "extra_forbidden":
+        msg = "unknown key"
+    elif msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    key = ".".join(p for p in (prefix, loc) if p)
+    return key, msg
+
+
+def validate_section(model: type[BaseModel], data: Any, *, key: str, path: Path | None, base_dir: Path | None) -> Any:
+    """Validate ``data`` with ``model``; errors become one-line :class:`ConfigError` under ``key``."""
+    try:
+        return model.model_validate(data, context={"base_dir": base_dir})
+    except ValidationError as err:
+        k, msg = _first_error(err, key)
+        raise ConfigError(k, msg, path) from None
+
+
+def parse_override(item: str) -> tuple[str, Any]:
+    """``a.b.c=VALUE`` → (``a.b.c``, VALUE parsed as YAML)."""
+    if "=" not in item:
+        raise ConfigError(item, "override must be KEY=VALUE, e.g. fuser.method=none")
+    key, raw = item.split("=", 1)
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise ConfigError(key, "empty part in the dotted key")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key, value
+
+
+def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Set dotted paths in a raw layout dict (lists by integer index); returns a copy."""
+    out = copy.deepcopy(raw)
+    for item in overrides:
+        key, value = parse_override(item)
+        node: Any = out
+        parts = key.split(".")
+        for depth, part in enumerate(parts):
+            last = depth == len(parts) - 1
+            here = ".".join(parts[: depth + 1])
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise ConfigError(here, f"no list item {part} (the list has {len(node)})")
+                idx = int(part)
+                if last:
+                    node[idx] = value
+                else:
+                    node = node[idx]
+            elif isinstance(node, dict):
+                if last:
+                    node[part] = value
+                else:
+                    if node.get(part) is None:
+                        node[part] = {}
+                    node = node[part]
+            else:
+                raise ConfigError(here, "cannot set a key inside a plain value")
+    return out
+
+
+def read_yaml(path: Path) -> dict[str, Any]:
+    """Read a YAML mapping; syntax errors name the file and line."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError("", "file not found", path) from None
+    except OSError as err:
+        raise ConfigError("", f"cannot read: {err.strerror}", path) from None
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        raise ConfigError("", f"YAML syntax: {problem}", where) from None
+    if not isinstance(raw, dict):
+        raise ConfigError("", "the file must hold a YAML mapping", path)
+    return raw
+
+
+class LoadedLayout:
+    """A validated layout with each system's section validated by its plugin.
+
+    Attributes: ``path`` (file), ``layout`` (:class:`Layout`), ``system_configs``
+    (name → plugin config model), ``raw`` (the dict after overrides), ``sha256``.
+    """
+
+    def __init__(self, path: Path, layout: Layout, system_configs: dict[str, BaseModel], raw: dict[str, Any]) -> None:
+        self.path = path
+        self.layout = layout
+        self.system_configs = system_configs
+        self.raw = raw
+        self.sha256 = hashlib.sha256(yaml.safe_dump(raw, sort_keys=True).encode()).hexdigest()
+
+    @property
+    def name(self) -> str:
+        return self.layout.name or self.path.stem
+
+
+def load_layout(path: str | Path, overrides: list[str] | None = None, registry: Any = None) -> LoadedLayout:
+    """Read, override, and validate a layout file (both stages)."""
+    from fusion.plugins import get_registry
+
+    path = Path(path)
+    raw = apply_overrides(read_yaml(path), overrides or [])
+    base_dir = path.resolve().parent
+    layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
+    registry = registry or get_registry()
+    system_configs: dict[str, BaseModel] = {}
+    for name, section in raw["systems"].items():
+        system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
+        system_configs[name] = validate_section(system_cls.Config, section, key=f"systems.{name}", path=path, base_dir=base_dir)
+    return LoadedLayout(path, layout, system_configs, raw)
+
+
+class ImuCsvConfig(StrictModel):
+    """An IMU recorded as CSV: column names, units and time base (see :func:`fusion.readers.read_imu_csv`)."""
+
+    path: DataPath
+    acc_columns: tuple[str, str, str]
+    gyro_columns: tuple[str, str, str]
+    stance_column: str | None = None
+    acc_unit: Literal["m/s^2", "g"] = "m/s^2"
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    time_column: str | None = None
+    time_scale: float = Field(default=1.0, gt=0)
+    rate_hz: float | None = Field(default=None, gt=0)
+    skip_rows: int = Field(default=0, ge=0)
+    delimiter: str = ","
+    timestamp_policy: Literal["drop", "sort", "error"] = "drop"
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "ImuCsvConfig":
+        if (self.time_column is None) == (self.rate_hz is None):
+            raise ValueError("give exactly one of time_column or rate_hz")
+        return self

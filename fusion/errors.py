@@ -1,0 +1,31 @@
+"""User-facing errors: each prints as one line naming the file (and line) or the config key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class FusionError(Exception):
+    """An error caused by the user's input; the CLI prints ``str(err)`` and exits non-zero."""
+
+
+class InputError(FusionError):
+    """Bad data file: ``path:line: reason`` (line is 1-based, as an editor shows it)."""
+
+    def __init__(self, path: str | Path, reason: str, line: int | None = None) -> None:
+        self.path = str(path)
+        self.line = line
+        self.reason = reason
+        where = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{where}: {reason}")
+
+
+class ConfigError(FusionError):
+    """Bad layout: ``file: dotted.key.path: reason``."""
+
+    def __init__(self, key: str, reason: str, path: str | Path | None = None) -> None:
+        self.key = key
+        self.path = None if path is None else str(path)
+        self.reason = reason
+        prefix = f"{self.path}: " if self.path else ""
+        super().__init__(f"{prefix}{key or '<root>'}: {reason}")

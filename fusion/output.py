@@ -1,0 +1,99 @@
+"""Writers of the run outputs named in CONTRACT.md: metrics.json, trajectories.csv, plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fusion.errors import FusionError
+from fusion.metrics import loop_closure_m, path_length_m
+from fusion.run import RunResult, samples_total
+
+TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
+
+
+def _median_p99(values: list[float]) -> dict[str, float]:
+    if not values:
+        return {"median": 0.0, "p99": 0.0}
+    a = np.asarray(values)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
+
+
+def metrics_document(result: RunResult, config_label: str, total_wall_s: float) -> dict:
+    """The metrics.json document (CONTRACT.md), plus per-system diagnostics."""
+    layout = result.loaded.layout
+    loop = layout.truth is not None and layout.truth.loop
+    systems: dict[str, dict] = {}
+    for name, system in result.systems.items():
+        traj = result.trajectories[name]
+        block: dict = {"samples": system.samples}
+        score = result.scores.get(name)
+        if score is not None:
+            block.update(score.metrics)
+        else:
+            block["distance_m"] = path_length_m(traj.pos_n)
+        if loop and "loop_closure_m" not in block:
+            block["loop_closure_m"] = loop_closure_m(traj)
+        block["diagnostics"] = system.diagnostics()
+        systems[name] = block
+    t = result.transform
+    doc: dict = {
+        "config": config_label,
+        "config_sha256": result.loaded.sha256,
+        "alignment": layout.truth.alignment if result.scores else "none",
+        "evaluation": {
+            "error_epochs": "truth epochs; estimate interpolated linearly to them",
+            "transform": {"rotation_deg": float(np.rad2deg(t.rotation_rad)),
+                          "translation_m": [float(v) for v in t.translation_m],
+                          "vertical_offset_m": float(t.vertical_offset_m)},
+        },
+        "heading_alignment_deg": {k: float(np.rad2deg(v)) for k, v in result.heading_rotations_rad.items()},
+        "systems": systems,
+    }
+    if layout.constraints:
+        rep = result.fuser
+        doc["constraints"] = {
+            "method": rep.method, "epochs": rep.epochs, "activations": rep.activations,
+            "solver_fallbacks": rep.solver_fallbacks, "max_violation_after_m": rep.max_violation_after_m,
+            "solve_time_us": _median_p99(rep.solve_times_us),
+        }
+    inp = result.input_report
+    doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
+                    "notes": inp.notes}
+    samples = samples_total(result)
+    nav_s = result.timings_s["navigation_s"]
+    doc["runtime"] = {"wall_s": total_wall_s, "samples": samples,
+                      "samples_per_s": samples / nav_s if nav_s > 0 else 0.0,
+                      **{k: v for k, v in result.timings_s.items()}}
+    return doc
+
+
+def write_trajectories(path: Path, result: RunResult, decimate: int = 1) -> None:
+    """Long-format trajectories in the navigation frame, before any evaluation alignment."""
+    with path.open("w") as fh:
+        fh.write(TRAJECTORY_HEADER + "\n")
+        for name, traj in result.trajectories.items():
+            block = np.column_stack([traj.t, traj.pos_n, traj.pos_sd])[::decimate]
+            np.savetxt(fh, block, fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
+
+
+def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float) -> None:
+    """metrics.json, trajectories.csv and (unless switched off) the PNG plots."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
+    output = result.loaded.layout.output
+    write_trajectories(out_dir / "trajectories.csv", result, output.decimate)
+    doc = metrics_document(result, config_label, total_wall_s)
+    (out_dir / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
+    if output.plots:
+        from fusion import plots
+
+        plots.plot_trajectories(out_dir / "trajectory.png", result.trajectories, result.scores or None,
+                                result.transform, result.truths or None)
+        if result.scores:
+            plots.plot_error_vs_time(out_dir / "error_vs_time.png", result.scores)
+            plots.plot_error_cdf(out_dir / "error_cdf.png", result.scores)

@@ -1,0 +1,88 @@
+"""Attitude conventions, said once for the whole project.
+
+Quaternions are **scalar-first** ``[w, x, y, z]`` with the Hamilton product. ``q_nb``
+rotates body-frame vectors into the navigation frame (ENU): ``v_n = C_nb v_b`` with
+``C_nb = quat_to_dcm(q_nb)``. Heading (azimuth) is measured clockwise from North;
+the ENU yaw angle (counter-clockwise about Up from East) is ``pi/2 - azimuth``.
+
+The numba kernels here serve the per-sample loops; the conversions that run once
+use :class:`scipy.spatial.transform.Rotation` with ``scalar_first=True``.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+@numba.njit(cache=True, inline="always")
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a ⊗ b of scalar-first quaternions."""
+    out = np.empty(4)
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
+    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
+    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
+    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def quat_from_rotvec(r: np.ndarray) -> np.ndarray:
+    """Quaternion of the rotation vector r (rad); exact, with a series near zero."""
+    angle = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    out = np.empty(4)
+    if angle < 1e-8:
+        out[0] = 1.0 - angle * angle / 8.0
+        s = 0.5 - angle * angle / 48.0
+    else:
+        out[0] = np.cos(0.5 * angle)
+        s = np.sin(0.5 * angle) / angle
+    out[1] = s * r[0]
+    out[2] = s * r[1]
+    out[3] = s * r[2]
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def quat_normalise(q: np.ndarray) -> None:
+    """Scale q to unit norm in place."""
+    n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for k in range(4):
+        q[k] /= n
+
+
+@numba.njit(cache=True, inline="always")
+def quat_to_dcm(q: np.ndarray) -> np.ndarray:
+    """Direction-cosine matrix C_nb of the unit quaternion q_nb."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    C = np.empty((3, 3))
+    C[0, 0] = 1 - 2 * (y * y + z * z)
+    C[0, 1] = 2 * (x * y - w * z)
+    C[0, 2] = 2 * (x * z + w * y)
+    C[1, 0] = 2 * (x * y + w * z)
+    C[1, 1] = 1 - 2 * (x * x + z * z)
+    C[1, 2] = 2 * (y * z - w * x)
+    C[2, 0] = 2 * (x * z - w * y)
+    C[2, 1] = 2 * (y * z + w * x)
+    C[2, 2] = 1 - 2 * (x * x + y * y)
+    return C
+
+
+def quat_from_azimuth_pitch_roll(azimuth: float, pitch: float, roll: float) -> np.ndarray:
+    """q_nb from azimuth (clockwise from North), pitch and roll (rad), ZYX order in ENU."""
+    rot = Rotation.from_euler("ZYX", [np.pi / 2 - azimuth, pitch, roll])
+    return rot.as_quat(scalar_first=True)
+
+
+def azimuth_pitch_roll(q_nb: np.ndarray) -> np.ndarray:
+    """(azimuth, pitch, roll) in rad of scalar-first q_nb; accepts (4,) or (N, 4)."""
+    yaw, pitch, roll = Rotation.from_quat(q_nb, scalar_first=True).as_euler("ZYX").T
+    azimuth = np.mod(np.pi / 2 - yaw, 2 * np.pi)
+    return np.array([azimuth, pitch, roll])
+
+
+def levelling(mean_acc_b: np.ndarray) -> tuple[float, float]:
+    """Pitch and roll (rad) from the mean specific force over a stationary window."""
+    ax, ay, az = mean_acc_b
+    return float(np.arctan2(-ax, np.hypot(ay, az))), float(np.arctan2(ay, az))

@@ -1,0 +1,110 @@
+"""``fusion run``: build a layout's systems, fuse them, score against truth, write outputs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fusion.config import LoadedLayout, load_layout
+from fusion.earth import normal_gravity
+from fusion.fuser import Fuser, FuserReport
+from fusion.heading import align_headings
+from fusion.metrics import PlanarTransform, SystemScore, score_systems
+from fusion.plugins import get_registry
+from fusion.readers import read_truth_csv, read_truth_long_csv
+from fusion.system import LayoutContext, SensorSystem
+from fusion.types import InputReport, Trajectory, TruthTrack
+
+
+@dataclass
+class RunResult:
+    """Everything a run produced: systems (with their histories), trajectories, scores."""
+
+    loaded: LoadedLayout
+    systems: dict[str, SensorSystem]
+    trajectories: dict[str, Trajectory]
+    truths: dict[str, TruthTrack]
+    transform: PlanarTransform
+    scores: dict[str, SystemScore]
+    fuser: FuserReport
+    heading_rotations_rad: dict[str, float]
+    timings_s: dict[str, float]
+
+    @property
+    def input_report(self) -> InputReport:
+        report = InputReport()
+        for s in self.systems.values():
+            report = report.merge(s.input_report)
+        return report
+
+
+def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
+    lay = loaded.layout
+    g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
+    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.path.resolve().parent, seed=seed)
+
+
+def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem]:
+    registry = get_registry()
+    return {
+        name: registry.system_class(cfg.plugin)(name, cfg, context)
+        for name, cfg in loaded.system_configs.items()
+    }
+
+
+def load_truth(loaded: LoadedLayout) -> dict[str, TruthTrack]:
+    truth = loaded.layout.truth
+    if truth is None or truth.path is None:
+        return {}
+    if truth.format == "long":
+        tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
+        return {name: tr for name, tr in tracks.items() if name in loaded.layout.systems}
+    return read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
+                          time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
+                          delimiter=truth.delimiter, sparse=truth.sparse)
+
+
+def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
+    """Run a validated layout in-process (no files written)."""
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    context = layout_context(loaded, seed)
+    systems = build_systems(loaded, context)
+    truths = load_truth(loaded)
+    timings["load_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    rotations = align_headings(systems, loaded.layout.heading_alignment)
+    report = Fuser(systems, loaded.layout.fuser).run()
+    timings["navigation_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    trajectories = {name: s.trajectory() for name, s in systems.items()}
+    truth_cfg = loaded.layout.truth
+    if truths:
+        transform, scores = score_systems(trajectories, truths, alignment=truth_cfg.alignment,
+                                          loop=truth_cfg.loop, alignment_distance_m=truth_cfg.alignment_distance_m)
+    else:
+        transform, scores = PlanarTransform.identity(), {}
+    timings["scoring_s"] = time.perf_counter() - t0
+    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, timings)
+
+
+def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
+        seed: int = 0) -> tuple[RunResult, Path]:
+    """Load, run, and write outputs; returns the result and the output folder."""
+    from fusion.output import write_outputs
+
+    t0 = time.perf_counter()
+    loaded = load_layout(config_path, overrides)
+    result = run_layout(loaded, seed)
+    out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
+    write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0)
+    return result, out
+
+
+def samples_total(result: RunResult) -> int:
+    return int(np.sum([s.samples for s in result.systems.values()]))

@@ -1,0 +1,86 @@
+"""Strapdown mechanisation in the local ENU frame with a quaternion attitude.
+
+Nominal state vector ``x`` (16,): position p_n (m, 0:3), velocity v_n (m/s, 3:6),
+attitude q_nb (scalar-first, 6:10), accelerometer bias b_a (m/s^2, 10:13), gyroscope
+bias b_g (rad/s, 13:16).
+
+An IMU sample at t_k is taken as the mean rate over (t_{k-1}, t_k] (increment
+convention). One step, from t_{k-1} to t_k with Δθ = (ω_k − b_g) dt and
+Δv = (f_k − b_a) dt:
+
+    v_n ← v_n + C_nb(t_{k-1}) (Δv + ½ Δθ × Δv) + (g_n − 2 ω_ie × v_n) dt
+    p_n ← p_n + ½ (v_n(t_{k-1}) + v_n(t_k)) dt
+    q_nb ← exp(−ω_ie dt) ⊗ q_nb ⊗ exp(Δθ)
+
+The ½ Δθ × Δv term is the rotation compensation of the velocity increment; the
+Earth rate ω_ie (ENU) is optional (zero vector switches it off).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from fusion.quaternion import quat_from_rotvec, quat_multiply, quat_normalise, quat_to_dcm
+
+POS = slice(0, 3)
+VEL = slice(3, 6)
+QUAT = slice(6, 10)
+ACC_BIAS = slice(10, 13)
+GYRO_BIAS = slice(13, 16)
+NOMINAL_SIZE = 16
+
+
+@numba.njit(cache=True)
+def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g: float,
+              w_ie_n: np.ndarray, f_n_out: np.ndarray) -> np.ndarray:
+    """Advance the nominal state ``x`` in place by one sample (see module docstring).
+
+    acc_b: specific force (m/s^2), gyro_b: angular rate (rad/s), dt (s), g: gravity
+    magnitude (m/s^2). Writes the mean navigation-frame specific force of the step
+    into ``f_n_out`` and returns C_nb at the start of the step (both feed the error-state
+    transition matrix).
+    """
+    C = quat_to_dcm(x[6:10])
+    dth = np.empty(3)
+    dv = np.empty(3)
+    for k in range(3):
+        dth[k] = (gyro_b[k] - x[13 + k]) * dt
+        dv[k] = (acc_b[k] - x[10 + k]) * dt
+    comp = np.empty(3)
+    comp[0] = dv[0] + 0.5 * (dth[1] * dv[2] - dth[2] * dv[1])
+    comp[1] = dv[1] + 0.5 * (dth[2] * dv[0] - dth[0] * dv[2])
+    comp[2] = dv[2] + 0.5 * (dth[0] * dv[1] - dth[1] * dv[0])
+    v0 = x[3:6].copy()
+    cor = np.empty(3)
+    cor[0] = 2.0 * (w_ie_n[1] * v0[2] - w_ie_n[2] * v0[1])
+    cor[1] = 2.0 * (w_ie_n[2] * v0[0] - w_ie_n[0] * v0[2])
+    cor[2] = 2.0 * (w_ie_n[0] * v0[1] - w_ie_n[1] * v0[0])
+    for r in range(3):
+        dvn = C[r, 0] * comp[0] + C[r, 1] * comp[1] + C[r, 2] * comp[2]
+        f_n_out[r] = dvn / dt
+        x[3 + r] = v0[r] + dvn - cor[r] * dt
+    x[5] -= g * dt
+    for r in range(3):
+        x[r] += 0.5 * (v0[r] + x[3 + r]) * dt
+    q = quat_multiply(x[6:10], quat_from_rotvec(dth))
+    if w_ie_n[0] != 0.0 or w_ie_n[1] != 0.0 or w_ie_n[2] != 0.0:
+        q = quat_multiply(quat_from_rotvec(-w_ie_n * dt), q)
+    quat_normalise(q)
+    x[6:10] = q
+    return C
+
+
+@numba.njit(cache=True)
+def integrate(x0: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, g: float,
+              w_ie_n: np.ndarray) -> np.ndarray:
+    """Free inertial navigation (no aiding) from x0 at t[0]; returns (N, 16) nominal states."""
+    n = t.shape[0]
+    out = np.empty((n, 16))
+    x = x0.copy()
+    out[0] = x
+    f_n = np.empty(3)
+    for i in range(1, n):
+        mechanise(x, acc_b[i], gyro_b[i], t[i] - t[i - 1], g, w_ie_n, f_n)
+        out[i] = x
+    return out

@@ -1,0 +1,121 @@
+"""The interface every sensor system (plugin) implements for the fuser.
+
+A system owns its data stream, its nominal navigation state and error-state filter,
+its own aiding, and its history. The fuser drives it forward in time with
+:meth:`SensorSystem.advance` and, at sync epochs, reads its position and covariance
+and hands back a correction with :meth:`SensorSystem.apply_correction`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from pydantic import BaseModel
+
+from fusion.types import InputReport, Trajectory
+
+
+@dataclass(frozen=True)
+class LayoutContext:
+    """Layout-wide facts a system needs: gravity (m/s^2), latitude (deg), config folder."""
+
+    gravity_mps2: float
+    latitude_deg: float
+    base_dir: Path
+    seed: int = 0
+
+
+class SensorSystem(ABC):
+    """Base class of a body-worn navigation system.
+
+    Class attributes: ``plugin_name`` (the layout's ``systems.<name>.plugin``), ``Config``
+    (pydantic model of the system's section) and ``position_indices`` (indices of δp
+    in the error state). Frames: positions in the ENU navigation frame, metres.
+    """
+
+    plugin_name: ClassVar[str]
+    Config: ClassVar[type[BaseModel]]
+    position_indices: ClassVar[slice] = slice(0, 3)
+
+    def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
+        self.name = name
+        self.config = config
+        self.context = context
+
+    # --- time -----------------------------------------------------------------
+    @property
+    @abstractmethod
+    def t_start(self) -> float:
+        """Time of the first state (s)."""
+
+    @property
+    @abstractmethod
+    def t_end(self) -> float:
+        """Time of the last sample (s)."""
+
+    @property
+    @abstractmethod
+    def t_now(self) -> float:
+        """Time of the current state (s)."""
+
+    @abstractmethod
+    def advance(self, t: float) -> None:
+        """Propagate and apply own aiding for every sample with time <= t."""
+
+    # --- heading --------------------------------------------------------------
+    @abstractmethod
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        """Azimuth (rad, clockwise from North) of the start-to-here vector once the
+        system has travelled ``distance_m`` horizontally, with the current initial
+        heading; None if it never travels that far. Leaves the system at its start."""
+
+    @abstractmethod
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        """Rotate the initial attitude about Up by ``delta_rad`` (clockwise from North
+        positive, as azimuth) and restart from the first sample."""
+
+    @property
+    @abstractmethod
+    def heading_is_auto(self) -> bool:
+        """True if the layout asks for the heading to be aligned to the other systems."""
+
+    # --- fuser interface ----------------------------------------------------------
+    @abstractmethod
+    def position_n(self) -> np.ndarray:
+        """Current position estimate, ENU (m), shape (3,)."""
+
+    @abstractmethod
+    def covariance(self) -> np.ndarray:
+        """Current error-state covariance, shape (n, n)."""
+
+    @abstractmethod
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """Closed-loop reset: add error-state correction ``dx`` (n,) to the nominal
+        state and replace the covariance with ``P`` (n, n)."""
+
+    @abstractmethod
+    def sync_times(self) -> np.ndarray:
+        """Times (s) of events the fuser may sync on (e.g. stance starts)."""
+
+    # --- results ----------------------------------------------------------------
+    @abstractmethod
+    def trajectory(self) -> Trajectory:
+        """History of positions and their one-sigma uncertainty."""
+
+    @property
+    @abstractmethod
+    def samples(self) -> int:
+        """Number of input samples used."""
+
+    @property
+    @abstractmethod
+    def input_report(self) -> InputReport:
+        """What the readers dropped or reordered."""
+
+    def diagnostics(self) -> dict:
+        """Plugin-specific figures for metrics.json (stance fraction, updates...)."""
+        return {}

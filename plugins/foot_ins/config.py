@@ -1,0 +1,69 @@
+"""Layout section of a foot-mounted INS (``plugin: foot_ins``)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from fusion.config import ImuCsvConfig, StrictModel
+
+
+class FootFilterConfig(StrictModel):
+    """Error-state filter settings. Noise densities: accelerometer m/s^2/√Hz, gyroscope
+    rad/s/√Hz; bias random walks m/s^3/√Hz and rad/s^2/√Hz; ZUPT σ in m/s, ZARU σ in rad/s."""
+
+    kind: Literal["ekf"] = "ekf"
+    acc_noise_density: float = Field(default=0.02, gt=0)
+    gyro_noise_density: float = Field(default=0.002, gt=0)
+    acc_bias_random_walk: float = Field(default=1e-4, ge=0)
+    gyro_bias_random_walk: float = Field(default=1e-5, ge=0)
+    zupt_sigma_mps: float = Field(default=0.01, gt=0)
+    zaru_sigma_radps: float | None = Field(default=None, gt=0)
+    earth_rate: bool = False
+
+
+class DetectorConfig(StrictModel):
+    """Zero-velocity detector. ``labels`` uses the data's stance column.
+
+    shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a (m/s^2), σ_ω (rad/s) and
+    ``threshold`` γ; magnitude: | ‖f‖ − g | ≤ ``threshold`` (m/s^2); axes_band: ``low`` ≤
+    f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance runs shorter than ``min_stance_s`` and swing
+    gaps shorter than ``min_swing_s`` are removed.
+    """
+
+    kind: Literal["labels", "shoe", "magnitude", "axes_band"] = "shoe"
+    window: int = Field(default=5, ge=1)
+    threshold: float | None = Field(default=None, gt=0)
+    sigma_acc: float = Field(default=0.01, gt=0)
+    sigma_gyro: float = Field(default=0.1 * 3.141592653589793 / 180, gt=0)
+    low: float | None = None
+    high: float | None = None
+    min_stance_s: float = Field(default=0.0, ge=0)
+    min_swing_s: float = Field(default=0.0, ge=0)
+
+
+class InitialStateConfig(StrictModel):
+    """Initial state: position (ENU m), heading (azimuth of the body x axis, degrees
+    clockwise from North, or ``auto`` to align with the other systems), the stationary
+    window at the start used for levelling and gyro bias (s), and one-sigma uncertainties."""
+
+    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    heading_deg: float | Literal["auto"] = 0.0
+    stationary_s: float = Field(default=1.0, gt=0)
+    position_sd_m: float = Field(default=1e-3, gt=0)
+    velocity_sd_mps: float = Field(default=1e-2, gt=0)
+    level_sd_deg: float = Field(default=1.0, gt=0)
+    heading_sd_deg: float = Field(default=1.0, gt=0)
+    acc_bias_sd_mps2: float = Field(default=0.05, gt=0)
+    gyro_bias_sd_radps: float = Field(default=1e-3, gt=0)
+
+
+class FootInsConfig(StrictModel):
+    """A foot-mounted IMU with strapdown navigation, ZUPT and a 15-state error filter."""
+
+    plugin: Literal["foot_ins"] = "foot_ins"
+    data: ImuCsvConfig
+    filter: FootFilterConfig = Field(default_factory=FootFilterConfig)
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
+    initial: InitialStateConfig = Field(default_factory=InitialStateConfig)

@@ -1,0 +1,204 @@
+"""Foot-mounted INS: strapdown navigation, zero-velocity detection, 15-state error EKF."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion import detectors
+from fusion.errors import ConfigError
+from fusion.quaternion import levelling, quat_from_azimuth_pitch_roll
+from fusion.readers import read_imu_csv
+from fusion.strapdown import NOMINAL_SIZE
+from fusion.system import LayoutContext, SensorSystem
+from fusion.types import ImuStream, InputReport, Trajectory
+from fusion_plugins.foot_ins.config import DetectorConfig, FootInsConfig
+from fusion_plugins.foot_ins.kernels import C_NIS_SUM, C_ZARUS, C_ZUPTS, PARAMS_SIZE, run_foot_ins
+
+_DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
+
+
+def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
+    """Stance flags (N,) from the configured detector, then debounced (durations in s)."""
+    threshold = cfg.threshold if cfg.threshold is not None else _DEFAULT_THRESHOLDS.get(cfg.kind)
+    if cfg.kind == "labels":
+        if stream.stance is None:
+            raise ConfigError(f"{key}.kind", "labels need data.stance_column")
+        stance = stream.stance.copy()
+    elif cfg.kind == "shoe":
+        stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=cfg.window, sigma_acc=cfg.sigma_acc,
+                                sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity)
+    elif cfg.kind == "magnitude":
+        stance = detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=cfg.window)
+    else:
+        low = cfg.low if cfg.low is not None else gravity - 1.0
+        high = cfg.high if cfg.high is not None else gravity + 1.0
+        if not low < high:
+            raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
+        stance = detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=cfg.window)
+    rate = 1.0 / np.median(np.diff(stream.t))
+    if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
+        stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
+                                    min_swing=max(1, round(cfg.min_swing_s * rate)))
+    return np.ascontiguousarray(stance, dtype=np.bool_)
+
+
+class FootIns(SensorSystem):
+    """Foot-mounted IMU navigated by strapdown + ZUPT in a closed-loop error-state EKF.
+
+    Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`fusion.error_state`.
+    The per-sample loop runs compiled (:func:`fusion_plugins.foot_ins.kernels.run_foot_ins`)
+    in chunks between the fuser's sync epochs.
+
+    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal states,
+    ``stance`` (N,) detector output.
+    """
+
+    plugin_name = "foot_ins"
+    Config = FootInsConfig
+
+    def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        d = config.data
+        self.stream = read_imu_csv(
+            d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns, stance_column=d.stance_column,
+            acc_unit=d.acc_unit, gyro_unit=d.gyro_unit, time_column=d.time_column, time_scale=d.time_scale,
+            rate_hz=d.rate_hz, skip_rows=d.skip_rows, delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
+        self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
+        self._params = self._filter_params()
+        heading = config.initial.heading_deg
+        self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
+        self._x0, self._P0 = self._initial_state()
+        self.restart()
+
+    # --- set-up -------------------------------------------------------------------
+    def _filter_params(self) -> np.ndarray:
+        f = self.config.filter
+        p = np.zeros(PARAMS_SIZE)
+        p[:7] = (f.acc_noise_density, f.gyro_noise_density, f.acc_bias_random_walk, f.gyro_bias_random_walk,
+                 f.zupt_sigma_mps, f.zaru_sigma_radps or 0.0, self.context.gravity_mps2)
+        if f.earth_rate:
+            from fusion.earth import earth_rate_enu
+
+            p[7:10] = earth_rate_enu(self.context.latitude_deg)
+        return p
+
+    def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Levelling and gyro bias from the stationary window at the start (roll/pitch from
+        the mean specific force, b_g = mean angular rate); heading from the layout."""
+        ini = self.config.initial
+        t = self.stream.t
+        window = t - t[0] <= ini.stationary_s
+        if window.sum() < 2:
+            raise ConfigError(f"systems.{self.name}.initial.stationary_s", "window holds fewer than 2 samples")
+        pitch, roll = levelling(self.stream.acc_b[window].mean(axis=0))
+        x = np.zeros(NOMINAL_SIZE)
+        x[0:3] = ini.position_m
+        x[6:10] = quat_from_azimuth_pitch_roll(self._azimuth0, pitch, roll)
+        x[13:16] = self.stream.gyro_b[window].mean(axis=0)
+        sd = np.concatenate([
+            np.full(3, ini.position_sd_m), np.full(3, ini.velocity_sd_mps),
+            np.deg2rad([ini.level_sd_deg, ini.level_sd_deg, ini.heading_sd_deg]),
+            np.full(3, ini.acc_bias_sd_mps2), np.full(3, ini.gyro_bias_sd_radps)])
+        return x, np.diag(sd**2)
+
+    def restart(self) -> None:
+        """Back to the initial state at the first sample; history cleared."""
+        n = len(self.stream)
+        self.x = self._x0.copy()
+        self.P = self._P0.copy()
+        self.hist_x = np.empty((n, NOMINAL_SIZE))
+        self.hist_pos_var = np.empty((n, 3))
+        self.hist_x[0] = self.x
+        self.hist_pos_var[0] = np.diag(self.P)[:3]
+        self.counters = np.zeros(3)
+        self._i = 0  # index of the sample the state refers to
+
+    # --- time ---------------------------------------------------------------------
+    @property
+    def t_start(self) -> float:
+        return float(self.stream.t[0])
+
+    @property
+    def t_end(self) -> float:
+        return float(self.stream.t[-1])
+
+    @property
+    def t_now(self) -> float:
+        return float(self.stream.t[self._i])
+
+    def advance(self, t: float) -> None:
+        i1 = int(np.searchsorted(self.stream.t, t, side="right"))
+        if i1 <= self._i + 1:
+            return
+        run_foot_ins(self.x, self.P, self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance,
+                     self._i + 1, i1, self._params, self.hist_x, self.hist_pos_var, self.counters)
+        self._i = i1 - 1
+
+    # --- heading ------------------------------------------------------------------
+    @property
+    def heading_is_auto(self) -> bool:
+        return self.config.initial.heading_deg == "auto"
+
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        self.restart()
+        chunk_s = 5.0
+        t = self.t_start
+        azimuth = None
+        while self._i < len(self.stream) - 1:
+            t += chunk_s
+            self.advance(t)
+            pos = self.hist_x[: self._i + 1, 0:2]
+            path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pos, axis=0).T))])
+            reached = np.flatnonzero(path >= distance_m)
+            if reached.size:
+                d = pos[reached[0]] - pos[0]
+                azimuth = float(np.arctan2(d[0], d[1]))
+                break
+        self.restart()
+        return azimuth
+
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        self._azimuth0 += delta_rad
+        self._x0, self._P0 = self._initial_state()
+        self.restart()
+
+    # --- fuser interface ------------------------------------------------------------
+    def position_n(self) -> np.ndarray:
+        return self.x[0:3].copy()
+
+    def covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        from fusion.error_state import inject
+
+        inject(self.x, np.ascontiguousarray(dx, dtype=np.float64))
+        self.P = 0.5 * (P + P.T)
+        self.hist_x[self._i] = self.x
+        self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+
+    def sync_times(self) -> np.ndarray:
+        starts, _ = detectors.stance_events(self.stance)
+        return self.stream.t[starts]
+
+    # --- results ----------------------------------------------------------------------
+    def trajectory(self) -> Trajectory:
+        n = self._i + 1
+        return Trajectory(self.stream.t[:n], self.hist_x[:n, 0:3], np.sqrt(np.maximum(self.hist_pos_var[:n], 0.0)))
+
+    @property
+    def samples(self) -> int:
+        return len(self.stream)
+
+    @property
+    def input_report(self) -> InputReport:
+        return self.stream.report
+
+    def diagnostics(self) -> dict:
+        zupts = int(self.counters[C_ZUPTS])
+        return {
+            "stance_fraction": float(self.stance.mean()),
+            "zupt_updates": zupts,
+            "zaru_updates": int(self.counters[C_ZARUS]),
+            "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
+        }
