@@ -11,12 +11,14 @@ use :class:`scipy.spatial.transform.Rotation` with ``scalar_first=True``.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a ⊗ b of scalar-first quaternions."""
     out = np.empty(4)
@@ -27,32 +29,32 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def quat_from_rotvec(r: np.ndarray) -> np.ndarray:
     """Quaternion of the rotation vector r (rad); exact, with a series near zero."""
-    angle = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    angle = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     out = np.empty(4)
     if angle < 1e-8:
         out[0] = 1.0 - angle * angle / 8.0
         s = 0.5 - angle * angle / 48.0
     else:
-        out[0] = np.cos(0.5 * angle)
-        s = np.sin(0.5 * angle) / angle
+        out[0] = math.cos(0.5 * angle)
+        s = math.sin(0.5 * angle) / angle
     out[1] = s * r[0]
     out[2] = s * r[1]
     out[3] = s * r[2]
     return out
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def quat_normalise(q: np.ndarray) -> None:
     """Scale q to unit norm in place."""
-    n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for k in range(4):
         q[k] /= n
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:
     """Direction-cosine matrix C_nb of the unit quaternion q_nb."""
     w, x, y, z = q[0], q[1], q[2], q[3]
