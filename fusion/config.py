@@ -8,7 +8,6 @@ dotted path of the offending key. Relative paths resolve against the config file
 
 from __future__ import annotations
 
-import copy
 import hashlib
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -135,31 +134,32 @@ class Layout(StrictModel):
         names = set(self.systems)
         ref = self.heading_alignment.reference
         if ref is not None and ref not in names:
-            raise _KeyedError("heading_alignment.reference", f"unknown system {ref!r} (have {sorted(names)})")
+            raise KeyedError("heading_alignment.reference", f"unknown system {ref!r} (have {sorted(names)})")
         for k, c in enumerate(self.constraints):
             for side in c.between:
                 if side not in names:
-                    raise _KeyedError(f"constraints.{k}.between", f"unknown system {side!r} (have {sorted(names)})")
+                    raise KeyedError(f"constraints.{k}.between", f"unknown system {side!r} (have {sorted(names)})")
             if c.between[0] == c.between[1]:
-                raise _KeyedError(f"constraints.{k}.between", "a constraint needs two different systems")
+                raise KeyedError(f"constraints.{k}.between", "a constraint needs two different systems")
             for side in c.lever_arms_m:
                 if side not in c.between:
-                    raise _KeyedError(f"constraints.{k}.lever_arms_m.{side}", "not one of the constrained systems")
+                    raise KeyedError(f"constraints.{k}.lever_arms_m.{side}", "not one of the constrained systems")
         bounds: dict[frozenset[str], dict[str, float]] = {}
         for k, c in enumerate(self.constraints):
             pair = bounds.setdefault(frozenset(c.between), {})
             pair[c.kind] = c.distance_m
             if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
-                raise _KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
+                raise KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
         if self.truth is not None:
             for sys_name in self.truth.systems:
                 if sys_name not in names:
-                    raise _KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")
+                    raise KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")
         return self
 
 
-class _KeyedError(ValueError):
-    """A cross-field error that knows the dotted key it is about."""
+class KeyedError(ValueError):
+    """A cross-field error raised in a validator that knows the dotted key (relative to
+    the section being validated) it is about."""
 
     def __init__(self, key: str, reason: str) -> None:
         super().__init__(reason)
@@ -170,12 +170,31 @@ def _dotted(loc: tuple[Any, ...]) -> str:
     return ".".join(str(p) for p in loc if p not in ("function-after", "function-before"))
 
 
-def _first_error(err: ValidationError, prefix: str = "") -> tuple[str, str]:
+def _data_location(loc: tuple[Any, ...], data: Any) -> tuple[Any, ...]:
+    """The part of a pydantic error location that names keys of the user's data
+    (drops union-member tags such as ``float`` that pydantic appends)."""
+    kept: list[Any] = []
+    node = data
+    for part in loc:
+        if isinstance(node, dict):
+            kept.append(part)
+            if part not in node:  # a missing or unknown key is still the user's key
+                break
+            node = node[part]
+        elif isinstance(node, (list, tuple)) and isinstance(part, int) and part < len(node):
+            kept.append(part)
+            node = node[part]
+        else:
+            break
+    return tuple(kept)
+
+
+def _first_error(err: ValidationError, prefix: str = "", data: Any = None) -> tuple[str, str]:
     e = err.errors(include_url=False)[0]
-    loc = _dotted(e["loc"])
+    loc = _dotted(_data_location(e["loc"], data) if data is not None else e["loc"])
     ctx_err = (e.get("ctx") or {}).get("error")
-    if isinstance(ctx_err, _KeyedError):
-        return ctx_err.key, str(ctx_err)
+    if isinstance(ctx_err, KeyedError):
+        return ".".join(p for p in (prefix, ctx_err.key) if p), str(ctx_err)
     msg = e["msg"]
     if e["type"] == "extra_forbidden":
         msg = "unknown key"
@@ -190,7 +209,7 @@ def validate_section(model: type[BaseModel], data: Any, *, key: str, path: Path 
     try:
         return model.model_validate(data, context={"base_dir": base_dir})
     except ValidationError as err:
-        k, msg = _first_error(err, key)
+        k, msg = _first_error(err, key, data)
         raise ConfigError(k, msg, path) from None
 
 
@@ -209,9 +228,18 @@ def parse_override(item: str) -> tuple[str, Any]:
     return key, value
 
 
+def _unshared_copy(node: Any) -> Any:
+    """Copy dicts and lists without keeping YAML aliases shared (unlike ``copy.deepcopy``)."""
+    if isinstance(node, dict):
+        return {k: _unshared_copy(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_unshared_copy(v) for v in node]
+    return node
+
+
 def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
     """Set dotted paths in a raw layout dict (lists by integer index); returns a copy."""
-    out = copy.deepcopy(raw)
+    out = _unshared_copy(raw)
     for item in overrides:
         key, value = parse_override(item)
         node: Any = out
@@ -239,6 +267,21 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
     return out
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key repeated in one mapping (two systems with one name)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"key {key!r} appears twice", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
     """Read a YAML mapping; syntax errors name the file and line."""
     try:
@@ -248,7 +291,7 @@ def read_yaml(path: Path) -> dict[str, Any]:
     except OSError as err:
         raise ConfigError("", f"cannot read: {err.strerror}", path) from None
     try:
-        raw = yaml.safe_load(text)
+        raw = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)

@@ -83,6 +83,7 @@ return the projection solution with ``fallback=True``.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -147,6 +148,7 @@ class DistanceConstraint:
                 raise ValueError(f"{name} must be a finite (3,) vector, got {v!r}")
             a.setflags(write=False)
             object.__setattr__(self, name, a)
+        object.__setattr__(self, "_hash", hash(self._key()))
 
     @property
     def dims(self) -> int:
@@ -164,7 +166,7 @@ class DistanceConstraint:
         return self._key() == other._key()
 
     def __hash__(self) -> int:
-        return hash(self._key())
+        return self._hash  # type: ignore[attr-defined]
 
 
 @dataclass
@@ -304,7 +306,7 @@ def _check_inputs(p_hat: Any, sigma: Any, n_systems: int | None = None) -> tuple
 
 
 def _unit(v: Sequence[float]) -> list[float] | None:
-    nv = math.sqrt(sum(x * x for x in v))
+    nv = math.sqrt(math.fsum([x * x for x in v]))
     if not nv > _DEGENERATE_M or not math.isfinite(nv):
         return None
     return [x / nv for x in v]
@@ -390,6 +392,8 @@ def _eq_project(
     least-squares multiplier of the stationarity condition at that point
     (used to certify QP/SOCP solutions).
     """
+    if len(W) == 1:
+        return _eq_project_single(p_hat, sigma, lay, W[0], dirs[W[0]], p_given)
     rows = lay.rows(W)
     K = len(rows)
     U = np.zeros((K, len(W)))
@@ -421,6 +425,44 @@ def _eq_project(
         mu = sig_gt @ (Mp @ G)
     p = p_hat - sig_gt @ lam if p_given is None else p_given
     return p, lam, mu, G
+
+
+def _eq_project_single(
+    p_hat: np.ndarray,
+    sigma: np.ndarray,
+    lay: _Layout,
+    k: int,
+    u: list[float],
+    p_given: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_eq_project` for one constraint, without numpy.linalg."""
+    sl = sigma.tolist()
+    pl = p_hat.tolist()
+    i3, j3, D = lay.i3[k], lay.j3[k], lay.dims[k]
+    sgn = -1.0 if lay.code[k] == 1 else 1.0
+    sgt = []
+    for row in sl:
+        acc = 0.0
+        for b in range(D):
+            acc += (row[i3 + b] - row[j3 + b]) * u[b]
+        sgt.append(sgn * acc)
+    G = [0.0] * len(pl)
+    for b in range(D):
+        G[i3 + b] = sgn * u[b]
+        G[j3 + b] -= sgn * u[b]
+    M = sum(g * s for g, s in zip(G, sgt))
+    if not M > 0.0:
+        raise np.linalg.LinAlgError("constraint direction has zero variance")
+    if p_given is None:
+        r = lay.r(pl, k)
+        lam = sgn * (sum(a * b for a, b in zip(u, r)) - lay.d[k]) / M
+        p = np.array([x - lam * y for x, y in zip(pl, sgt)])
+    else:
+        lam = -sum(g * (a - b) for g, a, b in zip(G, p_given.tolist(), pl)) / M
+        p = p_given
+    Ga = np.array(G)
+    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
+    return p, np.array([lam]), mu, Ga[None, :]
 
 
 def _finish(
@@ -472,8 +514,13 @@ def _secular(
     """
     s, Q = _eig_sym(S)
     D = len(rhat)
-    c = [sum(Q[a][t] * rhat[t] for t in range(D)) for a in range(D)]
-    rho0 = math.sqrt(sum(x * x for x in c))
+    c = []
+    for a in range(D):
+        acc = 0.0
+        for t in range(D):
+            acc += Q[a][t] * rhat[t]
+        c.append(acc)
+    rho0 = math.sqrt(math.fsum([x * x for x in rhat]))
     if rho0 == d:
         return _unit(rhat), 0
     if rho0 > d:
@@ -519,7 +566,11 @@ def _secular(
             dn += q * q * s[a] / den
         rho = math.sqrt(n2)
         if abs(rho - d) <= tol:
-            r = [sum(Q[a][t] * c[a] / (1.0 + nu * s[a]) for a in range(D)) for t in range(D)]
+            r = [0.0] * D
+            for a in range(D):
+                f = c[a] / (1.0 + nu * s[a])
+                for t in range(D):
+                    r[t] += f * Q[a][t]
             return _unit(r), it
         if rho > d:
             lo = nu
@@ -540,124 +591,53 @@ def _secular(
 def _single_fast(
     p_hat: np.ndarray,
     pl: list[float],
-    sigma: np.ndarray,
+    sl: list[list[float]],
     lay: _Layout,
     k: int,
     hints: dict[int, list[float]] | None,
     tol_m: float,
     max_iter: int,
 ) -> tuple[np.ndarray, float, list[float], np.ndarray, np.ndarray, int] | None:
-    """One active constraint: exact direction by the secular equation, then eq. 58/60."""
+    """One active constraint: exact direction by the secular equation, then eq. 58/60.
+
+    Pure-Python floats (``pl = p̂.tolist()``, ``sl = Σ.tolist()``): for a handful
+    of numbers this is several times faster than small numpy calls.
+    """
     i3, j3, D = lay.i3[k], lay.j3[k], lay.dims[k]
-    Sii = sigma[i3 : i3 + D, i3 : i3 + D]
-    Sij = sigma[i3 : i3 + D, j3 : j3 + D]
-    Sjj = sigma[j3 : j3 + D, j3 : j3 + D]
-    S = (Sii - Sij - Sij.T + Sjj).tolist()
+    rD = range(D)
+    S = [
+        [sl[i3 + a][i3 + b] - sl[i3 + a][j3 + b] - sl[j3 + a][i3 + b] + sl[j3 + a][j3 + b] for b in rD]
+        for a in rD
+    ]
     rhat = lay.r(pl, k)
-    hint = _hint(hints, k, D)
-    u, its = _secular(S, rhat, lay.d[k], hint, 1e-3 * tol_m, max(4 * max_iter, 60))
+    u, its = _secular(S, rhat, lay.d[k], _hint(hints, k, D), 1e-3 * tol_m, max(4 * max_iter, 60))
     if u is None:
         return None
     sgn = -1.0 if lay.code[k] == 1 else 1.0
-    # eq. 58 at direction u: G = sgn·(uᵀE on i, −uᵀE on j)
-    su = np.array(u)
-    sig_gt = sgn * ((sigma[:, i3 : i3 + D] - sigma[:, j3 : j3 + D]) @ su)
-    M = sum(u[a] * sum(S[a][b] * u[b] for b in range(D)) for a in range(D))
+    M = 0.0
+    ur = 0.0
+    for a in rD:
+        ur += u[a] * rhat[a]
+        for b in rD:
+            M += u[a] * S[a][b] * u[b]
     if not M > 0.0:
         return None
-    lam = sgn * (sum(a * b for a, b in zip(u, rhat)) - lay.d[k]) / M
-    p = p_hat - lam * sig_gt
-    G = np.zeros(p_hat.shape[0])
-    G[i3 : i3 + D] = sgn * su
-    G[j3 : j3 + D] -= sgn * su
-    mu = np.multiply.outer(sig_gt, G / M)
-    return p, lam, u, mu, G, its
-
-
-# ---------------------------------------------------------------------------
-# projection, Newton scheme: several active constraints
-# ---------------------------------------------------------------------------
-
-
-def _multi_newton(
-    p_hat: np.ndarray,
-    sigma: np.ndarray,
-    lay: _Layout,
-    W: list[int],
-    nu0: np.ndarray,
-    tol: float,
-    max_iter: int,
-) -> tuple[dict[int, list[float]], np.ndarray, int] | None:
-    """Solve ‖r_k(ν)‖ = d_k, k ∈ W, with r(ν) = (I + S N)⁻¹ r̂; Newton on 1/d − 1/‖r‖."""
-    rows = lay.rows(W)
-    K = len(rows)
-    plus, minus = lay.plus[rows], lay.minus[rows]
-    bvec = np.concatenate([lay.b[k] for k in W])
-    rhat = p_hat[plus] - p_hat[minus] + bvec
-    sig_bt = sigma[:, plus] - sigma[:, minus]
-    S = sig_bt[plus] - sig_bt[minus]
-    dW = np.array([lay.d[k] for k in W])
-    sizes = [lay.dims[k] for k in W]
-    blk = np.repeat(np.arange(len(W)), sizes)  # block id of each stacked row
-    R = np.zeros((K, len(W)))
-    R[np.arange(K), blk] = 1.0
-    eye = np.eye(K)
-
-    def evaluate(nu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        Mx = eye + S * nu[blk][None, :]
-        try:
-            r = np.linalg.solve(Mx, rhat)
-        except np.linalg.LinAlgError:
-            return None
-        rho = np.sqrt(np.bincount(blk, weights=r * r, minlength=len(W)))
-        if not np.all(np.isfinite(rho)) or np.any(rho < _DEGENERATE_M):
-            return None
-        return Mx, r, rho
-
-    def admissible(nu: np.ndarray) -> bool:
-        if np.all(nu >= 0.0):
-            return True
-        ev = np.linalg.eigvals(S * nu[blk][None, :])
-        return bool(np.min(ev.real) > -1.0 + 1e-9)
-
-    nu = nu0.astype(float).copy()
-    if not admissible(nu):
-        nu = np.zeros(len(W))
-    ev = evaluate(nu)
-    if ev is None:
-        return None
-    Mx, r, rho = ev
-    for it in range(1, max_iter + 1):
-        if np.max(np.abs(rho - dW)) <= tol:
-            u = r / rho[blk]
-            dirs = {k: u[rows_k].tolist() for k, rows_k in zip(W, np.split(np.arange(K), np.cumsum(sizes)[:-1]))}
-            return dirs, nu, it
-        F = 1.0 / dW - 1.0 / rho
-        X = np.linalg.solve(Mx, S)
-        U = R * (r / rho[blk])[:, None]
-        J = -(U.T @ (X @ (R * r[:, None]))) / (rho * rho)[:, None]
-        try:
-            step = np.linalg.solve(J, -F)
-        except np.linalg.LinAlgError:
-            step = np.linalg.lstsq(J, -F, rcond=None)[0]
-        fn = np.linalg.norm(F)
-        t = 1.0
-        accepted = False
-        for _ in range(40):
-            trial = nu + t * step
-            if admissible(trial):
-                ev = evaluate(trial)
-                if ev is not None:
-                    Ft = 1.0 / dW - 1.0 / ev[2]
-                    if np.linalg.norm(Ft) <= (1.0 - 1e-4 * t) * fn:
-                        nu = trial
-                        Mx, r, rho = ev
-                        accepted = True
-                        break
-            t *= 0.5
-        if not accepted:
-            return None
-    return None
+    # eq. 58 at direction u: G = sgn·(uᵀE on block i, −uᵀE on block j)
+    lam = sgn * (ur - lay.d[k]) / M
+    sgt = []  # Σ Gᵀ
+    for row in sl:
+        acc = 0.0
+        for b in rD:
+            acc += (row[i3 + b] - row[j3 + b]) * u[b]
+        sgt.append(sgn * acc)
+    p = np.array([x - lam * y for x, y in zip(pl, sgt)])
+    G = [0.0] * len(pl)
+    for b in rD:
+        G[i3 + b] = sgn * u[b]
+        G[j3 + b] -= sgn * u[b]
+    Ga = np.array(G)
+    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
+    return p, lam, u, mu, Ga, its
 
 
 # ---------------------------------------------------------------------------
@@ -746,6 +726,139 @@ def _fixed_point(
 
 
 # ---------------------------------------------------------------------------
+# whitening
+# ---------------------------------------------------------------------------
+
+
+def _sqrt_cov(sigma: np.ndarray) -> np.ndarray | None:
+    """L with Σ = L Lᵀ: Cholesky, or the symmetric square root for PSD Σ."""
+    try:
+        return np.linalg.cholesky(sigma)
+    except np.linalg.LinAlgError:
+        pass
+    s = 0.5 * (sigma + sigma.T)
+    w, V = np.linalg.eigh(s)
+    if not np.all(np.isfinite(w)) or w[0] < -1e-9 * max(1.0, abs(w[-1])):
+        return None
+    return V * np.sqrt(np.clip(w, 0.0, None))
+
+
+def _sqp(
+    p_hat: np.ndarray,
+    L: np.ndarray,
+    lay: _Layout,
+    g0: list[float],
+    rho0: list[float],
+    hints: dict[int, list[float]] | None,
+    tol: float,
+    max_iter: int,
+    backend,
+):
+    """Sequential QP in y = L⁻¹(p − p̂) with the constraints' curvature.
+
+    Each QP: min ½ yᵀ(I + H)y − (H y_k)ᵀ y  s.t.  lo ≤ A y ≤ hi, with A the
+    distance gradients at p_k (rows a_k = u_kᵀ E B_k L) and
+    H = Σ_k y_k (BL_kᵀBL_k − a_k a_kᵀ)/‖r_k‖ = Σ_k y_k Lᵀ∇²‖r_k‖L, y_k the
+    previous QP's multipliers in OSQP's sign (> 0 at an upper bound). The
+    first QP's curvature is seeded with eq. 58's multiplier of each violated
+    constraint at p̂, so it is already a Newton step. Negative curvature
+    (active ``min`` constraints) is scaled down so that I + H ⪰ 0.1 I.
+
+    ``backend(H, q, A, lo, hi) -> (ok, y, duals)`` solves one QP.
+    Returns (p, g(p), duals, iterations, converged), or None on QP failure.
+    """
+    n3, m = p_hat.shape[0], lay.m
+    pl = p_hat.tolist()
+    blks = [L[lay.i3[k] : lay.i3[k] + lay.dims[k]] - L[lay.j3[k] : lay.j3[k] + lay.dims[k]] for k in range(m)]
+    btb: list[np.ndarray | None] = [None] * m
+    rhat = [lay.r(pl, k) for k in range(m)]
+    duals = [0.0] * m
+    for k in range(m):
+        if (g0[k] > 0.0 or lay.code[k] == 2) and rho0[k] > _DEGENERATE_M:
+            a = np.asarray([x / rho0[k] for x in rhat[k]]) @ blks[k]
+            duals[k] = (rho0[k] - lay.d[k]) / float(a @ a)
+    eye = np.eye(n3)
+    y = np.zeros(n3)
+    p, pk = p_hat, pl
+    A = np.empty((m, n3))
+    lo = [0.0] * m
+    hi = [0.0] * m
+    prev_step = math.inf
+    g = g0
+    for it in range(1, max_iter + 1):
+        H = None
+        neg = None
+        for k in range(m):
+            r = lay.r(pk, k)
+            rho = math.sqrt(math.fsum([x * x for x in r]))
+            u = [x / rho for x in r] if rho > _DEGENERATE_M else _hint(hints, k, lay.dims[k])
+            a = np.asarray(u) @ blks[k]
+            A[k] = a
+            lin = lay.d[k] - math.fsum([x * z for x, z in zip(u, rhat[k])])
+            code = lay.code[k]
+            lo[k] = -1e30 if code == 0 else lin
+            hi[k] = 1e30 if code == 1 else lin
+            if duals[k] != 0.0 and rho > _DEGENERATE_M:
+                if btb[k] is None:
+                    btb[k] = blks[k].T @ blks[k]
+                curv = (duals[k] / rho) * (btb[k] - np.multiply.outer(a, a))
+                if duals[k] > 0.0:
+                    H = curv if H is None else H + curv
+                else:
+                    neg = curv if neg is None else neg + curv
+        if neg is not None:
+            base = eye if H is None else eye + H
+            t = 1.0
+            for _ in range(30):
+                if np.linalg.eigvalsh(base + t * neg)[0] >= 0.1:
+                    break
+                t *= 0.5
+            else:
+                t = 0.0
+            H = t * neg if H is None else H + t * neg
+        q = None if H is None else -(H @ y)
+        ok, y_new, yd = backend(H, q, A, lo, hi)
+        if not ok:
+            return None
+        p_new = p_hat + L @ y_new
+        pn = p_new.tolist()
+        if not math.isfinite(math.fsum(pn)):
+            return None
+        step = max([abs(x - z) for x, z in zip(pn, pk)])
+        y, duals, p, pk = y_new, yd, p_new, pn
+        g, _ = lay.g_all(pk)
+        if _max_violation(lay, g) <= tol and (
+            step <= tol
+            # Newton (quadratic) convergence: the next step would be ≈ step³/prev²;
+            # the bounds keep this safe even under linear convergence (rate ≤ 0.01)
+            or (step <= 100.0 * tol and step**3 <= 1e-2 * tol * prev_step**2)
+        ):
+            return p, g, duals, it, True
+        prev_step = step
+    return p, g, duals, max_iter, False
+
+
+def _dense_qp_backend(lay: _Layout, tol: float):
+    """Small dense QP solver for :func:`_sqp` (dual active set, no OSQP)."""
+    sgn = np.array([-1.0 if code == 1 else 1.0 for code in lay.code])
+    is_eq = np.array([code == 2 for code in lay.code])
+
+    def solve(H, q, A, lo, hi):
+        b = np.array([-lo[k] if lay.code[k] == 1 else hi[k] for k in range(lay.m)])
+        Ar = A * sgn[:, None]  # every row as Ar y ≤ b (== for fixed)
+        if H is None:
+            pinv_at, y0 = Ar.T, np.zeros(A.shape[1])
+        else:
+            P = np.eye(A.shape[1]) + H
+            sol = np.linalg.solve(P, np.column_stack([Ar.T, -q]))
+            pinv_at, y0 = sol[:, :-1], sol[:, -1]
+        lam = _dual_active_set(Ar @ pinv_at, Ar @ y0 - b, is_eq, 1e-3 * tol)
+        return True, y0 - pinv_at @ lam, (sgn * lam).tolist()
+
+    return solve
+
+
+# ---------------------------------------------------------------------------
 # projection driver
 # ---------------------------------------------------------------------------
 
@@ -771,7 +884,7 @@ def _projection(
         # --- fast path: exactly one candidate constraint -------------------
         if len(W) == 1:
             k = W[0]
-            out = _single_fast(p_hat, pl, sigma, lay, k, hints, tol_m, max_iter)
+            out = _single_fast(p_hat, pl, sigma.tolist(), lay, k, hints, tol_m, max_iter)
             if out is not None:
                 p, lam, u, mu, G, its = out
                 g1, _ = lay.g_all(p.tolist())
@@ -788,21 +901,34 @@ def _projection(
                         ),
                         {k: u},
                     )
-        # --- general active-set loop ----------------------------------------
-        result = _newton_active_set(p_hat, sigma, lay, W, hints, tol_m, max_iter)
-        if result is not None:
-            p, W, lam_full, mu, G, dirs, its = result
-            g1, _ = lay.g_all(p.tolist())
-            viol1 = _max_violation(lay, g1)
-            return (
-                ConstraintSolution(
-                    p=p, active=W, multipliers=lam_full, gain=mu,
-                    violation_before_m=viol0, violation_after_m=viol1,
-                    iterations=its, converged=viol1 <= tol_m, method="projection",
-                    jacobian=G,
-                ),
-                dirs,
-            )
+        # --- several candidates: SQP with a dense QP, then eq. 58 at its point ---
+        L = _sqrt_cov(sigma)
+        if L is not None:
+            _, rho0 = lay.g_all(pl)
+            res = _sqp(p_hat, L, lay, g0, rho0, hints, tol_m, max_iter, _dense_qp_backend(lay, tol_m))
+            if res is not None and res[4]:
+                p_s, _, duals, its, _ = res
+                ps_l = p_s.tolist()
+                # λ_k = ±dual (OSQP sign: > 0 at an upper bound, i.e. for max/fixed rows)
+                Ws = [k for k in range(lay.m) if lay.code[k] == 2 or (-duals[k] if lay.code[k] == 1 else duals[k]) > 0.0]
+                dirs = {k: _direction(lay.r(ps_l, k), hints, k) for k in Ws}
+                try:
+                    p, Ws, lam_full, mu, G = _finish(p_hat, sigma, lay, Ws, dirs)
+                except np.linalg.LinAlgError:
+                    p = None
+                if p is not None:
+                    g1, _ = lay.g_all(p.tolist())
+                    viol1 = _max_violation(lay, g1)
+                    if viol1 <= tol_m and all(lam_full[k] >= 0.0 for k in Ws if lay.code[k] != 2):
+                        return (
+                            ConstraintSolution(
+                                p=p, active=Ws, multipliers=lam_full, gain=mu,
+                                violation_before_m=viol0, violation_after_m=viol1,
+                                iterations=its, converged=True, method="projection",
+                                jacobian=G,
+                            ),
+                            dirs,
+                        )
     # --- fixed-point scheme (the paper's re-linearisation), also the fallback ---
     if max_iter <= 0:
         p, Wf, dirs, its, ok = p_hat.copy(), [], {}, 0, False
@@ -824,62 +950,6 @@ def _projection(
         ),
         {k: dirs[k] for k in Wf},
     )
-
-
-def _newton_active_set(
-    p_hat: np.ndarray,
-    sigma: np.ndarray,
-    lay: _Layout,
-    W: list[int],
-    hints: dict[int, list[float]] | None,
-    tol_m: float,
-    max_iter: int,
-):
-    """Active-set loop around the Newton solves; None when it fails."""
-    nu_of: dict[int, float] = {}
-    total = 0
-    seen: set[tuple[int, ...]] = set()
-    pl = p_hat.tolist()
-    for _outer in range(4 * lay.m + 4):
-        key = tuple(sorted(W))
-        if key in seen:
-            return None  # cycling
-        seen.add(key)
-        if not W:
-            return None
-        if len(W) == 1:
-            out = _single_fast(p_hat, pl, sigma, lay, W[0], hints, tol_m, max_iter)
-            if out is None:
-                return None
-            p, lam, u, mu, G, its = out
-            dirs = {W[0]: u}
-            lam_W = np.array([lam])
-            G = G[None, :]
-            nu_of[W[0]] = lam / lay.d[W[0]] * (-1.0 if lay.code[W[0]] == 1 else 1.0)
-        else:
-            nu0 = np.array([nu_of.get(k, 0.0) for k in W])
-            res = _multi_newton(p_hat, sigma, lay, W, nu0, 1e-3 * tol_m, max(4 * max_iter, 60))
-            if res is None:
-                return None
-            dirs, nu, its = res
-            for k, v in zip(W, nu):
-                nu_of[k] = float(v)
-            p, lam_W, mu, G = _eq_project(p_hat, sigma, lay, W, dirs)
-        total += its
-        # multipliers with the wrong sign leave the set
-        wrong = [(lam_W[a], k) for a, k in enumerate(W) if lay.code[k] != 2 and lam_W[a] < 0.0]
-        if wrong:
-            W = [k for k in W if k != min(wrong)[1]]
-            continue
-        g, _ = lay.g_all(p.tolist())
-        add = [(g[k], k) for k in range(lay.m) if k not in W and g[k] > tol_m]
-        if add:
-            W = W + [max(add)[1]]
-            continue
-        lam_full = np.zeros(lay.m)
-        lam_full[W] = lam_W
-        return p, list(W), lam_full, mu, G, dirs, total
-    return None
 
 
 def solve_projection(
@@ -945,37 +1015,22 @@ class ProjectionSolver:
         return sol
 
 
-# ---------------------------------------------------------------------------
-# whitening
-# ---------------------------------------------------------------------------
-
-
-def _sqrt_cov(sigma: np.ndarray) -> np.ndarray | None:
-    """L with Σ = L Lᵀ: Cholesky, or the symmetric square root for PSD Σ."""
-    try:
-        return np.linalg.cholesky(sigma)
-    except np.linalg.LinAlgError:
-        pass
-    s = 0.5 * (sigma + sigma.T)
-    w, V = np.linalg.eigh(s)
-    if not np.all(np.isfinite(w)) or w[0] < -1e-9 * max(1.0, abs(w[-1])):
-        return None
-    return V * np.sqrt(np.clip(w, 0.0, None))
-
-
 def _certify(
     p_hat: np.ndarray,
     sigma: np.ndarray,
     lay: _Layout,
     p: np.ndarray,
+    g: list[float],
     hints: dict[int, list[float]] | None,
     tol_act: float,
 ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, dict[int, list[float]]]:
-    """Active set, multipliers and μ at a solution found by an external solver."""
+    """Active set, multipliers and μ at a solution ``p`` (with g = g(p)) found by an
+    external solver: candidates are the fixed constraints and those within
+    ``tol_act`` of their bound; λ from the stationarity condition at p (least
+    squares), inequality constraints with λ ≤ 0 leave one by one."""
     pl = p.tolist()
-    g, _ = lay.g_all(pl)
     W = [k for k in range(lay.m) if lay.code[k] == 2 or g[k] >= -tol_act]
-    dirs = {k: _direction(lay.r(pl, k), hints, k) for k in range(lay.m)}
+    dirs = {k: _direction(lay.r(pl, k), hints, k) for k in W}
     while True:
         _, W2, lam_full, mu, G = _finish(p_hat, sigma, lay, W, dirs, p_given=p)
         wrong = [(lam_full[k], k) for k in W2 if lay.code[k] != 2 and lam_full[k] <= 0.0]
@@ -1052,13 +1107,15 @@ class QpSolver:
             and hasattr(ext, "update_data_vec") and hasattr(ext, "solution")
         )
         self._solved_status = 1  # OSQP_SOLVED
-        self._y = np.zeros(n3)
+        self._eye = np.eye(n3)
+        self._zeros = np.zeros(n3)
+        self._p_flat = rows * n3 + cols  # positions of the CSC triangle in a row-major n3×n3
+        self._eye_tri = (rows == cols).astype(float)
 
     # -- OSQP calls -------------------------------------------------------
     def _qp(self, Px: np.ndarray, q: np.ndarray, Ax: np.ndarray, l: np.ndarray, u: np.ndarray):
-        inf = 1e30
-        l = np.maximum(l, -inf)
-        u = np.minimum(u, inf)
+        l = np.array(l, dtype=float)
+        u = np.array(u, dtype=float)
         if self._fast:
             ext = self._osqp._solver
             ext.update_data_vec(q=q, l=l, u=u)
@@ -1088,10 +1145,19 @@ class QpSolver:
         sol.fallback = True
         return sol
 
+    def _backend(self, H, q, A, lo, hi):
+        """One QP through OSQP (fixed sparsity: dense triangle of P, dense A)."""
+        if H is None:
+            Px, q = self._eye_tri, self._zeros
+        else:
+            Px = (self._eye + H).take(self._p_flat)
+        Ax = A[0] if self._m == 1 else A.T.reshape(-1)
+        status, y, yd = self._qp(Px, q, Ax, lo, hi)
+        return status == self._solved_status, y, yd.tolist()
+
     def _solve(self, p_hat: np.ndarray, sigma: np.ndarray) -> ConstraintSolution | None:
         lay = self._lay
-        pl = p_hat.tolist()
-        g0, _ = lay.g_all(pl)
+        g0, rho0 = lay.g_all(p_hat.tolist())
         viol0 = _max_violation(lay, g0)
         if not lay.has_fixed and all(x <= 0.0 for x in g0):
             return _unconstrained_solution(p_hat, lay, "qp", viol0)
@@ -1100,75 +1166,82 @@ class QpSolver:
         L = _sqrt_cov(sigma)
         if L is None:
             return None
-        n3, m = self._n3, lay.m
-        BL = L[lay.plus] - L[lay.minus]  # (K, n3): r(p̂ + L y) = r̂ + BL y
-        rhat = [lay.r(pl, k) for k in range(m)]
-        eye_tri = (self._p_rows == self._p_cols).astype(float)
-        y = np.zeros(n3)
-        duals = np.zeros(m)
-        p = p_hat
-        A = np.empty((m, n3))
-        lo = np.empty(m)
-        hi = np.empty(m)
-        converged = False
-        it = 0
-        for it in range(1, self.max_iter + 1):
-            pk = p.tolist()
-            H = np.zeros((n3, n3))
-            neg = np.zeros((n3, n3))
-            for k in range(m):
-                o0, o1 = lay.offs[k], lay.offs[k + 1]
-                r = lay.r(pk, k)
-                u = _direction(r, self._hints, k)
-                blk = BL[o0:o1]
-                a = np.asarray(u) @ blk
-                A[k] = a
-                lin = lay.d[k] - sum(x * z for x, z in zip(u, rhat[k]))
-                code = lay.code[k]
-                lo[k] = -np.inf if code == 0 else lin
-                hi[k] = np.inf if code == 1 else lin
-                rho = math.sqrt(sum(x * x for x in r))
-                if duals[k] != 0.0 and rho > _DEGENERATE_M:
-                    curv = (duals[k] / rho) * (blk.T @ blk - np.multiply.outer(a, a))
-                    if duals[k] > 0.0:
-                        H += curv
-                    else:
-                        neg += curv
-            if np.any(neg):
-                t = 1.0
-                for _ in range(30):
-                    w = np.linalg.eigvalsh(np.eye(n3) + H + t * neg)[0]
-                    if w >= 0.1:
-                        break
-                    t *= 0.5
-                else:
-                    t = 0.0
-                H = H + t * neg
-            Pm = np.eye(n3) + H
-            q = -(H @ y)
-            status, y_new, yd = self._qp(
-                Pm[self._p_rows, self._p_cols], q, A.T.reshape(-1), lo, hi
-            )
-            if status != self._solved_status or not np.all(np.isfinite(y_new)):
-                return None
-            p_new = p_hat + L @ y_new
-            step = float(np.max(np.abs(p_new - p)))
-            y, duals, p = y_new, yd, p_new
-            g, _ = lay.g_all(p.tolist())
-            if step <= self.tol_m and _max_violation(lay, g) <= self.tol_m:
-                converged = True
-                break
-        if not converged:
+        res = _sqp(p_hat, L, lay, g0, rho0, self._hints, self.tol_m, self.max_iter, self._backend)
+        if res is None or not res[4]:
             return None
-        self._y = y
-        W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, self._hints, 10.0 * self.tol_m)
+        p, g, _, it, _ = res
+        W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, g, self._hints, 10.0 * self.tol_m)
         self._hints.update(dirs)
-        g1, _ = lay.g_all(p.tolist())
         return ConstraintSolution(
             p=p, active=W, multipliers=lam_full, gain=mu,
-            violation_before_m=viol0, violation_after_m=_max_violation(lay, g1),
+            violation_before_m=viol0, violation_after_m=_max_violation(lay, g),
             iterations=it, converged=True, method="qp", jacobian=G,
         )
+
+
+def _kkt_polish(
+    p_hat: np.ndarray,
+    L: np.ndarray,
+    lay: _Layout,
+    W: list[int],
+    p: np.ndarray,
+    hints: dict[int, list[float]] | None,
+    tol_m: float,
+    max_steps: int = 6,
+) -> np.ndarray | None:
+    """Newton on the KKT system of the active set W, in y = L⁻¹(p − p̂):
+
+        y + Σ λ_k ∇c_k(y) = 0,  c_k(y) = 0,   c_k = g_k(p̂ + L y).
+
+    Interior-point solutions are accurate to ≈ √gap along the constraint
+    surface (1e-7–1e-6 m here); two or three Newton steps make them exact.
+    Returns the polished p, or None when Newton does not settle.
+    """
+    if not W:
+        return p
+    n3 = p_hat.shape[0]
+    try:
+        y = np.linalg.solve(L, p - p_hat)
+    except np.linalg.LinAlgError:
+        y = np.linalg.lstsq(L, p - p_hat, rcond=None)[0]
+    blks = [L[lay.i3[k] : lay.i3[k] + lay.dims[k]] - L[lay.j3[k] : lay.j3[k] + lay.dims[k]] for k in W]
+    plh = p_hat.tolist()
+    rhat = [np.array(lay.r(plh, k)) for k in W]
+    sg = [-1.0 if lay.code[k] == 1 else 1.0 for k in W]
+    nW = len(W)
+    lam = None
+    for step in range(max_steps + 1):
+        J = np.empty((nW, n3))
+        c = np.empty(nW)
+        Hs = []
+        for a, k in enumerate(W):
+            r = rhat[a] + blks[a] @ y
+            rho = float(np.linalg.norm(r))
+            if rho <= _DEGENERATE_M:
+                return None
+            u = r / rho
+            ga = u @ blks[a]
+            J[a] = sg[a] * ga
+            c[a] = sg[a] * (rho - lay.d[k])
+            Hs.append(sg[a] * (blks[a].T @ blks[a] - np.multiply.outer(ga, ga)) / rho)
+        if lam is None:
+            lam = -np.linalg.lstsq(J.T, y, rcond=None)[0]
+        F1 = y + J.T @ lam
+        if np.max(np.abs(F1)) <= 1e-11 * (1.0 + np.max(np.abs(y))) and np.max(np.abs(c)) <= 1e-4 * tol_m:
+            if any(lay.code[k] != 2 and lam[a] < 0.0 for a, k in enumerate(W)):
+                return None  # a KKT point of the wrong kind
+            return p_hat + L @ y
+        if step == max_steps:
+            return None
+        Hl = np.eye(n3) + sum(l * h for l, h in zip(lam, Hs))
+        K = np.block([[Hl, J.T], [J, np.zeros((nW, nW))]])
+        try:
+            delta = np.linalg.solve(K, -np.concatenate([F1, c]))
+        except np.linalg.LinAlgError:
+            return None
+        y = y + delta[:n3]
+        lam = lam + delta[n3:]
+    return None
 
 
 # ---------------------------------------------------------------------------
@@ -1219,7 +1292,7 @@ class SocpSolver:
         self.solver = solver or _pick_cvxpy_solver(cp)
         opts: dict[str, Any] = {}
         if self.solver == "CLARABEL":
-            opts = dict(tol_gap_abs=1e-11, tol_gap_rel=1e-11, tol_feas=1e-11, tol_ktratio=1e-9, max_iter=200)
+            opts = dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, tol_ktratio=1e-8, max_iter=200)
         elif self.solver == "ECOS":
             opts = dict(abstol=1e-10, reltol=1e-10, feastol=1e-10, max_iters=200)
         elif self.solver == "SCS":
@@ -1267,7 +1340,7 @@ class SocpSolver:
         cp = self._cp
         lay = self._lay
         pl = p_hat.tolist()
-        g0, _ = lay.g_all(pl)
+        g0, rho0 = lay.g_all(pl)
         viol0 = _max_violation(lay, g0)
         if not lay.has_fixed and all(x <= 0.0 for x in g0):
             return _unconstrained_solution(p_hat, lay, "socp", viol0)
@@ -1281,38 +1354,62 @@ class SocpSolver:
         for k, (B, r0) in self._cone.items():
             B.value = BL[lay.offs[k] : lay.offs[k + 1]]
             r0.value = np.array(rhat[k])
+        zero_b = {k: np.zeros((lay.dims[k], self._n3)) for k in self._cone}
         p = p_hat
         converged = False
         it = 0
         zero = np.zeros(self._n3)
+        g: list[float] = g0
         for it in range(1, self.max_iter + 1):
             pk = p.tolist()
             for k, (a, lb) in self._half.items():
                 r = lay.r(pk, k)
-                rho = math.sqrt(sum(x * x for x in r))
-                if lay.code[k] == 2 and rho > lay.d[k]:
-                    a.value, lb.value = zero, -1.0  # outside: the cone alone is exact
-                    continue
+                rho = math.sqrt(math.fsum([x * x for x in r]))
+                if lay.code[k] == 2:
+                    # fixed: decided once from p̂. Outside the circle the cone alone is
+                    # exact; inside, only the linearised half-space (the two together
+                    # meet in a single point, which interior-point solvers dislike)
+                    B, r0 = self._cone[k]
+                    if rho0[k] > lay.d[k]:
+                        B.value = BL[lay.offs[k] : lay.offs[k + 1]]
+                        r0.value = np.array(rhat[k])
+                        a.value, lb.value = zero, -1.0
+                        continue
+                    B.value, r0.value = zero_b[k], np.zeros(lay.dims[k])
                 u = _direction(r, self._hints, k)
                 a.value = np.asarray(u) @ BL[lay.offs[k] : lay.offs[k + 1]]
-                lb.value = lay.d[k] - sum(x * z for x, z in zip(u, rhat[k]))
-            self._problem.solve(solver=self.solver, warm_start=True, **self._opts)
-            if self._problem.status != cp.OPTIMAL or self._y.value is None:
+                lb.value = lay.d[k] - math.fsum([x * z for x, z in zip(u, rhat[k])])
+            with warnings.catch_warnings():  # accuracy is checked (and polished) below
+                warnings.simplefilter("ignore")
+                self._problem.solve(solver=self.solver, warm_start=True, **self._opts)
+            if self._problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self._y.value is None:
                 return None
             p_new = p_hat + L @ np.asarray(self._y.value)
             step = float(np.max(np.abs(p_new - p)))
             p = p_new
             g, _ = lay.g_all(p.tolist())
+            if _max_violation(lay, g) > 10.0 * self.tol_m and (not self._half or step > self.tol_m):
+                continue  # keep re-linearising
+            # polish on the active set of this solution; accept when it is a KKT point
+            W, _, _, _, _ = _certify(p_hat, sigma, lay, p, g, self._hints, 1e3 * self.tol_m)
+            pp = _kkt_polish(p_hat, L, lay, W, p, self._hints, self.tol_m)
+            # accept a feasible KKT point near the SOCP point: within 1 mm, or (while the
+            # linearised min/fixed pieces still move) within 20 times the last step
+            if pp is not None and float(np.max(np.abs(pp - p))) <= max(1e-3, 20.0 * step):
+                gp, _ = lay.g_all(pp.tolist())
+                if _max_violation(lay, gp) <= self.tol_m:
+                    p, g = pp, gp
+                    converged = True
+                    break
             if _max_violation(lay, g) <= self.tol_m and (not self._half or step <= self.tol_m):
-                converged = True
+                converged = True  # unpolished but settled
                 break
         if not converged:
             return None
-        W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, self._hints, 10.0 * self.tol_m)
+        W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, g, self._hints, 10.0 * self.tol_m)
         self._hints.update(dirs)
-        g1, _ = lay.g_all(p.tolist())
         return ConstraintSolution(
             p=p, active=W, multipliers=lam_full, gain=mu,
-            violation_before_m=viol0, violation_after_m=_max_violation(lay, g1),
+            violation_before_m=viol0, violation_after_m=_max_violation(lay, g),
             iterations=it, converged=True, method="socp", jacobian=G,
         )

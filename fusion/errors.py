@@ -27,5 +27,5 @@ class ConfigError(FusionError):
         self.key = key
         self.path = None if path is None else str(path)
         self.reason = reason
-        prefix = f"{self.path}: " if self.path else ""
-        super().__init__(f"{prefix}{key or '<root>'}: {reason}")
+        parts = [p for p in (self.path, key) if p]
+        super().__init__(": ".join([*parts, reason]))

@@ -10,6 +10,7 @@ import numpy as np
 
 from fusion.config import LoadedLayout, load_layout
 from fusion.earth import normal_gravity
+from fusion.errors import ConfigError
 from fusion.fuser import Fuser, FuserReport
 from fusion.heading import align_headings
 from fusion.metrics import PlanarTransform, SystemScore, score_systems
@@ -48,11 +49,17 @@ def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
 
 
 def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem]:
+    """One system per layout entry; a plugin's config error is reported against the layout file."""
     registry = get_registry()
-    return {
-        name: registry.system_class(cfg.plugin)(name, cfg, context)
-        for name, cfg in loaded.system_configs.items()
-    }
+    systems = {}
+    for name, cfg in loaded.system_configs.items():
+        try:
+            systems[name] = registry.system_class(cfg.plugin)(name, cfg, context)
+        except ConfigError as err:
+            if err.path is not None:
+                raise
+            raise ConfigError(err.key, err.reason, loaded.path) from None
+    return systems
 
 
 def load_truth(loaded: LoadedLayout) -> dict[str, TruthTrack]:

@@ -8,12 +8,14 @@ An IMU sample at t_k is taken as the mean rate over (t_{k-1}, t_k] (increment
 convention). One step, from t_{k-1} to t_k with Δθ = (ω_k − b_g) dt and
 Δv = (f_k − b_a) dt:
 
-    v_n ← v_n + C_nb(t_{k-1}) (Δv + ½ Δθ × Δv) + (g_n − 2 ω_ie × v_n) dt
+    Δv_n = (I − ½ [ω_ie dt ×]) C_nb(t_{k-1}) (Δv + ½ Δθ × Δv)
+    v_n ← v_n + Δv_n + (g_n − 2 ω_ie × v_n) dt
     p_n ← p_n + ½ (v_n(t_{k-1}) + v_n(t_k)) dt
     q_nb ← exp(−ω_ie dt) ⊗ q_nb ⊗ exp(Δθ)
 
-The ½ Δθ × Δv term is the rotation compensation of the velocity increment; the
-Earth rate ω_ie (ENU) is optional (zero vector switches it off).
+The ½ Δθ × Δv term is the rotation compensation of the velocity increment and
+−½ [ω_ie dt ×] the matching rotation of the navigation frame (Savage 1998). The
+Earth rate ω_ie (ENU) is optional (a zero vector switches it off).
 """
 
 from __future__ import annotations
@@ -56,10 +58,18 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     cor[0] = 2.0 * (w_ie_n[1] * v0[2] - w_ie_n[2] * v0[1])
     cor[1] = 2.0 * (w_ie_n[2] * v0[0] - w_ie_n[0] * v0[2])
     cor[2] = 2.0 * (w_ie_n[0] * v0[1] - w_ie_n[1] * v0[0])
+    dvn = np.empty(3)
     for r in range(3):
-        dvn = C[r, 0] * comp[0] + C[r, 1] * comp[1] + C[r, 2] * comp[2]
-        f_n_out[r] = dvn / dt
-        x[3 + r] = v0[r] + dvn - cor[r] * dt
+        dvn[r] = C[r, 0] * comp[0] + C[r, 1] * comp[1] + C[r, 2] * comp[2]
+    # rotation of the navigation frame over the step: −½ (ω_ie dt) × Δv_n
+    rot = np.empty(3)
+    rot[0] = w_ie_n[1] * dvn[2] - w_ie_n[2] * dvn[1]
+    rot[1] = w_ie_n[2] * dvn[0] - w_ie_n[0] * dvn[2]
+    rot[2] = w_ie_n[0] * dvn[1] - w_ie_n[1] * dvn[0]
+    for r in range(3):
+        dvn[r] -= 0.5 * dt * rot[r]
+        f_n_out[r] = dvn[r] / dt
+        x[3 + r] = v0[r] + dvn[r] - cor[r] * dt
     x[5] -= g * dt
     for r in range(3):
         x[r] += 0.5 * (v0[r] + x[3 + r]) * dt

@@ -3,8 +3,9 @@
 Timing. One gait cycle of a foot lasts ``T`` = 2 / cadence (cadence counts steps of
 either foot) with ``stance_fraction`` of it flat and still; or, for the "pulse" profile
 of the FB-RTS paper's simulation, ``swing_s`` + ``stance_s``. The other foot runs half a
-cycle later. Every swing starts and ends ON an IMU sample instant (durations are rounded
-to whole samples, at most half a sample off the configured values), so an IMU sample's
+cycle later. Every swing starts and ends ON an IMU sample instant (the cycle, the swing
+and the half-cycle offset are rounded to whole samples, each at most half a sample off
+the configured value, so stance at most one sample off), so an IMU sample's
 interval never straddles a swing/stance boundary and the stance label of a sample is
 unambiguous: ``stance[k]`` ⇔ the foot is still at ``t_k`` (both ends of a swing included,
 where velocity and angular rate are exactly zero).
@@ -48,7 +49,7 @@ from fusion.errors import ConfigError
 from fusion.sim.imu import MotionState, quat_multiply
 from fusion.sim.paths import BodyPath, left_normal
 
-__all__ = ["FootMotion", "GaitConfig", "GaitPlan", "plan_gait"]
+__all__ = ["FootMotion", "FootTrack", "GaitConfig", "GaitPlan", "plan_gait"]
 
 Foot = Literal["left", "right"]
 
@@ -188,6 +189,17 @@ class FootMotion:
 
 
 @dataclass
+class FootTrack:
+    """One foot (or the IMU on it) sampled on the IMU grid: t (N,) s, pos (N, 3) ENU m,
+    q_nb (N, 4) scalar-first, stance (N,) bool."""
+
+    t: np.ndarray
+    pos: np.ndarray
+    q_nb: np.ndarray
+    stance: np.ndarray
+
+
+@dataclass
 class GaitPlan:
     """Both feet on one time grid ``t = k / rate_hz``, k = 0 … n_samples−1."""
 
@@ -196,10 +208,23 @@ class GaitPlan:
     feet: dict[str, FootMotion]
     path: BodyPath
     step_m: float
+    n_start_still: int
+
+    @property
+    def start_still_s(self) -> float:
+        """Both feet stand still on [0, start_still_s] (rounded to the sample grid)."""
+        return self.n_start_still / self.rate_hz
 
     @property
     def t(self) -> np.ndarray:
         return np.arange(self.n_samples) / self.rate_hz
+
+    def track(self, foot: Foot, mount_yaw_deg: float = 0.0) -> FootTrack:
+        """``foot``'s IMU (turned by ``mount_yaw_deg``) at every sample instant."""
+        motion = self.feet[foot].mounted(mount_yaw_deg)
+        t = self.t
+        state = motion.evaluate(t)
+        return FootTrack(t, state.pos, state.q_nb, motion.stance_flags(t.size))
 
     @property
     def distance_m(self) -> float:
@@ -214,7 +239,8 @@ def plan_gait(path: BodyPath, gait: GaitConfig, rate_hz: float, key: str = "gait
     n_swing = int(round(swing * rate_hz))
     n_half = n_cycle // 2
     if n_swing < 4 or n_cycle - n_swing < 1:
-        raise ConfigError(key, f"a swing of {swing:.3g} s in a {cycle:.3g} s cycle is too short to sample at {rate_hz:g} Hz")
+        raise ConfigError(key, f"a swing of {swing:.3g} s in a {cycle:.3g} s cycle is too short "
+                               f"to sample at {rate_hz:g} Hz")
     n0 = int(round(gait.start_still_s * rate_hz))
     if n0 < 1:
         raise ConfigError(f"{key}.start_still_s", f"shorter than one sample at {rate_hz:g} Hz")
@@ -245,4 +271,4 @@ def plan_gait(path: BodyPath, gait: GaitConfig, rate_hz: float, key: str = "gait
         feet[foot] = FootMotion(foot, float(rate_hz), footprints, az, k_start, k_end,
                                 gait.lift_m, math.radians(gait.pitch_amplitude_deg))
     n_samples = last + int(round(gait.end_still_s * rate_hz)) + 1
-    return GaitPlan(float(rate_hz), n_samples, {"left": feet["left"], "right": feet["right"]}, path, step)
+    return GaitPlan(float(rate_hz), n_samples, {"left": feet["left"], "right": feet["right"]}, path, step, n0)

@@ -8,6 +8,14 @@ Ideal IMU
     :mod:`fusion.strapdown` — integrated with Gauss–Legendre quadrature on each interval
     (8 nodes: exact for polynomials up to degree 15); sample 0 is the instantaneous value.
 
+Consistency with the mechanisation: free inertial integration of the ideal IMU with
+:func:`fusion.strapdown.integrate` (default gait) leaves a truncation error that falls as
+dt²: at 100 Hz ≈ 18 mm after the first stride, mostly vertical (the velocity update has
+no sculling or second-order rotation terms; the attitude update no coning term, which
+shows after turns); at 1000 Hz ≈ 0.2 mm per stride and 3.5 cm after 20 s. A
+mechanisation with those terms reaches ≈ 0.25 mm per stride at 100 Hz
+(``tests/test_sim.py``).
+
 Error model (per triad, accelerometer and gyroscope alike)::
 
     y_k = (I + S + M) x_k + b_const + b_gm(t_k) + b_rw(t_k) + n_k

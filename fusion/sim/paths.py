@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal, Union
+from typing import Literal, Union
 
 import numpy as np
 from pydantic import Field
@@ -30,6 +30,7 @@ __all__ = [
     "Line",
     "LoopsPath",
     "OutAndBackPath",
+    "PATH_KINDS",
     "PathConfig",
     "PolylinePath",
     "RectanglePath",
@@ -163,7 +164,8 @@ def polyline_path(points: np.ndarray, turn_radius: float, *, closed: bool = Fals
         for k in range(1, len(legs)):
             turn = _wrap_pi(math.atan2(legs[k, 0], legs[k, 1]) - az[-1])
             if abs(abs(turn) - math.pi) < 1e-9:
-                raise ConfigError(f"{key}.waypoints_m.{k}", "the path reverses here; use kind out_and_back for a U-turn")
+                raise ConfigError(f"{key}.waypoints_m.{k}",
+                                  "the path reverses here; use kind out_and_back for a U-turn")
             az.append(az[-1] + turn)
     else:
         az = list(azimuths)
@@ -177,7 +179,8 @@ def polyline_path(points: np.ndarray, turn_radius: float, *, closed: bool = Fals
         straight = lengths[k] - cut_in - cut_out
         if straight < -1e-9:
             raise ConfigError(f"{key}.turn_radius_m",
-                              f"{turn_radius:g} m is too large: the rounded corners do not fit on leg {k} ({lengths[k]:.3g} m)")
+                              f"{turn_radius:g} m is too large: the rounded corners do not fit "
+                              f"on leg {k} ({lengths[k]:.3g} m)")
         line = Line((float(cursor[0]), float(cursor[1])), az[k], max(straight, 0.0))
         segments.append(line)
         cursor, _ = line.end
@@ -298,8 +301,13 @@ class OutAndBackPath(_PathBase):
         return BodyPath(segments, closed=False)
 
 
-PathConfig = Annotated[
-    Union[PolylinePath, SquarePath, RectanglePath, LoopsPath, OutAndBackPath],
-    Field(discriminator="kind"),
-]
-"""The scenario's ``path`` section, dispatched on ``kind``."""
+PATH_KINDS: dict[str, type[StrictModel]] = {
+    "polyline": PolylinePath,
+    "square": SquarePath,
+    "rectangle": RectanglePath,
+    "loops": LoopsPath,
+    "out_and_back": OutAndBackPath,
+}
+"""The scenario's ``path.kind`` → its section model (each has ``build() -> BodyPath``)."""
+
+PathConfig = Union[PolylinePath, SquarePath, RectanglePath, LoopsPath, OutAndBackPath]

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from fusion.config import ImuCsvConfig, StrictModel
+from fusion.config import ImuCsvConfig, KeyedError, StrictModel
 
 
 class FootFilterConfig(StrictModel):
@@ -67,3 +67,9 @@ class FootInsConfig(StrictModel):
     filter: FootFilterConfig = Field(default_factory=FootFilterConfig)
     detector: DetectorConfig = Field(default_factory=DetectorConfig)
     initial: InitialStateConfig = Field(default_factory=InitialStateConfig)
+
+    @model_validator(mode="after")
+    def _labels_need_a_stance_column(self) -> "FootInsConfig":
+        if self.detector.kind == "labels" and self.data.stance_column is None:
+            raise KeyedError("detector.kind", "labels need data.stance_column")
+        return self

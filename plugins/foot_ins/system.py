@@ -20,9 +20,7 @@ _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
 def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
     """Stance flags (N,) from the configured detector, then debounced (durations in s)."""
     threshold = cfg.threshold if cfg.threshold is not None else _DEFAULT_THRESHOLDS.get(cfg.kind)
-    if cfg.kind == "labels":
-        if stream.stance is None:
-            raise ConfigError(f"{key}.kind", "labels need data.stance_column")
+    if cfg.kind == "labels":  # the config model ensures the data have a stance column
         stance = stream.stance.copy()
     elif cfg.kind == "shoe":
         stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=cfg.window, sigma_acc=cfg.sigma_acc,
