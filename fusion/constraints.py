@@ -37,44 +37,58 @@ closest to the hint (east when there is none).
 
 Methods
 -------
+All three reach the same point — the KKT point of the nonlinear problem, which
+is also the fixed point of the paper's "linearise about the current point and
+project" iteration — and report μ from eqs. 59–60 with the active constraints
+linearised at p*.
+
 ``projection`` (:func:`solve_projection`, :class:`ProjectionSolver`)
-    The paper's eqs. 55–60: linearise the constraints in the active set about
-    a point and project p̂ onto them as equalities,
+    The paper's eqs. 55–60: linearise the active constraints about a point and
+    project p̂ onto them as equalities,
     p* = p̂ − Σ Gᵀ (G Σ Gᵀ)⁻¹ (G p̂ − h), μ = Σ Gᵀ (G Σ Gᵀ)⁻¹ G.
     The paper linearises once, about p̂. Re-linearising about the new point
-    and projecting again ("fixed_point" scheme) converges to the exact
-    solution but only linearly, and slowly when Σ is anisotropic (median
-    ≈ 12 iterations to 1e-9 m, and often no convergence in 100, on random
-    two-foot problems), so the default ``scheme="newton"`` moves the
-    linearisation point by Newton steps on the multipliers instead: with
-    ν_k = λ_k/‖r_k‖ the stationarity condition gives r(ν) = (I + S N)⁻¹ r̂
-    in closed form (N = blkdiag(ν_k I)), and ‖r_k(ν)‖ = d_k is solved by
-    safeguarded Newton on 1/d − 1/‖r‖ (Moré–Sorensen secular equation;
-    scalar and monotone for one active constraint). The returned p* and μ
-    are eqs. 58/60 evaluated at the converged linearisation point, which is
-    the fixed point of the paper's iteration. Active set: start from the
-    fixed constraints plus those violated at p̂, drop constraints whose
-    multiplier has the wrong sign, add constraints violated at the new
-    point, repeat. Falls back to the fixed-point scheme when the Newton
-    scheme fails (degenerate geometry with several active constraints).
+    and projecting again (``scheme="fixed_point"``, kept as an option and as
+    the last-resort fallback) converges only linearly, and slowly when Σ is
+    anisotropic: on random two-foot problems it needed a median ≈ 12
+    iterations for 1e-9 m and often did not converge in 100. So the default
+    ``scheme="newton"`` finds the linearisation point by Newton's method:
+
+    * one candidate constraint (violated, or ``fixed``) — the usual case: in
+      the pair's difference space the solution is r(ν) = (I + ν S)⁻¹ r̂ with
+      S = E B Σ Bᵀ Eᵀ (2x2 or 3x3) and ν = λ/‖r‖; ‖r(ν)‖ = d is solved by
+      safeguarded Newton on 1/d − 1/‖r(ν)‖ (the Moré–Sorensen secular
+      equation: a few scalar iterations, monotone for ``max``, the global
+      minimum for the non-convex ``min``, the degenerate "hard case" in
+      closed form). Eqs. 58–60 are then applied at that direction.
+    * several candidates: the SQP described under ``qp`` with a small dense
+      QP solver (Lawson–Hanson on the dual) in place of OSQP, then eqs. 58–60
+      at the converged point with that QP's active set.
 ``qp`` (:class:`QpSolver`)
-    OSQP on the linearised problem, in the whitened variable
-    y = L⁻¹ (p − p̂), Σ = L Lᵀ: the objective is ½‖y‖², the constraints
-    u_kᵀ (r̂_k + E B_k L y) {≤, ≥, =} d_k. Re-linearised until the nonlinear
-    constraints hold (to ``tol_m``) and the step is below ``tol_m``. For the
-    same reason as above the re-linearised QPs carry the curvature of the
-    constraints (a sequential-QP Newton step): P = I + Σ_k y_k Lᵀ ∇²‖r_k‖ L,
-    with y_k the OSQP multipliers of the previous QP; the first QP (P = I) is
-    exactly the linearised QP about p̂. Negative curvature of active ``min``
-    constraints is scaled down if it would make P indefinite. OSQP is set up
-    once with fixed sparsity (dense upper triangle of P, dense A) and each
-    QP is an ``update`` plus a warm-started ``solve``.
+    OSQP on the linearised problem in the whitened variable
+    y = L⁻¹ (p − p̂), Σ = L Lᵀ (Cholesky; symmetric square root if Σ is only
+    PSD): the objective is ½‖y‖² and each constraint is one row
+    u_kᵀ (r̂_k + E B_k L y) {≤, ≥, =} d_k. Whitening makes the QP well
+    conditioned whatever the scale of Σ and needs no Σ⁻¹. Re-linearised until
+    the nonlinear constraints hold to ``tol_m`` and the step is below
+    ``tol_m`` (or Newton's quadratic rate shows the next step would be). For
+    the reason above the re-linearised QPs carry the constraints' curvature
+    (a sequential-QP Newton step): P = I + Σ_k y_k Lᵀ ∇²‖r_k‖ L, y_k the
+    previous QP's multipliers; the first QP's curvature is seeded with eq. 58's
+    multipliers at p̂. Negative curvature (active ``min``) is scaled down to
+    keep P ⪰ 0.1 I. OSQP is set up once with fixed sparsity (dense upper
+    triangle of P, dense A); each QP is ``update(Px, q, Ax, l, u)`` plus a
+    warm-started ``solve``. Typically 3 QPs per epoch.
 ``socp`` (:class:`SocpSolver`)
-    cvxpy, DPP (compiled once), same whitened variable: ``max`` constraints
-    are exact second-order cones, ``min`` constraints half-spaces linearised
-    about the current point, ``fixed`` constraints a cone plus (while inside
-    the circle) the linearised half-space; the linearised pieces are
-    re-linearised until they hold. A reference/oracle, not a hot path.
+    cvxpy, DPP (compiled once), same whitened variable. ``max`` constraints
+    are exact second-order cones; ``min`` constraints half-spaces linearised
+    about the current point (re-linearised until they settle); a ``fixed``
+    constraint is the cone when p̂ is outside the circle and the half-space
+    when inside. Interior-point solutions are only accurate to ≈ √gap along
+    the constraint surface (1e-7–1e-6 m seen with Clarabel), so the result is
+    polished by Newton steps on the KKT system of its active set. For ``min``
+    constraints the SOCP (linearised at p̂) can end at a different local
+    minimum than the projection, whose single-constraint solve is global. A
+    reference/oracle, not a hot path.
 
 Solver failure never raises: :class:`QpSolver` and :class:`SocpSolver` then
 return the projection solution with ``fallback=True``.
@@ -1395,7 +1409,7 @@ class SocpSolver:
             pp = _kkt_polish(p_hat, L, lay, W, p, self._hints, self.tol_m)
             # accept a feasible KKT point near the SOCP point: within 1 mm, or (while the
             # linearised min/fixed pieces still move) within 20 times the last step
-            if pp is not None and float(np.max(np.abs(pp - p))) <= max(1e-3, 20.0 * step):
+            if W and pp is not None and float(np.max(np.abs(pp - p))) <= max(1e-3, 20.0 * step):
                 gp, _ = lay.g_all(pp.tolist())
                 if _max_violation(lay, gp) <= self.tol_m:
                     p, g = pp, gp

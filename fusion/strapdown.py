@@ -5,17 +5,21 @@ attitude q_nb (scalar-first, 6:10), accelerometer bias b_a (m/s^2, 10:13), gyros
 bias b_g (rad/s, 13:16).
 
 An IMU sample at t_k is taken as the mean rate over (t_{k-1}, t_k] (increment
-convention). One step, from t_{k-1} to t_k with Δθ = (ω_k − b_g) dt and
-Δv = (f_k − b_a) dt:
+convention). One step, from t_{k-1} to t_k, with the bias-corrected increments
+α_k = (ω_k − b_g) dt and υ_k = (f_k − b_a) dt and those of the previous step
+(a two-sample algorithm, Savage 1998, "Strapdown inertial navigation integration
+algorithm design", JGCD 21(1–2)):
 
-    Δv_n = (I − ½ [ω_ie dt ×]) C_nb(t_{k-1}) (Δv + ½ Δθ × Δv)
-    v_n ← v_n + Δv_n + (g_n − 2 ω_ie × v_n) dt
-    p_n ← p_n + ½ (v_n(t_{k-1}) + v_n(t_k)) dt
-    q_nb ← exp(−ω_ie dt) ⊗ q_nb ⊗ exp(Δθ)
+    φ     = α_k + (1/12) α_{k-1} × α_k                                   (coning)
+    Δv_b  = υ_k + ½ α_k × υ_k + (1/6) α_k × (α_k × υ_k)                  (rotation)
+            + (1/12) (α_{k-1} × υ_k + υ_{k-1} × α_k)                       (sculling)
+    Δv_n  = (I − ½ [ω_ie dt ×]) C_nb(t_{k-1}) Δv_b
+    v_n  ← v_n + Δv_n + (g_n − 2 ω_ie × v_n) dt
+    p_n  ← p_n + ½ (v_n(t_{k-1}) + v_n(t_k)) dt
+    q_nb ← exp(−ω_ie dt) ⊗ q_nb ⊗ exp(φ)
 
-The ½ Δθ × Δv term is the rotation compensation of the velocity increment and
-−½ [ω_ie dt ×] the matching rotation of the navigation frame (Savage 1998). The
-Earth rate ω_ie (ENU) is optional (a zero vector switches it off).
+``prev`` (6,) carries [α_{k-1}, υ_{k-1}] from step to step (zeros at the start).
+The Earth rate ω_ie (ENU) is optional (a zero vector switches it off).
 """
 
 from __future__ import annotations
@@ -34,8 +38,17 @@ NOMINAL_SIZE = 16
 
 
 @numba.njit(cache=True)
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@numba.njit(cache=True)
 def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g: float,
-              w_ie_n: np.ndarray, f_n_out: np.ndarray) -> np.ndarray:
+              w_ie_n: np.ndarray, f_n_out: np.ndarray, prev: np.ndarray) -> np.ndarray:
     """Advance the nominal state ``x`` in place by one sample (see module docstring).
 
     acc_b: specific force (m/s^2), gyro_b: angular rate (rad/s), dt (s), g: gravity
@@ -49,10 +62,13 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     for k in range(3):
         dth[k] = (gyro_b[k] - x[13 + k]) * dt
         dv[k] = (acc_b[k] - x[10 + k]) * dt
-    comp = np.empty(3)
-    comp[0] = dv[0] + 0.5 * (dth[1] * dv[2] - dth[2] * dv[1])
-    comp[1] = dv[1] + 0.5 * (dth[2] * dv[0] - dth[0] * dv[2])
-    comp[2] = dv[2] + 0.5 * (dth[0] * dv[1] - dth[1] * dv[0])
+    pth = prev[0:3]
+    pv = prev[3:6]
+    a = _cross(dth, dv)
+    comp = dv + 0.5 * a + _cross(dth, a) / 6.0 + (_cross(pth, dv) + _cross(pv, dth)) / 12.0
+    phi = dth + _cross(pth, dth) / 12.0
+    prev[0:3] = dth
+    prev[3:6] = dv
     v0 = x[3:6].copy()
     cor = np.empty(3)
     cor[0] = 2.0 * (w_ie_n[1] * v0[2] - w_ie_n[2] * v0[1])
@@ -73,7 +89,7 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     x[5] -= g * dt
     for r in range(3):
         x[r] += 0.5 * (v0[r] + x[3 + r]) * dt
-    q = quat_multiply(x[6:10], quat_from_rotvec(dth))
+    q = quat_multiply(x[6:10], quat_from_rotvec(phi))
     if w_ie_n[0] != 0.0 or w_ie_n[1] != 0.0 or w_ie_n[2] != 0.0:
         q = quat_multiply(quat_from_rotvec(-w_ie_n * dt), q)
     quat_normalise(q)
@@ -90,7 +106,8 @@ def integrate(x0: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarr
     x = x0.copy()
     out[0] = x
     f_n = np.empty(3)
+    prev = np.zeros(6)
     for i in range(1, n):
-        mechanise(x, acc_b[i], gyro_b[i], t[i] - t[i - 1], g, w_ie_n, f_n)
+        mechanise(x, acc_b[i], gyro_b[i], t[i] - t[i - 1], g, w_ie_n, f_n, prev)
         out[i] = x
     return out

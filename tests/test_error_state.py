@@ -51,7 +51,7 @@ def error_between(x_true: np.ndarray, x_est: np.ndarray) -> np.ndarray:
 def step(x: np.ndarray, acc: np.ndarray, gyro: np.ndarray, dt: float):
     x = x.copy()
     f_n = np.empty(3)
-    C = mechanise(x, acc, gyro, dt, G, NO_EARTH, f_n)
+    C = mechanise(x, acc, gyro, dt, G, NO_EARTH, f_n, np.zeros(6))
     return x, C, f_n
 
 

@@ -55,36 +55,6 @@ def _free_inertial(t, motion):
     return out[:, 0:3] - truth.pos
 
 
-def _reference_integrate(t, motion):
-    """Unaided reference mechanisation with second-order terms: the velocity increment gets
-    ½Δθ×Δv + ⅙Δθ×(Δθ×Δv) and the two-sample sculling term (Δθ_{k−1}×Δv_k + Δv_{k−1}×Δθ_k)/12;
-    the attitude the two-sample coning term Δθ_{k−1}×Δθ_k/12. Position error (N, 3)."""
-    acc, gyro = ideal_imu(motion, t, G)
-    truth = motion.evaluate(t)
-    p, v = truth.pos[0].copy(), np.zeros(3)
-    C = dcm_from_quat(truth.q_nb[0])
-    out = np.empty((t.size, 3))
-    out[0] = p
-    pth = pdv = np.zeros(3)
-    for k in range(1, t.size):
-        dt = t[k] - t[k - 1]
-        dth, dv = gyro[k] * dt, acc[k] * dt
-        comp = dv + 0.5 * np.cross(dth, dv) + np.cross(dth, np.cross(dth, dv)) / 6.0
-        phi = dth.copy()
-        if k > 1:
-            comp += (np.cross(pth, dv) + np.cross(pdv, dth)) / 12.0
-            phi += np.cross(pth, dth) / 12.0
-        v_new = v + C @ comp - np.array([0.0, 0.0, G * dt])
-        p = p + 0.5 * (v + v_new) * dt
-        v = v_new
-        angle = np.linalg.norm(phi)
-        K = np.array([[0, -phi[2], phi[1]], [phi[2], 0, -phi[0]], [-phi[1], phi[0], 0]]) / max(angle, 1e-300)
-        C = C @ (np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K)
-        pth, pdv = dth, dv
-        out[k] = p
-    return out - truth.pos
-
-
 def _one_stride_and_20s(t, motion, plan, rate):
     """Sample indices: end of the first full stride (second swing), and 20 s after walking starts."""
     return int(motion.k_end[1]), int(round((plan.start_still_s + 20.0) * rate))
@@ -151,13 +121,9 @@ def test_pure_yaw_turn_integrates_to_the_right_heading():
 
 
 def test_free_inertial_integration_follows_truth():
-    """The spec's bounds, 3-D, with fusion.strapdown.integrate: < 1 mm after one stride,
-    < 5 cm after 20 s of walking (with a 90° turn and a 7° mounting yaw), no aiding.
-
-    Run at 1000 Hz: the mechanisation's truncation error is O(dt²) (no sculling, coning
-    or second-order rotation terms) and at 100 Hz it is ~2 cm per stride, vertical, and
-    ~19 cm horizontal 8 s after a 90° turn (see the next tests)."""
-    rate = 1000.0
+    """3-D, 100 Hz, fusion.strapdown.integrate of the ideal IMU with no aiding: < 1 mm
+    after one stride, < 5 cm after 20 s of walking (with a 90° turn and a 7° mounting yaw)."""
+    rate = 100.0
     t, motion, plan = _walk(rate)
     err = _free_inertial(t, motion)
     k_stride, k_20 = _one_stride_and_20s(t, motion, plan, rate)
@@ -165,47 +131,16 @@ def test_free_inertial_integration_follows_truth():
     assert np.linalg.norm(err[k_20]) < 0.05
 
 
-def test_free_inertial_at_100hz_straight_horizontal_bounds_and_dt2_convergence():
-    """At 100 Hz, walking straight, the horizontal error meets the bounds. What
-    fusion.strapdown.integrate leaves (vertical while walking straight, also horizontal
-    after a turn: no sculling, coning or second-order terms) falls as dt² — a truncation
-    error of the mechanisation, not an inconsistency of the simulated IMU (that would not
-    shrink with dt)."""
-    t, motion, plan = _walk(100.0, waypoints=((0.0, 0.0), (3.0, 30.0)))
-    err = _free_inertial(t, motion)
-    k_stride, k_20 = _one_stride_and_20s(t, motion, plan, 100.0)
-    assert np.linalg.norm(err[k_stride, :2]) < 1e-3
-    assert np.linalg.norm(err[k_20, :2]) < 0.05
+def test_free_inertial_error_is_a_truncation_error_that_shrinks_with_dt():
+    """What is left falls at least as dt³ from 100 Hz to 200 Hz (measured: about dt⁴): a
+    truncation error of the two-sample mechanisation, not an inconsistency of the simulated
+    IMU (that would not shrink with dt)."""
     errs = {}
     for rate in (100.0, 200.0):
         t, motion, plan = _walk(rate)
         k_stride, k_20 = _one_stride_and_20s(t, motion, plan, rate)
         errs[rate] = np.linalg.norm(_free_inertial(t, motion)[[k_stride, k_20]], axis=1)
-    ratio = errs[100.0] / errs[200.0]
-    assert np.all((3.5 < ratio) & (ratio < 4.5)), ratio
-
-
-def test_simulated_imu_is_consistent_at_100hz_with_a_second_order_mechanisation():
-    """The same walk at 100 Hz through a mechanisation with sculling/coning and the
-    second-order rotation term meets the spec's bounds in 3-D."""
-    rate = 100.0
-    t, motion, plan = _walk(rate)
-    k_stride, k_20 = _one_stride_and_20s(t, motion, plan, rate)
-    err = _reference_integrate(t[: k_20 + 1], motion)
-    assert np.linalg.norm(err[k_stride]) < 1e-3
-    assert np.linalg.norm(err[k_20]) < 0.05
-
-
-@pytest.mark.xfail(reason="fusion.strapdown has no sculling, coning or second-order velocity terms: "
-                          "at 100 Hz ~1.8 cm (vertical) per stride, ~3.5 m after 20 s (see the dt² test)",
-                   strict=False)
-def test_free_inertial_3d_bounds_at_100hz():
-    rate = 100.0
-    t, motion, plan = _walk(rate)
-    err = _free_inertial(t, motion)
-    k_stride, k_20 = _one_stride_and_20s(t, motion, plan, rate)
-    assert np.linalg.norm(err[k_stride]) < 1e-3
-    assert np.linalg.norm(err[k_20]) < 0.05
+    assert np.all(errs[100.0] / errs[200.0] > 8.0), errs
 
 
 # --------------------------------------------------------------------------- paths and gait

@@ -143,7 +143,7 @@ def test_mechanise_returns_start_dcm_and_mean_nav_specific_force():
     f_n = np.empty(3)
     acc = np.array([0.4, -0.1, 9.9])
     gyro = np.zeros(3)
-    C = mechanise(x, acc, gyro, 0.01, G, NO_EARTH, f_n)
+    C = mechanise(x, acc, gyro, 0.01, G, NO_EARTH, f_n, np.zeros(6))
     C_ref = Rotation.from_quat(q, scalar_first=True).as_matrix()
     np.testing.assert_allclose(C, C_ref, atol=1e-14)
     np.testing.assert_allclose(f_n, C_ref @ acc, atol=1e-12)
@@ -185,7 +185,7 @@ def test_earth_rate_coriolis_term_on_a_moving_body():
     x = nominal(v=(10.0, 0.0, 0.0))
     f_n = np.empty(3)
     dt = 0.01
-    mechanise(x, np.array([0.0, 0.0, G]), np.zeros(3), dt, G, w, f_n)
+    mechanise(x, np.array([0.0, 0.0, G]), np.zeros(3), dt, G, w, f_n, np.zeros(6))
     expected_dv = -2.0 * np.cross(w, [10.0, 0.0, 0.0]) * dt - 0.5 * dt * np.cross(w, [0.0, 0.0, G * dt])
     np.testing.assert_allclose(x[3:6] - [10.0, 0.0, 0.0], expected_dv, atol=1e-15)
 

@@ -19,12 +19,13 @@ C_ZUPTS, C_ZARUS, C_NIS_SUM = range(3)
 
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, hist_x: np.ndarray,
-                 hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
+                 hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i], propagate P,
     and at stance samples apply the ZUPT (and the ZARU when its σ > 0).
 
-    x (16,) nominal state and P (15, 15) are updated in place; row i of ``hist_x`` and
+    x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
+    increments, see :func:`fusion.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
     ``hist_pos_var`` receives the state and the position variances (m^2) after sample i.
     ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS].
     """
@@ -43,7 +44,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     dx = np.empty(15)
     for i in range(i0, i1):
         dt = t[i] - t[i - 1]
-        C = mechanise(x, acc_b[i], gyro_b[i], dt, g, w_ie, f_n)
+        C = mechanise(x, acc_b[i], gyro_b[i], dt, g, w_ie, f_n, mech_memory)
         propagate_covariance(P, C, f_n, dt, q_diag, work)
         if stance[i]:
             counters[C_NIS_SUM] += zero_velocity_update(x, P, zupt_sigma, dx)

@@ -109,6 +109,7 @@ class FootIns(SensorSystem):
         self.hist_x[0] = self.x
         self.hist_pos_var[0] = np.diag(self.P)[:3]
         self.counters = np.zeros(3)
+        self.mech_memory = np.zeros(6)
         self._i = 0  # index of the sample the state refers to
 
     # --- time ---------------------------------------------------------------------
@@ -129,7 +130,8 @@ class FootIns(SensorSystem):
         if i1 <= self._i + 1:
             return
         run_foot_ins(self.x, self.P, self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance,
-                     self._i + 1, i1, self._params, self.hist_x, self.hist_pos_var, self.counters)
+                     self._i + 1, i1, self._params, self.mech_memory, self.hist_x, self.hist_pos_var,
+                     self.counters)
         self._i = i1 - 1
 
     # --- heading ------------------------------------------------------------------

@@ -1,0 +1,496 @@
+"""Property tests for fusion.constraints: projection (eqs. 55–60), OSQP QP, cvxpy SOCP.
+
+Hypothesis draws the structure (number of systems, full or block-diagonal Σ,
+horizontal or 3-D, lever arms, how far the constraint is violated) and a seed;
+numpy generates the numbers from the seed. Σ has eigenvalues (5–60 cm)², so it
+is well conditioned and KKT residuals can be checked with Σ⁻¹.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from fusion import constraints as fc
+from fusion.constraints import (
+    ConstraintSolution,
+    DistanceConstraint,
+    ProjectionSolver,
+    QpSolver,
+    SocpSolver,
+    constrained_covariance,
+    solve_projection,
+    violations,
+)
+
+TOL = 1e-6
+SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+seeds = st.integers(0, 2**32 - 1)
+n_systems = st.integers(2, 4)
+flags = st.booleans()
+
+
+# ---------------------------------------------------------------------------
+# problem generators and independent reference computations
+# ---------------------------------------------------------------------------
+
+
+def random_spd(rng: np.random.Generator, n3: int, full: bool) -> np.ndarray:
+    def block(k: int) -> np.ndarray:
+        q, _ = np.linalg.qr(rng.normal(size=(k, k)))
+        return (q * rng.uniform(0.05, 0.6, k) ** 2) @ q.T
+
+    if full:
+        return block(n3)
+    out = np.zeros((n3, n3))
+    for b in range(n3 // 3):
+        out[3 * b : 3 * b + 3, 3 * b : 3 * b + 3] = block(3)
+    return out
+
+
+def pair_problem(seed: int, n: int, full: bool, horizontal: bool, lever: bool, kind: str, ratio: float):
+    """p̂, Σ and one constraint between two random systems whose constrained
+    separation ‖E(p_i + l_i − p_j − l_j)‖ is ``ratio`` times its distance."""
+    rng = np.random.default_rng(seed)
+    i, j = (int(x) for x in rng.choice(n, 2, replace=False))
+    li = rng.normal(scale=0.2, size=3) if lever else None
+    lj = rng.normal(scale=0.2, size=3) if lever else None
+    d = float(rng.uniform(0.3, 1.5))
+    p = rng.normal(scale=2.0, size=3 * n)
+    dim = 2 if horizontal else 3
+    direction = rng.normal(size=dim)
+    direction /= np.linalg.norm(direction)
+    base = p[3 * i : 3 * i + 3] + (0 if li is None else li) - (0 if lj is None else lj)
+    p[3 * j : 3 * j + dim] = base[:dim] - ratio * d * direction
+    c = DistanceConstraint(i, j, kind, d, horizontal=horizontal, lever_i_m=li, lever_j_m=lj)
+    return p, random_spd(rng, 3 * n, full), c
+
+
+def separation(p: np.ndarray, c: DistanceConstraint) -> np.ndarray:
+    """E (p_i + l_i − p_j − l_j), computed here independently of the module."""
+    li = np.zeros(3) if c.lever_i_m is None else c.lever_i_m
+    lj = np.zeros(3) if c.lever_j_m is None else c.lever_j_m
+    r = p[3 * c.i : 3 * c.i + 3] + li - p[3 * c.j : 3 * c.j + 3] - lj
+    return r[:2] if c.horizontal else r
+
+
+def g_value(p: np.ndarray, c: DistanceConstraint) -> float:
+    """g ≤ 0 form: max ‖r‖ − d, min d − ‖r‖, fixed ‖r‖ − d."""
+    nr = float(np.linalg.norm(separation(p, c)))
+    return c.distance_m - nr if c.kind == "min" else nr - c.distance_m
+
+
+def grad_g(p: np.ndarray, c: DistanceConstraint, n: int) -> np.ndarray:
+    r = separation(p, c)
+    u = r / np.linalg.norm(r)
+    out = np.zeros(3 * n)
+    out[3 * c.i : 3 * c.i + len(u)] += u
+    out[3 * c.j : 3 * c.j + len(u)] -= u
+    return -out if c.kind == "min" else out
+
+
+def check_kkt(sol: ConstraintSolution, p_hat: np.ndarray, sigma: np.ndarray, cons, tol: float = TOL) -> None:
+    """Σ⁻¹(p* − p̂) + Σ λ_k ∇g_k(p*) = 0, λ ≥ 0 (max/min), λ_k g_k = 0, feasibility."""
+    n = p_hat.shape[0] // 3
+    p = sol.p
+    lam = sol.multipliers
+    assert lam.shape == (len(cons),)
+    pull = np.zeros(3 * n)
+    for k, c in enumerate(cons):
+        g = g_value(p, c)
+        if c.kind == "fixed":
+            assert abs(g) <= tol
+        else:
+            assert g <= tol
+            assert lam[k] >= -1e-9, f"multiplier {k} has the wrong sign: {lam[k]}"
+        if k in sol.active:
+            assert abs(g) <= tol, f"active constraint {k} is not tight: g = {g}"
+            pull += lam[k] * grad_g(p, c, n)
+        else:
+            assert lam[k] == 0.0
+        assert abs(lam[k] * g) <= tol * (1.0 + abs(lam[k]))  # complementary slackness
+    info_step = np.linalg.solve(sigma, p - p_hat)
+    resid = info_step + pull
+    scale = 1.0 + np.max(np.abs(info_step))
+    assert np.max(np.abs(resid)) <= 1e-4 * scale, f"stationarity residual {np.max(np.abs(resid))}"
+    # the same condition in metres (no Σ⁻¹): p* − p̂ + Σ Σλ∇g = 0
+    assert np.max(np.abs(p - p_hat + sigma @ pull)) <= 10 * tol
+    # the documented identity Σ⁻¹(p* − p̂) = −Jᵀ λ_active
+    if sol.active:
+        assert np.allclose(-sol.jacobian.T @ lam[sol.active], info_step, atol=1e-4 * scale)
+
+
+def assert_clean(sol: ConstraintSolution) -> None:
+    for arr in (sol.p, sol.gain, sol.multipliers):
+        assert np.all(np.isfinite(arr))
+
+
+# ---------------------------------------------------------------------------
+# single max constraint: three methods agree
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=30, **SETTINGS)
+@given(seeds, n_systems, flags, flags, flags, st.floats(1.02, 3.0))
+def test_single_max_constraint_methods_agree(seed, n, full, horizontal, lever, ratio):
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, "max", ratio)
+    cons = [c]
+    sols = {
+        "projection": solve_projection(p_hat, sigma, cons),
+        "qp": QpSolver(n, cons).solve(p_hat, sigma),
+        "socp": SocpSolver(n, cons).solve(p_hat, sigma),
+    }
+    for name, sol in sols.items():
+        assert_clean(sol)
+        assert sol.method == name and not sol.fallback and sol.converged, name
+        assert sol.active == [0]
+        assert sol.violation_before_m == pytest.approx((ratio - 1.0) * c.distance_m, rel=1e-6, abs=1e-9)
+        assert sol.violation_after_m <= TOL
+        assert violations(sol.p, cons)[0] <= TOL
+    for a, b in (("projection", "qp"), ("projection", "socp"), ("qp", "socp")):
+        assert np.max(np.abs(sols[a].p - sols[b].p)) <= TOL, (a, b)
+    assert np.allclose(sols["projection"].gain, sols["qp"].gain, atol=1e-5)
+
+
+# ---------------------------------------------------------------------------
+# KKT conditions (projection and qp), all kinds
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=60, **SETTINGS)
+@given(seeds, n_systems, flags, flags, flags, st.sampled_from(["max", "min", "fixed"]), st.floats(0.0, 1.0))
+def test_kkt_conditions_single_constraint(seed, n, full, horizontal, lever, kind, t):
+    if kind == "max":
+        ratio = 1.02 + 2.0 * t
+    elif kind == "min":
+        ratio = 0.1 + 0.85 * t
+    else:
+        ratio = 0.2 + 2.5 * t
+    assume(abs(ratio - 1.0) > 0.02)
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, kind, ratio)
+    for sol in (solve_projection(p_hat, sigma, [c]), QpSolver(n, [c]).solve(p_hat, sigma)):
+        assert_clean(sol)
+        assert sol.converged and not sol.fallback
+        assert sol.active == [0]
+        check_kkt(sol, p_hat, sigma, [c])
+        # sign convention: max pulls together (λ > 0), min pushes apart (λ > 0 on d − ‖r‖)
+        if kind == "fixed":
+            assert np.sign(sol.multipliers[0]) == np.sign(ratio - 1.0)
+        else:
+            assert sol.multipliers[0] > 0.0
+
+
+# ---------------------------------------------------------------------------
+# constrained covariance
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=40, **SETTINGS)
+@given(seeds, n_systems, flags, flags, flags, st.sampled_from(["max", "min", "fixed"]))
+def test_constrained_covariance_psd_and_collapses(seed, n, full, horizontal, lever, kind):
+    ratio = {"max": 1.5, "min": 0.5, "fixed": 1.3}[kind]
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, kind, ratio)
+    for sol in (solve_projection(p_hat, sigma, [c]), QpSolver(n, [c]).solve(p_hat, sigma)):
+        sig_star = constrained_covariance(sigma, sol.gain)
+        assert np.array_equal(sig_star, sig_star.T)
+        scale = np.trace(sigma)
+        assert np.linalg.eigvalsh(sig_star)[0] >= -1e-9 * scale
+        # never more uncertain than before: Σ − Σ* ⪰ 0
+        assert np.linalg.eigvalsh(sigma - sig_star)[0] >= -1e-9 * scale
+        # variance along the constrained direction collapses
+        gk = grad_g(sol.p, c, n)
+        assert gk @ sig_star @ gk <= 1e-9 * (gk @ sigma @ gk)
+        # and it equals the conditioning formula Σ − Σgᵀ(gΣgᵀ)⁻¹gΣ
+        sg = sigma @ gk
+        assert np.allclose(sig_star, sigma - np.outer(sg, sg) / (gk @ sg), atol=1e-9 * scale)
+
+
+def test_constrained_covariance_zero_gain_is_identity():
+    rng = np.random.default_rng(1)
+    sigma = random_spd(rng, 6, True)
+    assert np.allclose(constrained_covariance(sigma, np.zeros((6, 6))), sigma, atol=0, rtol=1e-15)
+
+
+# ---------------------------------------------------------------------------
+# inactive constraints change nothing
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=25, **SETTINGS)
+@given(seeds, n_systems, flags, flags, flags, st.sampled_from(["max", "min"]), st.floats(0.0, 1.0))
+def test_inactive_constraints_change_nothing(seed, n, full, horizontal, lever, kind, t):
+    ratio = 0.1 + 0.85 * t if kind == "max" else 1.05 + 2.0 * t
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, kind, ratio)
+    for sol in (
+        solve_projection(p_hat, sigma, [c]),
+        QpSolver(n, [c]).solve(p_hat, sigma),
+        SocpSolver(n, [c]).solve(p_hat, sigma),
+    ):
+        assert np.array_equal(sol.p, p_hat)
+        assert sol.p is not p_hat
+        assert not np.any(sol.gain) and sol.gain.shape == (3 * n, 3 * n)
+        assert sol.active == [] and not np.any(sol.multipliers)
+        assert sol.violation_before_m == 0.0 and sol.violation_after_m == 0.0
+        assert sol.converged and not sol.fallback
+
+
+# ---------------------------------------------------------------------------
+# min and fixed constraints hold after solving
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=40, **SETTINGS)
+@given(seeds, n_systems, flags, flags, flags, st.sampled_from(["min", "fixed"]), st.floats(0.05, 0.95))
+def test_min_and_fixed_constraints_hold(seed, n, full, horizontal, lever, kind, ratio):
+    if kind == "fixed" and seed % 2:
+        ratio = 1.0 / ratio  # fixed constraints violated from outside too
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, kind, ratio)
+    for sol in (solve_projection(p_hat, sigma, [c]), QpSolver(n, [c]).solve(p_hat, sigma)):
+        assert_clean(sol)
+        assert sol.converged and not sol.fallback
+        assert abs(np.linalg.norm(separation(sol.p, c)) - c.distance_m) <= TOL
+        assert violations(sol.p, [c])[0] <= TOL
+
+
+def test_fixed_constraint_is_always_active():
+    """Satisfied exactly at p̂: nothing moves, but the distance is information (μ ≠ 0)."""
+    p_hat = np.array([0.0, 0.0, 0.0, 0.6, 0.8, 0.3])
+    sigma = np.diag([0.04, 0.09, 0.01, 0.05, 0.02, 0.01])
+    c = DistanceConstraint(0, 1, "fixed", 1.0)
+    for sol in (solve_projection(p_hat, sigma, [c]), QpSolver(2, [c]).solve(p_hat, sigma)):
+        assert sol.active == [0]
+        assert np.allclose(sol.p, p_hat, atol=1e-12)
+        assert np.any(sol.gain)
+
+
+# ---------------------------------------------------------------------------
+# several constraints at once
+# ---------------------------------------------------------------------------
+
+
+def triangle_problem(seed: int, full: bool, horizontal: bool):
+    rng = np.random.default_rng(seed)
+    p_hat = rng.normal(scale=1.0, size=9)
+    sigma = random_spd(rng, 9, full)
+    cons = []
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        dim = 2 if horizontal else 3
+        dist = float(np.linalg.norm(p_hat[3 * i : 3 * i + dim] - p_hat[3 * j : 3 * j + dim]))
+        cons.append(DistanceConstraint(i, j, "max", dist * float(rng.uniform(0.3, 0.95)), horizontal=horizontal))
+    return p_hat, sigma, cons
+
+
+@settings(max_examples=40, **SETTINGS)
+@given(seeds, flags, flags)
+def test_three_pairwise_max_constraints(seed, full, horizontal):
+    p_hat, sigma, cons = triangle_problem(seed, full, horizontal)
+    assume(np.all(violations(p_hat, cons) > 1e-3))  # all three violated
+    proj = solve_projection(p_hat, sigma, cons)
+    qp = QpSolver(3, cons).solve(p_hat, sigma)
+    for sol in (proj, qp):
+        assert_clean(sol)
+        assert sol.converged and not sol.fallback
+        assert np.all(violations(sol.p, cons) <= TOL)
+        check_kkt(sol, p_hat, sigma, cons)
+    assert np.max(np.abs(proj.p - qp.p)) <= 1e-5
+    assert sorted(proj.active) == sorted(qp.active)
+
+
+@settings(max_examples=8, **SETTINGS)
+@given(seeds, flags)
+def test_three_pairwise_max_constraints_socp(seed, full):
+    p_hat, sigma, cons = triangle_problem(seed, full, True)
+    assume(np.all(violations(p_hat, cons) > 1e-3))
+    proj = solve_projection(p_hat, sigma, cons)
+    socp = SocpSolver(3, cons).solve(p_hat, sigma)
+    assert socp.converged and not socp.fallback
+    assert np.max(np.abs(proj.p - socp.p)) <= 1e-5
+
+
+# ---------------------------------------------------------------------------
+# degenerate geometry
+# ---------------------------------------------------------------------------
+
+
+@settings(max_examples=25, **SETTINGS)
+@given(seeds, n_systems, flags, flags, st.sampled_from(["min", "fixed"]))
+def test_degenerate_coincident_systems(seed, n, full, horizontal, kind):
+    rng = np.random.default_rng(seed)
+    p_hat = rng.normal(scale=2.0, size=3 * n)
+    i, j = (int(x) for x in rng.choice(n, 2, replace=False))
+    p_hat[3 * j : 3 * j + 3] = p_hat[3 * i : 3 * i + 3]  # p_i == p_j exactly
+    sigma = random_spd(rng, 3 * n, full)
+    c = DistanceConstraint(i, j, kind, float(rng.uniform(0.1, 1.0)), horizontal=horizontal)
+    assert violations(p_hat, [c])[0] == pytest.approx(c.distance_m)
+    for sol in (
+        solve_projection(p_hat, sigma, [c]),
+        ProjectionSolver(n, [c]).solve(p_hat, sigma),
+        QpSolver(n, [c]).solve(p_hat, sigma),
+        SocpSolver(n, [c]).solve(p_hat, sigma),  # may fall back: still must hold
+    ):
+        assert_clean(sol)
+        assert violations(sol.p, [c])[0] <= TOL
+        assert abs(np.linalg.norm(separation(sol.p, c)) - c.distance_m) <= TOL
+
+
+def test_degenerate_isotropic_separates_east():
+    """No preferred axis (S ∝ I) and no history: the documented direction is east."""
+    p_hat = np.array([1.0, 2.0, 0.0, 1.0, 2.0, 0.0])
+    sigma = 0.01 * np.eye(6)
+    c = DistanceConstraint(0, 1, "min", 0.4)
+    for sol in (solve_projection(p_hat, sigma, [c]), QpSolver(2, [c]).solve(p_hat, sigma)):
+        assert np.allclose(sol.p[:3] - sol.p[3:], [0.4, 0.0, 0.0], atol=1e-9)
+        assert np.allclose(sol.p[:3] + sol.p[3:], p_hat[:3] + p_hat[3:], atol=1e-12)
+    # a hint (e.g. the previous solution's direction) replaces east
+    sol = solve_projection(p_hat, sigma, [c], hint_directions=[[0.0, 1.0, 0.0]])
+    assert np.allclose(sol.p[:3] - sol.p[3:], [0.0, 0.4, 0.0], atol=1e-9)
+
+
+def test_degenerate_uses_previous_direction():
+    sigma = 0.01 * np.eye(6)
+    c = DistanceConstraint(0, 1, "min", 0.4)
+    solver = ProjectionSolver(2, [c])
+    solver.solve(np.array([0.0, 0.0, 0.0, 0.0, -0.1, 0.0]), sigma)  # separated along north
+    sol = solver.solve(np.array([1.0, 1.0, 0.0, 1.0, 1.0, 0.0]), sigma)  # then coincident
+    assert np.allclose(sol.p[:3] - sol.p[3:], [0.0, 0.4, 0.0], atol=1e-9)
+
+
+# ---------------------------------------------------------------------------
+# solver failure → projection fallback
+# ---------------------------------------------------------------------------
+
+
+def _one_violated(seed: int = 3):
+    return pair_problem(seed, 2, True, True, True, "max", 1.4)
+
+
+def test_qp_max_iter_zero_falls_back_to_projection():
+    p_hat, sigma, c = _one_violated()
+    qp = QpSolver(2, [c], max_iter=0)
+    sol = qp.solve(p_hat, sigma)
+    ref = solve_projection(p_hat, sigma, [c])
+    assert sol.fallback and sol.method == "projection" and qp.fallbacks == 1
+    np.testing.assert_allclose(sol.p, ref.p, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(sol.gain, ref.gain, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("mode", ["status", "raise"])
+def test_qp_osqp_failure_falls_back(monkeypatch, mode):
+    p_hat, sigma, c = _one_violated()
+    qp = QpSolver(2, [c])
+
+    def broken(*args, **kwargs):
+        if mode == "raise":
+            raise RuntimeError("solver crashed")
+        return 7, np.full(6, np.nan), np.full(1, np.nan)  # OSQP_MAX_ITER_REACHED
+
+    monkeypatch.setattr(qp, "_qp", broken)
+    sol = qp.solve(p_hat, sigma)
+    ref = solve_projection(p_hat, sigma, [c])
+    assert sol.fallback and sol.method == "projection"
+    np.testing.assert_allclose(sol.p, ref.p, rtol=0, atol=1e-12)
+    assert sol.violation_after_m <= TOL
+
+
+def test_socp_failure_falls_back(monkeypatch):
+    import cvxpy as cp
+
+    p_hat, sigma, c = _one_violated()
+    socp = SocpSolver(2, [c])
+    assert socp.is_dpp()
+
+    def broken(*args, **kwargs):
+        raise cp.error.SolverError("solver crashed")
+
+    monkeypatch.setattr(socp._problem, "solve", broken)
+    sol = socp.solve(p_hat, sigma)
+    assert sol.fallback and sol.method == "projection" and socp.fallbacks == 1
+    np.testing.assert_allclose(sol.p, solve_projection(p_hat, sigma, [c]).p, rtol=0, atol=1e-12)
+
+
+def test_fallback_field_defaults_false():
+    p_hat, sigma, c = _one_violated()
+    assert solve_projection(p_hat, sigma, [c]).fallback is False
+
+
+# ---------------------------------------------------------------------------
+# smaller properties
+# ---------------------------------------------------------------------------
+
+
+def test_violations_signs_and_lever_arms():
+    li, lj = np.array([0.1, 0.0, 0.5]), np.array([0.0, -0.2, 0.0])
+    p = np.array([0.0, 0.0, 0.0, 0.3, 0.0, 2.0])
+    # E(p_i + l_i − p_j − l_j) = (0.1 − 0.3, 0 + 0.2) → ‖·‖ = √0.08
+    r = np.sqrt(0.08)
+    cons = [
+        DistanceConstraint(0, 1, "max", 0.2, lever_i_m=li, lever_j_m=lj),
+        DistanceConstraint(0, 1, "min", 0.2, lever_i_m=li, lever_j_m=lj),
+        DistanceConstraint(0, 1, "fixed", 0.2, lever_i_m=li, lever_j_m=lj),
+        DistanceConstraint(0, 1, "max", 1.0, horizontal=False),  # 3-D: √(0.09 + 4)
+    ]
+    np.testing.assert_allclose(violations(p, cons), [r - 0.2, 0.2 - r, r - 0.2, np.sqrt(4.09) - 1.0])
+
+
+def test_lever_arms_move_the_constrained_points():
+    li, lj = np.array([-0.3, 0.0, 0.0]), np.array([0.3, 0.0, 0.0])
+    p_hat = np.array([0.0, 0.0, 0.0, 0.5, 0.0, 0.0])  # constrained points −0.3 and 0.8: 1.1 m apart
+    sigma = 0.01 * np.eye(6)
+    c = DistanceConstraint(0, 1, "max", 0.8, lever_i_m=li, lever_j_m=lj)
+    sol = solve_projection(p_hat, sigma, [c])
+    # equal variances: each moves 0.15 m towards the other along east
+    np.testing.assert_allclose(sol.p, [0.15, 0, 0, 0.35, 0, 0], atol=1e-12)
+    assert sol.multipliers[0] == pytest.approx(0.3 / (2 * 0.01))
+
+
+def test_psd_sigma_without_inverse():
+    """Σ singular (exactly known heights): QP whitens with a PSD square root."""
+    rng = np.random.default_rng(7)
+    sigma = random_spd(rng, 6, False)
+    sigma[2, :] = sigma[:, 2] = 0.0
+    sigma[5, :] = sigma[:, 5] = 0.0
+    p_hat = np.array([0.0, 0.0, 1.0, 1.2, 0.4, 0.0])
+    c = DistanceConstraint(0, 1, "max", 0.8)
+    proj = solve_projection(p_hat, sigma, [c])
+    qp = QpSolver(2, [c]).solve(p_hat, sigma)
+    assert not qp.fallback and qp.converged
+    assert np.max(np.abs(proj.p - qp.p)) <= TOL
+    assert proj.p[2] == 1.0 and proj.p[5] == 0.0  # zero-variance components stay
+
+
+@pytest.mark.parametrize("scheme", ["newton", "fixed_point"])
+def test_schemes_agree_on_easy_problem(scheme):
+    p_hat = np.array([0.0, 0.0, 0.0, 1.0, 0.5, 0.0])
+    sigma = np.diag([0.02, 0.03, 0.01, 0.03, 0.02, 0.01])
+    c = DistanceConstraint(0, 1, "max", 0.8)
+    ref = QpSolver(2, [c]).solve(p_hat, sigma)
+    sol = solve_projection(p_hat, sigma, [c], scheme=scheme, max_iter=200)
+    assert sol.converged
+    assert np.max(np.abs(sol.p - ref.p)) <= 1e-5
+
+
+def test_constraint_validation_and_equality():
+    with pytest.raises(ValueError):
+        DistanceConstraint(0, 1, "between", 1.0)
+    with pytest.raises(ValueError):
+        DistanceConstraint(1, 1, "max", 1.0)
+    with pytest.raises(ValueError):
+        DistanceConstraint(0, 1, "max", 0.0)
+    with pytest.raises(ValueError):
+        DistanceConstraint(0, 1, "min", -0.1)
+    with pytest.raises(ValueError):
+        DistanceConstraint(0, 1, "max", 1.0, lever_i_m=np.zeros(2))
+    a = DistanceConstraint(0, 1, "max", 1.0, lever_i_m=[0.0, 0.1, 0.0])
+    b = DistanceConstraint(0, 1, "max", 1.0, lever_i_m=np.array([0.0, 0.1, 0.0]))
+    assert a == b and hash(a) == hash(b) and len({a, b}) == 1
+    assert a != DistanceConstraint(0, 1, "max", 1.0)
+    with pytest.raises(ValueError):
+        solve_projection(np.zeros(6), np.eye(6), [DistanceConstraint(0, 2, "max", 1.0)])
+
+
+def test_module_exports():
+    for name in fc.__all__:
+        assert hasattr(fc, name)
