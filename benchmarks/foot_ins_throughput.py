@@ -91,9 +91,13 @@ def main() -> None:
         from fusion.run import build_systems, layout_context
 
         loaded = load_layout(args.layout)
+        t1 = time.perf_counter()
         system = build_systems(loaded, layout_context(loaded))["foot"]
+        t2 = time.perf_counter()
         system.advance(system.t_end)
-        print(time.perf_counter() - t0)
+        t3 = time.perf_counter()
+        print(f"import+config {t1 - t0:.2f} s, read CSV {t2 - t1:.2f} s, compile+run {t3 - t2:.2f} s")
+        print(t3 - t0)
         return
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -105,11 +109,12 @@ def main() -> None:
         child = subprocess.run([sys.executable, __file__, "--layout", str(layout)], env=env,
                                capture_output=True, text=True, check=True)
         cold_wall = time.perf_counter() - t0
-        cold_inner = float(child.stdout.strip().splitlines()[-1])
+        cold_split, cold_inner = child.stdout.strip().splitlines()[-2:]
+        cold_inner = float(cold_inner)
         warm_s, samples = run_once(layout)
         print(f"stream: {samples} samples ({args.hours} h at {args.rate} Hz)")
         print(f"warm pass: {warm_s:.3f} s; cold process: {cold_wall:.2f} s wall, {cold_inner:.2f} s in-process "
-              f"(read CSV + JIT compile + run)")
+              f"({cold_split})")
         print(f"samples_per_s={samples / warm_s:.0f} cold_s={cold_inner:.2f}")
 
 

@@ -31,7 +31,6 @@ DGYRO_BIAS = slice(12, 15)
 def _apply_A_left(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, out: np.ndarray) -> None:
     """out = A P for the block-sparse A of the module docstring (P may be non-symmetric)."""
     n = P.shape[1]
-    out[:] = 0.0
     for c in range(n):
         for r in range(3):
             out[r, c] = P[3 + r, c]
@@ -43,6 +42,8 @@ def _apply_A_left(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, out: np.ndarray
         for r in range(3):
             out[3 + r, c] -= C[r, 0] * P[9, c] + C[r, 1] * P[10, c] + C[r, 2] * P[11, c]
             out[6 + r, c] = -(C[r, 0] * P[12, c] + C[r, 1] * P[13, c] + C[r, 2] * P[14, c])
+        for r in range(9, 15):
+            out[r, c] = 0.0
 
 
 @numba.njit(cache=True)
@@ -57,7 +58,10 @@ def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: floa
         for c in range(15):
             FP[r, c] = P[r, c] + dt * AP[r, c]
     # (F P) Fᵀ = FP + dt (A FPᵀ)ᵀ
-    FPt = FP.T.copy()
+    FPt = np.empty((15, 15))
+    for r in range(15):
+        for c in range(15):
+            FPt[r, c] = FP[c, r]
     _apply_A_left(FPt, C, f_n, AP)
     for r in range(15):
         for c in range(15):
@@ -80,7 +84,8 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
         x[13 + k] += dx[12 + k]
     q = quat_multiply(quat_from_rotvec(dx[6:9]), x[6:10])
     quat_normalise(q)
-    x[6:10] = q
+    for k in range(4):
+        x[6 + k] = q[k]
 
 
 @numba.njit(cache=True)

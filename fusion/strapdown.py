@@ -38,12 +38,11 @@ NOMINAL_SIZE = 16
 
 
 @numba.njit(cache=True)
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    out = np.empty(3)
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-    return out
+def _cross_into(a: np.ndarray, b: np.ndarray, out: np.ndarray, scale: float) -> None:
+    """out += scale · (a × b)."""
+    out[0] += scale * (a[1] * b[2] - a[2] * b[1])
+    out[1] += scale * (a[2] * b[0] - a[0] * b[2])
+    out[2] += scale * (a[0] * b[1] - a[1] * b[0])
 
 
 @numba.njit(cache=True)
@@ -54,7 +53,7 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     acc_b: specific force (m/s^2), gyro_b: angular rate (rad/s), dt (s), g: gravity
     magnitude (m/s^2). Writes the mean navigation-frame specific force of the step
     into ``f_n_out`` and returns C_nb at the start of the step (both feed the error-state
-    transition matrix).
+    transition matrix). Scalar loops only: array expressions cost numba compile time.
     """
     C = quat_to_dcm(x[6:10])
     dth = np.empty(3)
@@ -62,38 +61,44 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     for k in range(3):
         dth[k] = (gyro_b[k] - x[13 + k]) * dt
         dv[k] = (acc_b[k] - x[10 + k]) * dt
-    pth = prev[0:3]
-    pv = prev[3:6]
-    a = _cross(dth, dv)
-    comp = dv + 0.5 * a + _cross(dth, a) / 6.0 + (_cross(pth, dv) + _cross(pv, dth)) / 12.0
-    phi = dth + _cross(pth, dth) / 12.0
-    prev[0:3] = dth
-    prev[3:6] = dv
+    pth = prev[0:3].copy()
+    pv = prev[3:6].copy()
+    a = np.zeros(3)
+    _cross_into(dth, dv, a, 1.0)
+    comp = dv.copy()
+    phi = dth.copy()
+    for k in range(3):
+        comp[k] += 0.5 * a[k]
+    _cross_into(dth, a, comp, 1.0 / 6.0)
+    _cross_into(pth, dv, comp, 1.0 / 12.0)
+    _cross_into(pv, dth, comp, 1.0 / 12.0)
+    _cross_into(pth, dth, phi, 1.0 / 12.0)
+    for k in range(3):
+        prev[k] = dth[k]
+        prev[3 + k] = dv[k]
     v0 = x[3:6].copy()
-    cor = np.empty(3)
-    cor[0] = 2.0 * (w_ie_n[1] * v0[2] - w_ie_n[2] * v0[1])
-    cor[1] = 2.0 * (w_ie_n[2] * v0[0] - w_ie_n[0] * v0[2])
-    cor[2] = 2.0 * (w_ie_n[0] * v0[1] - w_ie_n[1] * v0[0])
-    dvn = np.empty(3)
+    dvn = np.zeros(3)
     for r in range(3):
         dvn[r] = C[r, 0] * comp[0] + C[r, 1] * comp[1] + C[r, 2] * comp[2]
-    # rotation of the navigation frame over the step: −½ (ω_ie dt) × Δv_n
-    rot = np.empty(3)
-    rot[0] = w_ie_n[1] * dvn[2] - w_ie_n[2] * dvn[1]
-    rot[1] = w_ie_n[2] * dvn[0] - w_ie_n[0] * dvn[2]
-    rot[2] = w_ie_n[0] * dvn[1] - w_ie_n[1] * dvn[0]
+    # rotation of the navigation frame over the step, −½ (ω_ie dt) × Δv_n, and Coriolis −2 ω_ie × v dt
+    _cross_into(w_ie_n, dvn.copy(), dvn, -0.5 * dt)
+    cor = np.zeros(3)
+    _cross_into(w_ie_n, v0, cor, -2.0 * dt)
     for r in range(3):
-        dvn[r] -= 0.5 * dt * rot[r]
         f_n_out[r] = dvn[r] / dt
-        x[3 + r] = v0[r] + dvn[r] - cor[r] * dt
+        x[3 + r] = v0[r] + dvn[r] + cor[r]
     x[5] -= g * dt
     for r in range(3):
         x[r] += 0.5 * (v0[r] + x[3 + r]) * dt
     q = quat_multiply(x[6:10], quat_from_rotvec(phi))
     if w_ie_n[0] != 0.0 or w_ie_n[1] != 0.0 or w_ie_n[2] != 0.0:
-        q = quat_multiply(quat_from_rotvec(-w_ie_n * dt), q)
+        earth = np.empty(3)
+        for k in range(3):
+            earth[k] = -w_ie_n[k] * dt
+        q = quat_multiply(quat_from_rotvec(earth), q)
     quat_normalise(q)
-    x[6:10] = q
+    for k in range(4):
+        x[6 + k] = q[k]
     return C
 
 

@@ -20,7 +20,7 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, dx: np.nd
     y = np.empty(3)
     for k in range(3):
         y[k] = -x[3 + k]
-    nis = update_selected(P, 3, y, sigma_v * sigma_v, dx)
+    nis = update_selected(P, np.int64(3), y, sigma_v * sigma_v, dx)
     inject(x, dx)
     return nis
 
@@ -32,6 +32,6 @@ def zero_angular_rate_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, s
     y = np.empty(3)
     for k in range(3):
         y[k] = gyro_b[k] - x[13 + k]
-    nis = update_selected(P, 12, y, sigma_w * sigma_w, dx)
+    nis = update_selected(P, np.int64(12), y, sigma_w * sigma_w, dx)
     inject(x, dx)
     return nis

@@ -52,6 +52,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
             if zaru_sigma > 0:
                 zero_angular_rate_update(x, P, gyro_b[i], zaru_sigma, dx)
                 counters[C_ZARUS] += 1
-        hist_x[i] = x
+        for k in range(16):
+            hist_x[i, k] = x[k]
         for k in range(3):
             hist_pos_var[i, k] = P[k, k]
