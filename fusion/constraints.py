@@ -367,8 +367,13 @@ def constrained_covariance(sigma: Any, gain: Any) -> np.ndarray:
 
 
 def _max_violation(lay: _Layout, g: list[float]) -> float:
-    v = lay.violation_values(g)
-    return max(0.0, max(v)) if v else 0.0
+    out = 0.0
+    for x, code in zip(g, lay.code):
+        if code == 2 and x < 0.0:
+            x = -x
+        if x > out:
+            out = x
+    return out
 
 
 def _unconstrained_solution(p_hat: np.ndarray, lay: _Layout, method: str, viol: float) -> ConstraintSolution:
@@ -602,6 +607,59 @@ def _secular(
     return None, max_iter
 
 
+def _secular2(
+    a: float, b: float, c: float, r0: float, r1: float, d: float,
+    hints: dict[int, list[float]] | None, k: int, tol: float, max_iter: int,
+) -> tuple[list[float] | None, int]:
+    """:func:`_secular` for a 2-D (horizontal) pair with S = [[a, b], [b, c]], in
+    scalars: the hot path of the projection. The hard case goes to the generic code."""
+    mean = 0.5 * (a + c)
+    rad = math.hypot(0.5 * (a - c), b)
+    th = 0.5 * math.atan2(2.0 * b, a - c)
+    ct, st = math.cos(th), math.sin(th)
+    s0, s1 = mean + rad, mean - rad  # eigenvectors (ct, st), (−st, ct)
+    c0 = ct * r0 + st * r1
+    c1 = ct * r1 - st * r0
+    rho0 = math.hypot(r0, r1)
+    if rho0 == d:
+        return [r0 / rho0, r1 / rho0], 0
+    if rho0 > d:
+        lo, hi = 0.0, math.inf
+        if not ((s0 > 0.0 and c0 != 0.0) or (s1 > 0.0 and c1 != 0.0)):
+            return None, 0
+    else:
+        if not s0 > 0.0:
+            return None, 0
+        cT = abs(c0) if s1 < s0 * (1.0 - 1e-10) else rho0
+        if cT <= 1e-12 * d:  # hard case: exact, in the generic code
+            return _secular([[a, b], [b, c]], [r0, r1], d, _hint(hints, k, 2), tol, max_iter)
+        lo, hi = -1.0 / s0, 0.0
+    nu = 0.0
+    for it in range(1, max_iter + 1):
+        den0 = 1.0 + nu * s0
+        den1 = 1.0 + nu * s1
+        q0 = c0 / den0
+        q1 = c1 / den1
+        n2 = q0 * q0 + q1 * q1
+        rho = math.sqrt(n2)
+        if abs(rho - d) <= tol:
+            x = (q0 * ct - q1 * st) / rho
+            y = (q0 * st + q1 * ct) / rho
+            return [x, y], it
+        if rho > d:
+            lo = nu
+        else:
+            hi = nu
+        dn = q0 * q0 * s0 / den0 + q1 * q1 * s1 / den1
+        nu_new = nu + (1.0 / d - 1.0 / rho) * rho * n2 / dn if dn != 0.0 else math.nan
+        if not (lo < nu_new < hi):  # also catches NaN
+            nu_new = 0.5 * (lo + hi) if hi != math.inf else (2.0 * lo if lo > 0.0 else 1.0)
+        if nu_new == nu:
+            break
+        nu = nu_new
+    return None, max_iter
+
+
 def _single_fast(
     p_hat: np.ndarray,
     pl: list[float],
@@ -618,6 +676,8 @@ def _single_fast(
     of numbers this is several times faster than small numpy calls.
     """
     i3, j3, D = lay.i3[k], lay.j3[k], lay.dims[k]
+    if D == 2:
+        return _single_fast2(p_hat, pl, sl, lay, k, hints, tol_m, max_iter)
     rD = range(D)
     S = [
         [sl[i3 + a][i3 + b] - sl[i3 + a][j3 + b] - sl[j3 + a][i3 + b] + sl[j3 + a][j3 + b] for b in rD]
@@ -649,6 +709,47 @@ def _single_fast(
     for b in rD:
         G[i3 + b] = sgn * u[b]
         G[j3 + b] -= sgn * u[b]
+    Ga = np.array(G)
+    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
+    return p, lam, u, mu, Ga, its
+
+
+def _single_fast2(
+    p_hat: np.ndarray,
+    pl: list[float],
+    sl: list[list[float]],
+    lay: _Layout,
+    k: int,
+    hints: dict[int, list[float]] | None,
+    tol_m: float,
+    max_iter: int,
+) -> tuple[np.ndarray, float, list[float], np.ndarray, np.ndarray, int] | None:
+    """:func:`_single_fast` for a horizontal pair, in scalars."""
+    i, j = lay.i3[k], lay.j3[k]
+    i1, j1 = i + 1, j + 1
+    ri, rj, ri1, rj1 = sl[i], sl[j], sl[i1], sl[j1]
+    a = ri[i] - ri[j] - rj[i] + rj[j]
+    b = ri[i1] - ri[j1] - rj[i1] + rj[j1]
+    c = ri1[i1] - ri1[j1] - rj1[i1] + rj1[j1]
+    bk = lay.b[k]
+    r0 = pl[i] - pl[j] + bk[0]
+    r1 = pl[i1] - pl[j1] + bk[1]
+    u, its = _secular2(a, b, c, r0, r1, lay.d[k], hints, k, 1e-3 * tol_m, max(4 * max_iter, 60))
+    if u is None:
+        return None
+    u0, u1 = u
+    M = u0 * u0 * a + 2.0 * u0 * u1 * b + u1 * u1 * c
+    if not M > 0.0:
+        return None
+    sgn = -1.0 if lay.code[k] == 1 else 1.0
+    lam = sgn * (u0 * r0 + u1 * r1 - lay.d[k]) / M  # eq. 58
+    f0, f1 = sgn * u0, sgn * u1
+    sgt = [(row[i] - row[j]) * f0 + (row[i1] - row[j1]) * f1 for row in sl]  # Σ Gᵀ
+    p = np.array([x - lam * y for x, y in zip(pl, sgt)])
+    G = [0.0] * len(pl)
+    G[i], G[i1] = f0, f1
+    G[j] -= f0
+    G[j1] -= f1
     Ga = np.array(G)
     mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
     return p, lam, u, mu, Ga, its
@@ -767,6 +868,7 @@ def _sqp(
     tol: float,
     max_iter: int,
     backend,
+    step_tol: float | None = None,
 ):
     """Sequential QP in y = L⁻¹(p − p̂) with the constraints' curvature.
 
@@ -778,9 +880,11 @@ def _sqp(
     constraint at p̂, so it is already a Newton step. Negative curvature
     (active ``min`` constraints) is scaled down so that I + H ⪰ 0.1 I.
 
-    ``backend(H, q, A, lo, hi) -> (ok, y, duals)`` solves one QP.
+    ``backend(H, q, A, lo, hi) -> (ok, y, duals)`` solves one QP. Converged:
+    violations ≤ ``tol`` and the step ≤ ``step_tol`` (default ``tol``).
     Returns (p, g(p), duals, iterations, converged), or None on QP failure.
     """
+    stol = tol if step_tol is None else step_tol
     n3, m = p_hat.shape[0], lay.m
     pl = p_hat.tolist()
     blks = [L[lay.i3[k] : lay.i3[k] + lay.dims[k]] - L[lay.j3[k] : lay.j3[k] + lay.dims[k]] for k in range(m)]
@@ -842,10 +946,10 @@ def _sqp(
         y, duals, p, pk = y_new, yd, p_new, pn
         g, _ = lay.g_all(pk)
         if _max_violation(lay, g) <= tol and (
-            step <= tol
+            step <= stol
             # Newton (quadratic) convergence: the next step would be ≈ step³/prev²;
             # the bounds keep this safe even under linear convergence (rate ≤ 0.01)
-            or (step <= 100.0 * tol and step**3 <= 1e-2 * tol * prev_step**2)
+            or (step <= 100.0 * stol and step**3 <= 1e-2 * stol * prev_step**2)
         ):
             return p, g, duals, it, True
         prev_step = step
@@ -901,7 +1005,13 @@ def _projection(
             out = _single_fast(p_hat, pl, sigma.tolist(), lay, k, hints, tol_m, max_iter)
             if out is not None:
                 p, lam, u, mu, G, its = out
-                g1, _ = lay.g_all(p.tolist())
+                if lay.m == 1:
+                    r = lay.r(p.tolist(), 0)
+                    g1 = [math.sqrt(math.fsum([x * x for x in r])) - lay.d[0]]
+                    if lay.code[0] == 1:
+                        g1[0] = -g1[0]
+                else:
+                    g1, _ = lay.g_all(p.tolist())
                 if all(g1[q] <= tol_m for q in range(lay.m) if q != k):
                     lam_full = np.zeros(lay.m)
                     lam_full[k] = lam
@@ -919,7 +1029,9 @@ def _projection(
         L = _sqrt_cov(sigma)
         if L is not None:
             _, rho0 = lay.g_all(pl)
-            res = _sqp(p_hat, L, lay, g0, rho0, hints, tol_m, max_iter, _dense_qp_backend(lay, tol_m))
+            res = _sqp(
+                p_hat, L, lay, g0, rho0, hints, tol_m, max_iter, _dense_qp_backend(lay, tol_m), 1e-3 * tol_m
+            )
             if res is not None and res[4]:
                 p_s, _, duals, its, _ = res
                 ps_l = p_s.tolist()

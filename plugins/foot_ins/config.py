@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from fusion.config import ImuCsvConfig, KeyedError, StrictModel
+from fusion.config import DataPath, ImuCsvConfig, KeyedError, StrictModel
 
 
 class FootFilterConfig(StrictModel):
@@ -59,6 +59,27 @@ class InitialStateConfig(StrictModel):
     gyro_bias_sd_radps: float = Field(default=1e-3, gt=0)
 
 
+class PositionFixConfig(StrictModel):
+    """Absolute position fixes (ENU, m) from a CSV: applied at the last IMU sample at or
+    before each fix time, with noise σ (m) and chi-square innovation gating
+    (``gate_probability`` of a consistent fix passing; 3 degrees of freedom)."""
+
+    path: DataPath
+    columns: tuple[str, str, str]
+    time_column: str | None = None
+    time_scale: float = Field(default=1.0, gt=0)
+    rate_hz: float | None = Field(default=None, gt=0)
+    delimiter: str = ","
+    sigma_m: float = Field(default=0.3, gt=0)
+    gate_probability: float = Field(default=0.99, gt=0, lt=1)
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "PositionFixConfig":
+        if (self.time_column is None) == (self.rate_hz is None):
+            raise ValueError("give exactly one of time_column or rate_hz")
+        return self
+
+
 class FootInsConfig(StrictModel):
     """A foot-mounted IMU with strapdown navigation, ZUPT and a 15-state error filter."""
 
@@ -67,6 +88,7 @@ class FootInsConfig(StrictModel):
     filter: FootFilterConfig = Field(default_factory=FootFilterConfig)
     detector: DetectorConfig = Field(default_factory=DetectorConfig)
     initial: InitialStateConfig = Field(default_factory=InitialStateConfig)
+    position_fixes: PositionFixConfig | None = None
 
     @model_validator(mode="after")
     def _labels_need_a_stance_column(self) -> "FootInsConfig":

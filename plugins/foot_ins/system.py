@@ -7,7 +7,8 @@ import numpy as np
 from fusion import detectors
 from fusion.errors import ConfigError
 from fusion.quaternion import levelling, quat_from_azimuth_pitch_roll
-from fusion.readers import read_imu_csv
+from fusion.measurements import GateCounts, chi2_gate, position_fix_update
+from fusion.readers import read_imu_csv, read_truth_csv
 from fusion.strapdown import NOMINAL_SIZE
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import ImuStream, InputReport, Trajectory
@@ -63,12 +64,27 @@ class FootIns(SensorSystem):
             rate_hz=d.rate_hz, skip_rows=d.skip_rows, delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
         self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
         self._params = self._filter_params()
+        self._fix_index, self._fix_pos_n = self._read_position_fixes()
+        fx = config.position_fixes
+        self._fix_sigma = fx.sigma_m if fx is not None else 0.0
+        self._fix_gate = chi2_gate(fx.gate_probability, 3) if fx is not None else 0.0
         heading = config.initial.heading_deg
         self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
         self._x0, self._P0 = self._initial_state()
         self.restart()
 
     # --- set-up -------------------------------------------------------------------
+    def _read_position_fixes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fix positions (K, 3) and the index of the last IMU sample at or before each fix."""
+        fx = self.config.position_fixes
+        if fx is None:
+            return np.empty(0, dtype=np.int64), np.empty((0, 3))
+        track = read_truth_csv(fx.path, position_columns={"fix": fx.columns}, time_column=fx.time_column,
+                               time_scale=fx.time_scale, rate_hz=fx.rate_hz, delimiter=fx.delimiter)["fix"]
+        index = np.searchsorted(self.stream.t, track.t, side="right") - 1
+        usable = index >= 1
+        return index[usable].astype(np.int64), track.pos_n[usable]
+
     def _filter_params(self) -> np.ndarray:
         f = self.config.filter
         p = np.zeros(PARAMS_SIZE)
@@ -110,6 +126,8 @@ class FootIns(SensorSystem):
         self.hist_pos_var[0] = np.diag(self.P)[:3]
         self.counters = np.zeros(3)
         self.mech_memory = np.zeros(6)
+        self.fix_counts = GateCounts()
+        self._next_fix = 0
         self._i = 0  # index of the sample the state refers to
 
     # --- time ---------------------------------------------------------------------
@@ -127,6 +145,18 @@ class FootIns(SensorSystem):
 
     def advance(self, t: float) -> None:
         i1 = int(np.searchsorted(self.stream.t, t, side="right"))
+        while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
+            k = self._fix_index[self._next_fix]
+            self._run_to(k + 1)
+            position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
+                                self._fix_gate, self.fix_counts)
+            self.hist_x[k] = self.x
+            self.hist_pos_var[k] = np.diag(self.P)[:3]
+            self._next_fix += 1
+        self._run_to(i1)
+
+    def _run_to(self, i1: int) -> None:
+        """Process samples up to (excluding) index i1 in one compiled chunk."""
         if i1 <= self._i + 1:
             return
         run_foot_ins(self.x, self.P, self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance,
@@ -201,4 +231,6 @@ class FootIns(SensorSystem):
             "zupt_updates": zupts,
             "zaru_updates": int(self.counters[C_ZARUS]),
             "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
+            **({"position_fixes_accepted": self.fix_counts.accepted,
+                "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
         }
