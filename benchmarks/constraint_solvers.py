@@ -62,6 +62,7 @@ def main() -> None:
 
     proj = ProjectionSolver(2, cons)
     qp = QpSolver(2, cons)
+    qp_cert = QpSolver(2, cons, start="projection")
     warnings.simplefilter("ignore")  # cvxpy accuracy chatter; fallbacks are counted instead
     socp = SocpSolver(2, cons)
 
@@ -69,6 +70,7 @@ def main() -> None:
     results["projection (function)"] = time_method(lambda p, s: solve_projection(p, s, cons), problems, args.n)
     results["projection"] = time_method(proj.solve, problems, args.n)
     results["qp"] = time_method(qp.solve, problems, args.n)
+    results["qp (start=projection)"] = time_method(qp_cert.solve, problems, args.n)
     results["socp"] = time_method(socp.solve, problems, args.n_socp)
 
     # agreement check on the pool

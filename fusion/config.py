@@ -30,6 +30,19 @@ DataPath = Annotated[Path, AfterValidator(_resolve_path)]
 """A file path; relative paths resolve against the folder of the layout file."""
 
 
+def _right_handed(signs: tuple[int, int, int]) -> tuple[int, int, int]:
+    if any(v not in (-1, 1) for v in signs):
+        raise ValueError("each axis sign must be 1 or -1")
+    if signs[0] * signs[1] * signs[2] != 1:
+        raise ValueError("these signs mirror the frame (their product must be +1 for a right-handed ENU)")
+    return signs
+
+
+AxisSigns = Annotated[tuple[int, int, int], AfterValidator(_right_handed)]
+"""Signs (+1/−1) turning a file's x, y, z position axes into east, north, up; e.g.
+``[1, -1, -1]`` for a right-handed frame whose z points down (a rotation of 180° about x)."""
+
+
 class StrictModel(BaseModel):
     """Base of every layout section: unknown keys are errors."""
 
@@ -80,11 +93,13 @@ class TruthConfig(StrictModel):
 
     ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
     ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
+    ``axis_signs`` turn the file's three position axes into east, north, up.
     """
 
     path: DataPath | None = None
     format: Literal["wide", "long"] = "wide"
     systems: dict[str, tuple[str, str, str]] = Field(default_factory=dict)
+    axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
     time_scale: float = Field(default=1.0, gt=0)
     rate_hz: float | None = Field(default=None, gt=0)

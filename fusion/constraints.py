@@ -869,6 +869,7 @@ def _sqp(
     max_iter: int,
     backend,
     step_tol: float | None = None,
+    start: tuple[np.ndarray, np.ndarray, list[float]] | None = None,
 ):
     """Sequential QP in y = L⁻¹(p − p̂) with the constraints' curvature.
 
@@ -882,6 +883,7 @@ def _sqp(
 
     ``backend(H, q, A, lo, hi) -> (ok, y, duals)`` solves one QP. Converged:
     violations ≤ ``tol`` and the step ≤ ``step_tol`` (default ``tol``).
+    ``start``: (p0, y0 = L⁻¹(p0 − p̂), duals0) instead of (p̂, 0, eq. 58 seeds).
     Returns (p, g(p), duals, iterations, converged), or None on QP failure.
     """
     stol = tol if step_tol is None else step_tol
@@ -891,13 +893,16 @@ def _sqp(
     btb: list[np.ndarray | None] = [None] * m
     rhat = [lay.r(pl, k) for k in range(m)]
     duals = [0.0] * m
-    for k in range(m):
+    for k in range(m if start is None else 0):
         if (g0[k] > 0.0 or lay.code[k] == 2) and rho0[k] > _DEGENERATE_M:
             a = np.asarray([x / rho0[k] for x in rhat[k]]) @ blks[k]
             duals[k] = (rho0[k] - lay.d[k]) / float(a @ a)
     eye = np.eye(n3)
     y = np.zeros(n3)
     p, pk = p_hat, pl
+    if start is not None:
+        p, y, duals = start[0], start[1], list(start[2])
+        pk = p.tolist()
     A = np.empty((m, n3))
     lo = [0.0] * m
     hi = [0.0] * m
@@ -1179,6 +1184,15 @@ class QpSolver:
     compiled solver object directly for update/solve/solution when available
     (same operations as ``OSQP.update``/``OSQP.solve`` without their Python
     bookkeeping, which costs ≈ 25 µs per call); the public API is used otherwise.
+
+    Tolerances: polishing solves the reduced KKT system of the identified active
+    set exactly, so eps 1e-8 gives the same answers as 1e-10 (checked: 5e-8 m
+    from the projection either way) with ~30 % fewer ADMM iterations.
+
+    ``start="p_hat"`` (default): the SQP starts at p̂, independent of the
+    projection. ``start="projection"``: it starts from the projection's point
+    and multipliers, so OSQP certifies that point (one QP when it is the KKT
+    point, further SQP steps when it is not, e.g. a wrong active set).
     """
 
     method = "qp"
@@ -1192,9 +1206,14 @@ class QpSolver:
         max_iter: int = 20,
         osqp_settings: dict[str, Any] | None = None,
         fast_calls: bool = True,
+        start: str = "p_hat",
     ) -> None:
         import osqp
         import scipy.sparse as sp
+
+        if start not in ("p_hat", "projection"):
+            raise ValueError(f"start must be 'p_hat' or 'projection', got {start!r}")
+        self.start = start
 
         self.n_systems = int(n_systems)
         self.constraints = tuple(constraints)
@@ -1217,7 +1236,7 @@ class QpSolver:
         a_indices = np.tile(np.arange(m), n3)
         A = sp.csc_matrix((np.ones(m * n3), a_indices, a_indptr), shape=(m, n3))
         settings = dict(
-            eps_abs=1e-10, eps_rel=1e-10, eps_prim_inf=1e-12, eps_dual_inf=1e-12,
+            eps_abs=1e-8, eps_rel=1e-8, eps_prim_inf=1e-12, eps_dual_inf=1e-12,
             polishing=True, polish_refine_iter=5, warm_starting=True, verbose=False,
             max_iter=4000, check_termination=5,
         )
@@ -1292,7 +1311,15 @@ class QpSolver:
         L = _sqrt_cov(sigma)
         if L is None:
             return None
-        res = _sqp(p_hat, L, lay, g0, rho0, self._hints, self.tol_m, self.max_iter, self._backend)
+        start = None
+        if self.start == "projection":
+            ref, _ = _projection(p_hat, sigma, lay, self._hints, self.tol_m, self.max_iter)
+            # p_ref − p̂ = −Σ Jᵀλ = −L Lᵀ Jᵀλ, so y0 = −Lᵀ Jᵀλ; OSQP's multiplier sign is
+            # > 0 at an upper bound (max, fixed) and < 0 for min
+            y0 = -(L.T @ (ref.jacobian.T @ ref.multipliers[ref.active])) if ref.active else np.zeros(p_hat.shape[0])
+            duals0 = [(-x if lay.code[k] == 1 else x) for k, x in enumerate(ref.multipliers.tolist())]
+            start = (ref.p, y0, duals0)
+        res = _sqp(p_hat, L, lay, g0, rho0, self._hints, self.tol_m, self.max_iter, self._backend, start=start)
         if res is None or not res[4]:
             return None
         p, g, _, it, _ = res

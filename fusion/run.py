@@ -69,9 +69,11 @@ def load_truth(loaded: LoadedLayout) -> dict[str, TruthTrack]:
     if truth.format == "long":
         tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
         return {name: tr for name, tr in tracks.items() if name in loaded.layout.systems}
-    return read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
-                          time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
-                          delimiter=truth.delimiter, sparse=truth.sparse)
+    tracks = read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
+                            time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
+                            delimiter=truth.delimiter, sparse=truth.sparse)
+    signs = np.asarray(truth.axis_signs, dtype=float)
+    return {name: TruthTrack(tr.t, tr.pos_n * signs, tr.sparse) for name, tr in tracks.items()}
 
 
 def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:

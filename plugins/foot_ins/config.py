@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from fusion.config import DataPath, ImuCsvConfig, KeyedError, StrictModel
+from fusion.config import AxisSigns, DataPath, ImuCsvConfig, KeyedError, StrictModel
 
 
 class FootFilterConfig(StrictModel):
@@ -62,10 +62,12 @@ class InitialStateConfig(StrictModel):
 class PositionFixConfig(StrictModel):
     """Absolute position fixes (ENU, m) from a CSV: applied at the last IMU sample at or
     before each fix time, with noise σ (m) and chi-square innovation gating
-    (``gate_probability`` of a consistent fix passing; 3 degrees of freedom)."""
+    (``gate_probability`` of a consistent fix passing; 3 degrees of freedom).
+    ``axis_signs`` turn the file's axes into east, north, up."""
 
     path: DataPath
     columns: tuple[str, str, str]
+    axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
     time_scale: float = Field(default=1.0, gt=0)
     rate_hz: float | None = Field(default=None, gt=0)

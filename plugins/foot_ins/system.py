@@ -83,7 +83,7 @@ class FootIns(SensorSystem):
                                time_scale=fx.time_scale, rate_hz=fx.rate_hz, delimiter=fx.delimiter)["fix"]
         index = np.searchsorted(self.stream.t, track.t, side="right") - 1
         usable = index >= 1
-        return index[usable].astype(np.int64), track.pos_n[usable]
+        return index[usable].astype(np.int64), track.pos_n[usable] * np.asarray(fx.axis_signs, dtype=float)
 
     def _filter_params(self) -> np.ndarray:
         f = self.config.filter
