@@ -64,12 +64,24 @@ class ConstraintConfig(StrictModel):
     distance_m: float = Field(gt=0)
     horizontal: bool = True
     lever_arms_m: dict[str, tuple[float, float, float]] = Field(default_factory=dict)
+    """Per system, the offset (ENU, m) from its navigated point to the constrained point."""
 
 
 class FuserConfig(StrictModel):
-    """How constraints are enforced. ``none``: systems run independently."""
+    """How constraints are enforced.
 
-    method: Literal["none"] = "none"
+    method: ``none`` (systems run independently), ``projection`` (linearised, active
+    set; PDR/GNSS paper eqs. 55–60), ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy).
+    epochs: when constraints are enforced — at the constrained systems' ``events``
+    (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
+    any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
+    """
+
+    method: Literal["none", "projection", "qp", "socp"] = "none"
+    epochs: Literal["events", "interval", "sample"] = "events"
+    interval_s: float = Field(default=0.5, gt=0)
+    tolerance_m: float = Field(default=1e-6, gt=0)
+    max_iterations: int = Field(default=20, ge=1)
 
 
 class SmootherConfig(StrictModel):

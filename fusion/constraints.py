@@ -316,6 +316,8 @@ def _check_inputs(p_hat: Any, sigma: Any, n_systems: int | None = None) -> tuple
     s = np.asarray(sigma, dtype=float)
     if s.shape != (p.shape[0], p.shape[0]):
         raise ValueError(f"sigma must have shape {(p.shape[0], p.shape[0])}, got {s.shape}")
+    if not math.isfinite(float(p.sum()) + float(s.sum())):
+        raise ValueError("p_hat and sigma must be finite")
     return p, s
 
 
@@ -1093,11 +1095,14 @@ def solve_projection(
     scheme: str = "newton",
     hint_directions: Any = None,
 ) -> ConstraintSolution:
-    """Projection method (eqs. 55–60) with an active set and re-linearisation.
+    """Projection method (eqs. 55–60), linearised at the solution.
 
-    scheme: "newton" (default; linearisation point moved by Newton steps on the
-    multipliers, see module docstring) or "fixed_point" (the paper's plain
-    re-linearise-and-project iteration; linear convergence).
+    scheme: "newton" (default: the linearisation point is found by Newton's
+    method — the secular equation for one candidate constraint, SQP for
+    several; see the module docstring) or "fixed_point" (the paper's plain
+    re-linearise-and-project iteration; linear convergence, often slow).
+    max_iter: Newton/SQP iterations (the scalar secular solve allows
+    max(4·max_iter, 60)); 0 returns p̂ unchanged with converged=False.
     hint_directions: optional (n_constraints, 3) directions used when a pair's
     separation is exactly zero (default east).
     """
@@ -1136,6 +1141,8 @@ class ProjectionSolver:
         self._lay = _Layout(self.n_systems, self.constraints)
         self.tol_m = float(tol_m)
         self.max_iter = int(max_iter)
+        if scheme not in ("newton", "fixed_point"):
+            raise ValueError(f"scheme must be 'newton' or 'fixed_point', got {scheme!r}")
         self.scheme = scheme
         self._hints: dict[int, list[float]] = {}
 
@@ -1414,8 +1421,11 @@ class SocpSolver:
     """Exact cones for ``max`` constraints, linearised ``min``/``fixed`` (cvxpy, DPP).
 
     Variables: y = L⁻¹ (p − p̂). Parameters: BL_k (D×3n), r̂_k (D) for the cones;
-    a row and bound per linearised half-space. The problem is built and
-    compiled once; ``problem.is_dpp()`` is asserted.
+    a row and bound per linearised half-space. The problem is built once and is
+    DPP (``is_dpp()``), so cvxpy compiles it at the first solve only. Solver:
+    Clarabel, else ECOS, else SCS (tight tolerances; override with
+    ``solver``/``solver_options``). The interior-point point is polished by
+    Newton steps on the KKT system of its active set (module docstring).
     """
 
     method = "socp"
@@ -1517,7 +1527,6 @@ class SocpSolver:
             pk = p.tolist()
             for k, (a, lb) in self._half.items():
                 r = lay.r(pk, k)
-                rho = math.sqrt(math.fsum([x * x for x in r]))
                 if lay.code[k] == 2:
                     # fixed: decided once from p̂. Outside the circle the cone alone is
                     # exact; inside, only the linearised half-space (the two together

@@ -1,7 +1,18 @@
-"""The central fuser: drives every system through time.
+"""The central fuser: drives every system through time and enforces the body's distance limits.
 
-With ``fuser.method: none`` the systems run independently, each in one compiled
-chunk. Constraint methods sync the systems at epochs and correct them jointly.
+At each sync epoch the constrained systems are advanced to the epoch, their positions
+and covariances stacked, all active constraints solved together in position space
+(:mod:`fusion.constraints`), and the correction spread to each system's full error
+state (DESIGN.md, "Distance constraints"):
+
+    x* − x̂ = P_{x,p} Σ⁻¹ (p* − p̂) = −P_{x,p} Jᵀ λ,
+    P* = (I − M) P (I − M)ᵀ,  M = P_{x,p} Jᵀ (J Σ Jᵀ)⁻¹ J S,
+
+where P = blkdiag(P_1 … P_n) is the stacked error-state covariance, S selects the
+positions, Σ = S P Sᵀ, and J, λ are the active constraints' Jacobian and multipliers
+at the solution (PDR/GNSS paper eqs. 55–60 written for the full state). Each system
+then takes its own block: the cross-covariances the constraint creates are dropped,
+as in the papers.
 """
 
 from __future__ import annotations
@@ -10,38 +21,136 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from fusion.config import FuserConfig
+import numpy as np
+from scipy.linalg import block_diag
+
+from fusion.config import ConstraintConfig, FuserConfig
+from fusion.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
+                                SocpSolver)
 from fusion.system import SensorSystem
+
+SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
 
 
 @dataclass
 class FuserReport:
-    """What the fuser did; becomes metrics.json ``constraints`` where constraints exist."""
+    """What the fuser did; becomes metrics.json ``constraints`` where constraints exist.
+
+    epochs: sync epochs at which constraints were checked; activations: epochs where
+    at least one was active; multipliers: λ of every activation (m⁻² scale, see
+    :mod:`fusion.constraints`); violations in metres; solve times in µs.
+    """
 
     method: str
     epochs: int = 0
     activations: int = 0
     solver_fallbacks: int = 0
+    not_converged: int = 0
+    max_violation_before_m: float = 0.0
     max_violation_after_m: float = 0.0
+    multipliers: list[float] = field(default_factory=list)
     solve_times_us: list[float] = field(default_factory=list)
     wall_s: float = 0.0
 
 
-class Fuser:
-    """Runs the layout's systems to the end of their data.
+def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
+    """Layout constraints as solver constraints over the systems in ``order``."""
+    out = []
+    for c in configs:
+        a, b = c.between
+        lever = {k: np.asarray(v, dtype=float) for k, v in c.lever_arms_m.items()}
+        out.append(DistanceConstraint(i=order.index(a), j=order.index(b), kind=c.kind, distance_m=c.distance_m,
+                                      horizontal=c.horizontal, lever_i_m=lever.get(a), lever_j_m=lever.get(b)))
+    return out
 
-    Parameters: ``systems`` (name → system, already initialised and heading-aligned),
-    ``config`` (the layout's ``fuser`` section). Result: ``report``.
+
+def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
+    """Sync epochs (s) inside the span all constrained systems cover."""
+    t0 = max(s.t_start for s in systems)
+    t1 = min(s.t_end for s in systems)
+    if config.epochs == "events":
+        times = np.concatenate([s.sync_times() for s in systems])
+    elif config.epochs == "interval":
+        times = np.arange(t0 + config.interval_s, t1, config.interval_s)
+    else:
+        times = np.concatenate([s.sample_times() for s in systems])
+    times = np.unique(times)
+    return times[(times > t0) & (times <= t1)]
+
+
+def spread_correction(covariances: list[np.ndarray], position_indices: list[np.ndarray],
+                      solution: ConstraintSolution) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per-system error-state corrections dx_i and covariances P*_ii from a position-space solution."""
+    P = block_diag(*covariances)
+    sizes = [c.shape[0] for c in covariances]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    pos = np.concatenate([off + idx for off, idx in zip(offsets[:-1], position_indices)])
+    P_xp = P[:, pos]
+    J = solution.jacobian
+    lam = solution.multipliers[solution.active]
+    dx = -P_xp @ (J.T @ lam)
+    Sigma = P[np.ix_(pos, pos)]
+    JS = J @ Sigma @ J.T
+    M = np.zeros_like(P)
+    M[:, pos] = P_xp @ J.T @ np.linalg.solve(JS, J)
+    IM = np.eye(P.shape[0]) - M
+    P_new = IM @ P @ IM.T
+    P_new = 0.5 * (P_new + P_new.T)
+    dxs = [dx[offsets[k]:offsets[k + 1]] for k in range(len(sizes))]
+    Ps = [P_new[offsets[k]:offsets[k + 1], offsets[k]:offsets[k + 1]] for k in range(len(sizes))]
+    return dxs, Ps
+
+
+class Fuser:
+    """Runs the layout's systems to the end of their data, enforcing the constraints.
+
+    Parameters: ``systems`` (name → system, initialised and heading-aligned),
+    ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list).
+    Result: ``report`` (:class:`FuserReport`).
     """
 
-    def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig) -> None:
+    def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig,
+                 constraints: list[ConstraintConfig] | None = None) -> None:
         self.systems = systems
         self.config = config
+        self.constraints = constraints or []
         self.report = FuserReport(method=config.method)
 
     def run(self) -> FuserReport:
-        t0 = time.perf_counter()
+        t_begin = time.perf_counter()
+        if self.config.method != "none" and self.constraints:
+            self._run_constrained()
         for system in self.systems.values():
             system.advance(system.t_end)
-        self.report.wall_s = time.perf_counter() - t0
+        self.report.wall_s = time.perf_counter() - t_begin
         return self.report
+
+    def _run_constrained(self) -> None:
+        order = list(dict.fromkeys(name for c in self.constraints for name in c.between))
+        members = [self.systems[name] for name in order]
+        solver_cls = SOLVERS[self.config.method]
+        solver = solver_cls(len(members), distance_constraints(self.constraints, order),
+                            tol_m=self.config.tolerance_m, max_iter=self.config.max_iterations)
+        pos_idx = [np.arange(s.position_indices.start, s.position_indices.stop) for s in members]
+        rep = self.report
+        for t in epoch_times(members, self.config):
+            for s in members:
+                s.advance(t)
+            covs = [s.covariance() for s in members]
+            p_hat = np.concatenate([s.position_n() for s in members])
+            sigma = block_diag(*[c[np.ix_(i, i)] for c, i in zip(covs, pos_idx)])
+            t0 = time.perf_counter_ns()
+            sol = solver.solve(p_hat, sigma)
+            rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
+            rep.epochs += 1
+            rep.solver_fallbacks += int(sol.fallback)
+            rep.not_converged += int(not sol.converged)
+            rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
+            rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
+            if not sol.active:
+                continue
+            rep.activations += 1
+            rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
+            dxs, Ps = spread_correction(covs, pos_idx, sol)
+            for s, dx, P in zip(members, dxs, Ps):
+                s.apply_correction(dx, P)

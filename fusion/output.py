@@ -54,9 +54,14 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     }
     if layout.constraints:
         rep = result.fuser
+        lam = np.asarray(rep.multipliers)
         doc["constraints"] = {
             "method": rep.method, "epochs": rep.epochs, "activations": rep.activations,
-            "solver_fallbacks": rep.solver_fallbacks, "max_violation_after_m": rep.max_violation_after_m,
+            "solver_fallbacks": rep.solver_fallbacks, "not_converged": rep.not_converged,
+            "max_violation_before_m": rep.max_violation_before_m,
+            "max_violation_after_m": rep.max_violation_after_m,
+            "multipliers": {"mean": float(lam.mean()) if lam.size else 0.0,
+                            "max": float(lam.max()) if lam.size else 0.0},
             "solve_time_us": _median_p99(rep.solve_times_us),
         }
     inp = result.input_report

@@ -87,7 +87,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
 
     t0 = time.perf_counter()
     rotations = align_headings(systems, loaded.layout.heading_alignment)
-    report = Fuser(systems, loaded.layout.fuser).run()
+    report = Fuser(systems, loaded.layout.fuser, loaded.layout.constraints).run()
     timings["navigation_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

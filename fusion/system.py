@@ -101,6 +101,10 @@ class SensorSystem(ABC):
     def sync_times(self) -> np.ndarray:
         """Times (s) of events the fuser may sync on (e.g. stance starts)."""
 
+    @abstractmethod
+    def sample_times(self) -> np.ndarray:
+        """Times (s) of every sample the system processes."""
+
     # --- results ----------------------------------------------------------------
     @abstractmethod
     def trajectory(self) -> Trajectory:

@@ -393,6 +393,25 @@ def test_degenerate_uses_previous_direction():
     assert np.allclose(sol.p[:3] - sol.p[3:], [0.0, 0.4, 0.0], atol=1e-9)
 
 
+@settings(max_examples=15, **SETTINGS)
+@given(seeds, n_systems, flags, st.sampled_from(["max", "min", "fixed"]))
+def test_qp_variants_agree(seed, n, lever, kind):
+    """OSQP through its public API, and the SQP started at the projection, give the
+    same answer as the default QP."""
+    ratio = {"max": 1.6, "min": 0.6, "fixed": 1.4}[kind]
+    p_hat, sigma, c = pair_problem(seed, n, True, True, lever, kind, ratio)
+    ref = QpSolver(n, [c]).solve(p_hat, sigma)
+    public = QpSolver(n, [c], fast_calls=False).solve(p_hat, sigma)
+    cert = QpSolver(n, [c], start="projection").solve(p_hat, sigma)
+    for sol in (ref, public, cert):
+        assert sol.converged and not sol.fallback and sol.method == "qp"
+    np.testing.assert_allclose(public.p, ref.p, rtol=0, atol=1e-9)
+    assert np.max(np.abs(cert.p - ref.p)) <= TOL
+    assert cert.iterations <= 2
+    with pytest.raises(ValueError):
+        QpSolver(n, [c], start="somewhere")
+
+
 # ---------------------------------------------------------------------------
 # solver failure → projection fallback
 # ---------------------------------------------------------------------------
@@ -524,6 +543,8 @@ def test_constraint_validation_and_equality():
     assert a != DistanceConstraint(0, 1, "max", 1.0)
     with pytest.raises(ValueError):
         solve_projection(np.zeros(6), np.eye(6), [DistanceConstraint(0, 2, "max", 1.0)])
+    with pytest.raises(ValueError):
+        solve_projection(np.full(6, np.nan), np.eye(6), [DistanceConstraint(0, 1, "max", 1.0)])
 
 
 def test_module_exports():

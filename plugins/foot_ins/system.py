@@ -211,6 +211,9 @@ class FootIns(SensorSystem):
         starts, _ = detectors.stance_events(self.stance)
         return self.stream.t[starts]
 
+    def sample_times(self) -> np.ndarray:
+        return self.stream.t
+
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         n = self._i + 1
