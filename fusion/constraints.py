@@ -1006,10 +1006,19 @@ def _projection(
     n3 = p_hat.shape[0]
 
     if scheme == "newton" and max_iter > 0:
-        # --- fast path: exactly one candidate constraint -------------------
+        # --- fast path: one constraint active ------------------------------
+        # Try each candidate alone (most violated first; a fixed constraint is
+        # always active, so with one only it can be tried). If the result
+        # satisfies every other constraint, it is a KKT point of the whole
+        # problem with the others' multipliers zero (the optimum when convex).
         if len(W) == 1:
-            k = W[0]
-            out = _single_fast(p_hat, pl, sigma.tolist(), lay, k, hints, tol_m, max_iter)
+            singles = W
+        else:
+            fixed = [k for k in W if lay.code[k] == 2]
+            singles = fixed if len(fixed) == 1 else (sorted(W, key=lambda q: -g0[q]) if not fixed else [])
+        sl = sigma.tolist() if singles else None
+        for k in singles:
+            out = _single_fast(p_hat, pl, sl, lay, k, hints, tol_m, max_iter)
             if out is not None:
                 p, lam, u, mu, G, its = out
                 if lay.m == 1:
