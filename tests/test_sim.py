@@ -13,6 +13,7 @@ from fusion.config import Layout, validate_section
 from fusion.errors import ConfigError
 from fusion.quaternion import azimuth_pitch_roll
 from fusion.readers import read_imu_csv
+from fusion.seeding import stable_hash
 from fusion.sim import simulate
 from fusion.sim.gait import GaitConfig, plan_gait
 from fusion.sim.imu import (
@@ -23,7 +24,6 @@ from fusion.sim.imu import (
     dcm_from_quat,
     error_generators,
     ideal_imu,
-    stable_hash,
 )
 from fusion.sim.paths import LoopsPath, OutAndBackPath, PolylinePath, RectanglePath, SquarePath
 from fusion.strapdown import integrate

@@ -36,12 +36,13 @@ the other terms' draws alone.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
+
+from fusion.seeding import system_seed
 from pydantic import Field
 from scipy.signal import lfilter
 
@@ -59,7 +60,6 @@ __all__ = [
     "error_generators",
     "ideal_imu",
     "quat_multiply",
-    "stable_hash",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -255,11 +255,6 @@ class ImuErrorConfig(StrictModel):
         return ImuErrorModel(acc=triad("acc", "mps2"), gyro=triad("gyro", "radps"))
 
 
-def stable_hash(name: str) -> int:
-    """A 64-bit integer from ``name`` that is the same in every process (unlike ``hash``)."""
-    return int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "little")
-
-
 ERROR_TERMS = ("bias", "gauss_markov", "random_walk", "white")
 """One random stream per (sensor, term), spawned in this fixed order (append new terms at
 the end so the existing streams keep their bits)."""
@@ -271,10 +266,8 @@ def error_generators(seed: int, system: str) -> dict[str, np.random.Generator]:
     All come from ``SeedSequence([seed, stable_hash(system)])``: spawned once per sensor
     (acc, gyro), then once per term of :data:`ERROR_TERMS`.
     """
-    if seed < 0:
-        raise ValueError(f"seed must be >= 0, got {seed}")
     out: dict[str, np.random.Generator] = {}
-    sensors = np.random.SeedSequence([int(seed), stable_hash(system)]).spawn(2)
+    sensors = system_seed(seed, system).spawn(2)
     for sensor, ss in zip(("acc", "gyro"), sensors):
         for term, child in zip(ERROR_TERMS, ss.spawn(len(ERROR_TERMS))):
             out[f"{sensor}.{term}"] = np.random.Generator(np.random.PCG64(child))
