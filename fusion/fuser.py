@@ -22,7 +22,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import block_diag
 
 from fusion.config import ConstraintConfig, FuserConfig
 from fusion.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
@@ -53,6 +52,18 @@ class FuserReport:
     wall_s: float = 0.0
 
 
+def block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
+    """Block-diagonal matrix of square blocks (cheaper than scipy's for a few small blocks)."""
+    n = sum(b.shape[0] for b in blocks)
+    out = np.zeros((n, n))
+    k = 0
+    for b in blocks:
+        m = b.shape[0]
+        out[k:k + m, k:k + m] = b
+        k += m
+    return out
+
+
 def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
     """Layout constraints as solver constraints over the systems in ``order``."""
     out = []
@@ -81,7 +92,7 @@ def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
 def spread_correction(covariances: list[np.ndarray], position_indices: list[np.ndarray],
                       solution: ConstraintSolution) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Per-system error-state corrections dx_i and covariances P*_ii from a position-space solution."""
-    P = block_diag(*covariances)
+    P = block_diagonal(covariances)
     sizes = [c.shape[0] for c in covariances]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     pos = np.concatenate([off + idx for off, idx in zip(offsets[:-1], position_indices)])
@@ -89,7 +100,7 @@ def spread_correction(covariances: list[np.ndarray], position_indices: list[np.n
     J = solution.jacobian
     lam = solution.multipliers[solution.active]
     dx = -P_xp @ (J.T @ lam)
-    Sigma = P[np.ix_(pos, pos)]
+    Sigma = P[pos][:, pos]
     JS = J @ Sigma @ J.T
     M = np.zeros_like(P)
     M[:, pos] = P_xp @ J.T @ np.linalg.solve(JS, J)
@@ -138,7 +149,7 @@ class Fuser:
                 s.advance(t)
             covs = [s.covariance() for s in members]
             p_hat = np.concatenate([s.position_n() for s in members])
-            sigma = block_diag(*[c[np.ix_(i, i)] for c, i in zip(covs, pos_idx)])
+            sigma = block_diagonal([c[i][:, i] for c, i in zip(covs, pos_idx)])
             t0 = time.perf_counter_ns()
             sol = solver.solve(p_hat, sigma)
             rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)

@@ -14,6 +14,18 @@ from fusion.run import RunResult, samples_total
 TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
 
 
+def _json_safe(value):
+    """NaN and inf (e.g. the error statistics of a system with no finite error) become null:
+    strict JSON has no NaN."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def _median_p99(values: list[float]) -> dict[str, float]:
     if not values:
         return {"median": 0.0, "p99": 0.0}
@@ -93,7 +105,7 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     output = result.loaded.layout.output
     write_trajectories(out_dir / "trajectories.csv", result, output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
-    (out_dir / "metrics.json").write_text(json.dumps(doc, indent=2) + "\n")
+    (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     if output.plots:
         from fusion import plots
 

@@ -78,6 +78,13 @@ class RandomWalk(SensorSystem):
         if i1 <= self._i + 1:
             return
         q = self.config.increment_variance_m2
+        if i1 == self._i + 2:  # one step: the fuser's per-sample epochs
+            self.x = self.x + self.increments[self._i]
+            self.P = self.P + q * np.eye(3)
+            self._i += 1
+            self.hist_pos[self._i] = self.x
+            self.hist_var[self._i] = self.P.diagonal()
+            return
         steps = np.arange(self._i + 1, i1)
         self.hist_pos[steps] = self.x + np.cumsum(self.increments[steps - 1], axis=0)
         self.hist_var[steps] = np.diag(self.P) + q * (steps - self._i)[:, None]
