@@ -75,6 +75,8 @@ class FuserConfig(StrictModel):
     epochs: when constraints are enforced — at the constrained systems' ``events``
     (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
     any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
+    cross_covariance: keep the cross-covariances a constraint creates between systems
+    (the papers drop them).
     """
 
     method: Literal["none", "projection", "qp", "socp"] = "none"
@@ -82,6 +84,7 @@ class FuserConfig(StrictModel):
     interval_s: float = Field(default=0.5, gt=0)
     tolerance_m: float = Field(default=1e-6, gt=0)
     max_iterations: int = Field(default=20, ge=1)
+    cross_covariance: bool = False
 
 
 class SmootherConfig(StrictModel):

@@ -75,6 +75,27 @@ def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: floa
 
 
 @numba.njit(cache=True)
+def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, work: np.ndarray) -> None:
+    """phi ← F phi in place (F = I + A dt); ``work`` is (15, 15) scratch."""
+    _apply_A_left(phi, C, f_n, work)
+    for r in range(15):
+        for c in range(15):
+            phi[r, c] += dt * work[r, c]
+
+
+@numba.njit(cache=True)
+def accumulate_update(phi: np.ndarray, K: np.ndarray, first: int) -> None:
+    """phi ← (I − K H) phi in place, H selecting states first:first+3."""
+    rows = np.empty((3, 15))
+    for k in range(3):
+        for c in range(15):
+            rows[k, c] = phi[first + k, c]
+    for r in range(15):
+        for c in range(15):
+            phi[r, c] -= K[r, 0] * rows[0, c] + K[r, 1] * rows[1, c] + K[r, 2] * rows[2, c]
+
+
+@numba.njit(cache=True)
 def inject(x: np.ndarray, dx: np.ndarray) -> None:
     """Closed-loop reset: add the error-state estimate dx (15,) to the nominal state x (16,)."""
     for k in range(3):
@@ -112,10 +133,15 @@ def inv3_sym(S: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: np.ndarray) -> float:
+def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: np.ndarray,
+                    phi: np.ndarray) -> float:
     """Kalman update for a 3-D measurement that selects states first:first+3 (H = [0 I 0]),
     innovation y (3,), isotropic noise variance r_var. Joseph form, P in place; writes
-    dx (15,) and returns the normalised innovation squared yᵀ S⁻¹ y."""
+    dx (15,) and returns the normalised innovation squared yᵀ S⁻¹ y.
+
+    ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
+    is left-multiplied by (I − K H) in place; pass an empty (0, 0) array when the fuser
+    does not track cross-covariances."""
     S = np.empty((3, 3))
     for r in range(3):
         for c in range(3):
@@ -128,6 +154,8 @@ def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: 
             K[r, c] = P[r, first] * Si[0, c] + P[r, first + 1] * Si[1, c] + P[r, first + 2] * Si[2, c]
     for r in range(15):
         dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
+    if phi.shape[0] > 0:
+        accumulate_update(phi, K, first)
     # Joseph: (I − K H) P (I − K H)ᵀ + K R Kᵀ
     M = P.copy()
     for r in range(15):

@@ -11,8 +11,10 @@ state (DESIGN.md, "Distance constraints"):
 where P = blkdiag(P_1 … P_n) is the stacked error-state covariance, S selects the
 positions, Σ = S P Sᵀ, and J, λ are the active constraints' Jacobian and multipliers
 at the solution (PDR/GNSS paper eqs. 55–60 written for the full state). Each system
-then takes its own block: the cross-covariances the constraint creates are dropped,
-as in the papers.
+then takes its own block. The cross-covariances the constraint creates are dropped, as
+in the papers, unless ``fuser.cross_covariance`` is on: then the fuser keeps them and
+carries them between epochs with each system's accumulated transition,
+C_ij ← Φ_i C_ij Φ_jᵀ (the systems' process noises are independent).
 """
 
 from __future__ import annotations
@@ -52,18 +54,6 @@ class FuserReport:
     wall_s: float = 0.0
 
 
-def block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
-    """Block-diagonal matrix of square blocks (cheaper than scipy's for a few small blocks)."""
-    n = sum(b.shape[0] for b in blocks)
-    out = np.zeros((n, n))
-    k = 0
-    for b in blocks:
-        m = b.shape[0]
-        out[k:k + m, k:k + m] = b
-        k += m
-    return out
-
-
 def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
     """Layout constraints as solver constraints over the systems in ``order``."""
     out = []
@@ -89,27 +79,23 @@ def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
     return times[(times > t0) & (times <= t1)]
 
 
-def spread_correction(covariances: list[np.ndarray], position_indices: list[np.ndarray],
-                      solution: ConstraintSolution) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Per-system error-state corrections dx_i and covariances P*_ii from a position-space solution."""
-    P = block_diagonal(covariances)
-    sizes = [c.shape[0] for c in covariances]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    pos = np.concatenate([off + idx for off, idx in zip(offsets[:-1], position_indices)])
+def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSolution) -> tuple[np.ndarray, np.ndarray]:
+    """Joint error-state correction dx and covariance P* from a position-space solution.
+
+    P: (n, n) joint error-state covariance of the constrained systems (block diagonal
+    unless cross-covariances are tracked); pos: indices of their positions in it, in
+    the order of the solver's stacked positions.
+    """
     P_xp = P[:, pos]
     J = solution.jacobian
     lam = solution.multipliers[solution.active]
     dx = -P_xp @ (J.T @ lam)
-    Sigma = P[pos][:, pos]
-    JS = J @ Sigma @ J.T
+    JS = J @ P[pos][:, pos] @ J.T
     M = np.zeros_like(P)
     M[:, pos] = P_xp @ J.T @ np.linalg.solve(JS, J)
     IM = np.eye(P.shape[0]) - M
     P_new = IM @ P @ IM.T
-    P_new = 0.5 * (P_new + P_new.T)
-    dxs = [dx[offsets[k]:offsets[k + 1]] for k in range(len(sizes))]
-    Ps = [P_new[offsets[k]:offsets[k + 1], offsets[k]:offsets[k + 1]] for k in range(len(sizes))]
-    return dxs, Ps
+    return dx, 0.5 * (P_new + P_new.T)
 
 
 class Fuser:
@@ -142,14 +128,32 @@ class Fuser:
         solver_cls = SOLVERS[self.config.method]
         solver = solver_cls(len(members), distance_constraints(self.constraints, order),
                             tol_m=self.config.tolerance_m, max_iter=self.config.max_iterations)
-        pos_idx = [np.arange(s.position_indices.start, s.position_indices.stop) for s in members]
+        sizes = [s.covariance().shape[0] for s in members]
+        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        blocks = [slice(offsets[k], offsets[k + 1]) for k in range(len(members))]
+        pos = np.concatenate([offsets[k] + np.arange(s.position_indices.start, s.position_indices.stop)
+                              for k, s in enumerate(members)])
+        track = self.config.cross_covariance
+        joint = np.zeros((offsets[-1], offsets[-1]))
+        if track:
+            for s in members:
+                s.track_transition()
         rep = self.report
         for t in epoch_times(members, self.config):
             for s in members:
                 s.advance(t)
-            covs = [s.covariance() for s in members]
+            if track:
+                # cross blocks: C_ij ← Φ_i C_ij Φ_jᵀ; own blocks are the systems' current P
+                phis = [s.transition_since_sync() for s in members]
+                for a in range(len(members)):
+                    for b in range(a + 1, len(members)):
+                        c = phis[a] @ joint[blocks[a], blocks[b]] @ phis[b].T
+                        joint[blocks[a], blocks[b]] = c
+                        joint[blocks[b], blocks[a]] = c.T
+            for k, s in enumerate(members):
+                joint[blocks[k], blocks[k]] = s.covariance()
             p_hat = np.concatenate([s.position_n() for s in members])
-            sigma = block_diagonal([c[i][:, i] for c, i in zip(covs, pos_idx)])
+            sigma = joint[pos][:, pos]
             t0 = time.perf_counter_ns()
             sol = solver.solve(p_hat, sigma)
             rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
@@ -162,6 +166,8 @@ class Fuser:
                 continue
             rep.activations += 1
             rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
-            dxs, Ps = spread_correction(covs, pos_idx, sol)
-            for s, dx, P in zip(members, dxs, Ps):
-                s.apply_correction(dx, P)
+            dx, P_new = spread_correction(joint, pos, sol)
+            if track:
+                joint[:] = P_new
+            for k, s in enumerate(members):
+                s.apply_correction(dx[blocks[k]], P_new[blocks[k], blocks[k]])

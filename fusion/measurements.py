@@ -30,8 +30,9 @@ class GateCounts:
 
 
 def position_fix_update(x: np.ndarray, P: np.ndarray, z_n: np.ndarray, sigma_m: float, gate_nis: float,
-                        counts: GateCounts) -> float:
-    """Gated position update of the 15-state filter; x (16,) and P (15, 15) in place.
+                        counts: GateCounts, phi: np.ndarray) -> float:
+    """Gated position update of the 15-state filter; x (16,), P (15, 15) and the
+    transition accumulator phi (see :func:`fusion.error_state.update_selected`) in place.
 
     Returns the NIS; a fix whose NIS exceeds ``gate_nis`` changes nothing.
     """
@@ -43,7 +44,7 @@ def position_fix_update(x: np.ndarray, P: np.ndarray, z_n: np.ndarray, sigma_m: 
         counts.rejected += 1
         return nis
     dx = np.empty(15)
-    update_selected(P, np.int64(0), y, r_var, dx)
+    update_selected(P, np.int64(0), y, r_var, dx, phi)
     inject(x, dx)
     counts.accepted += 1
     return nis

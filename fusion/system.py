@@ -16,6 +16,7 @@ from typing import ClassVar
 import numpy as np
 from pydantic import BaseModel
 
+from fusion.errors import FusionError
 from fusion.types import InputReport, Trajectory
 
 
@@ -96,6 +97,16 @@ class SensorSystem(ABC):
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset: add error-state correction ``dx`` (n,) to the nominal
         state and replace the covariance with ``P`` (n, n)."""
+
+    def track_transition(self) -> None:
+        """Start accumulating the error-state transition Φ between the fuser's syncs
+        (needed when the fuser tracks cross-covariances between systems)."""
+        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
+
+    def transition_since_sync(self) -> np.ndarray:
+        """Φ (n, n) that maps the error state at the previous call to now (propagation and
+        own updates, x_now = Φ x_then + independent terms); restarts the accumulation."""
+        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
 
     @abstractmethod
     def sync_times(self) -> np.ndarray:

@@ -265,7 +265,7 @@ def test_update_selected_equals_textbook_joseph_update(first):
 
     P_got = P.copy()
     dx = np.empty(ERROR_SIZE)
-    nis = update_selected(P_got, first, y, r_var, dx)
+    nis = update_selected(P_got, first, y, r_var, dx, np.empty((0, 0)))
     np.testing.assert_allclose(P_got, P_expected, atol=1e-12, rtol=0)
     np.testing.assert_allclose(dx, dx_expected, atol=1e-12, rtol=0)
     assert nis == pytest.approx(nis_expected, rel=1e-12)
@@ -278,7 +278,7 @@ def test_update_selected_joseph_form_stays_psd_with_tiny_measurement_noise():
     P = random_spd(rng)
     dx = np.empty(ERROR_SIZE)
     for _ in range(200):
-        update_selected(P, 3, rng.normal(0, 1e-3, 3), 1e-10, dx)
+        update_selected(P, 3, rng.normal(0, 1e-3, 3), 1e-10, dx, np.empty((0, 0)))
     assert np.linalg.eigvalsh(P).min() > -1e-12
     assert np.abs(P - P.T).max() == 0.0
     assert np.all(np.diag(P)[3:6] < 1e-9)
@@ -296,7 +296,7 @@ def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
     nis_expected = float(v @ np.linalg.solve(S, v))  # y = 0 − v̂
     P_before = P.copy()
     dx = np.empty(ERROR_SIZE)
-    nis = zero_velocity_update(x, P, sigma, dx)
+    nis = zero_velocity_update(x, P, sigma, dx, np.empty((0, 0)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
     assert np.linalg.norm(x[3:6]) < 1e-5 * np.linalg.norm(v)
     np.testing.assert_allclose(dx[3:6], -v, rtol=1e-5)
@@ -315,6 +315,6 @@ def test_zaru_pulls_gyro_bias_to_the_stance_rate():
     y = gyro - x[13:16]
     S = P[12:15, 12:15] + 1e-8 * np.eye(3)
     nis_expected = float(y @ np.linalg.solve(S, y))
-    nis = zero_angular_rate_update(x, P, gyro, 1e-4, dx)
+    nis = zero_angular_rate_update(x, P, gyro, 1e-4, dx, np.empty((0, 0)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
     np.testing.assert_allclose(x[13:16], gyro, atol=1e-5)

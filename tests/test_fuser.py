@@ -68,43 +68,46 @@ def test_every_method_gives_the_projection_trajectory_on_the_vicon_walk(method):
         np.testing.assert_allclose(other.trajectories[name].pos_n, ref.trajectories[name].pos_n, atol=1e-5)
 
 
+def joint(covs: list[np.ndarray]) -> np.ndarray:
+    n = sum(c.shape[0] for c in covs)
+    out, k = np.zeros((n, n)), 0
+    for c in covs:
+        out[k:k + len(c), k:k + len(c)] = c
+        k += len(c)
+    return out
+
+
+def random_spd(rng: np.random.Generator, n: int, floor: float) -> np.ndarray:
+    A = rng.normal(size=(n, n))
+    return A @ A.T + floor * np.eye(n)
+
+
 def test_spread_correction_of_position_only_states_is_the_position_projection():
     rng = np.random.default_rng(1)
-    covs = []
-    for _ in range(2):
-        A = rng.normal(size=(3, 3))
-        covs.append(A @ A.T + 0.1 * np.eye(3))
+    sigma = joint([random_spd(rng, 3, 0.1), random_spd(rng, 3, 0.1)])
     p_hat = np.array([0.0, 0.0, 0.0, 2.0, 0.5, 0.1])
-    c = [DistanceConstraint(0, 1, "max", 1.0)]
-    sigma = np.zeros((6, 6))
-    sigma[:3, :3], sigma[3:, 3:] = covs
-    sol = solve_projection(p_hat, sigma, c)
-    dxs, Ps = spread_correction(covs, [np.arange(3), np.arange(3)], sol)
-    np.testing.assert_allclose(np.concatenate(dxs), sol.p - p_hat, atol=1e-10)
-    full = constrained_covariance(sigma, sol.gain)
-    np.testing.assert_allclose(Ps[0], full[:3, :3], atol=1e-10)
-    np.testing.assert_allclose(Ps[1], full[3:, 3:], atol=1e-10)
+    sol = solve_projection(p_hat, sigma, [DistanceConstraint(0, 1, "max", 1.0)])
+    dx, P_new = spread_correction(sigma, np.arange(6), sol)
+    np.testing.assert_allclose(dx, sol.p - p_hat, atol=1e-10)
+    np.testing.assert_allclose(P_new, constrained_covariance(sigma, sol.gain), atol=1e-10)
 
 
 def test_spread_correction_moves_correlated_states_by_regression():
     """A velocity correlated with position moves by P_vp P_pp⁻¹ δp; P stays symmetric PSD."""
     rng = np.random.default_rng(2)
-    covs = []
-    for _ in range(2):
-        A = rng.normal(size=(6, 6))
-        covs.append(A @ A.T + 0.01 * np.eye(6))
-    idx = [np.arange(3), np.arange(3)]
+    covs = [random_spd(rng, 6, 0.01), random_spd(rng, 6, 0.01)]
+    P = joint(covs)
+    pos = np.array([0, 1, 2, 6, 7, 8])
     p_hat = np.array([0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
-    sigma = np.zeros((6, 6))
-    sigma[:3, :3], sigma[3:, 3:] = covs[0][:3, :3], covs[1][:3, :3]
-    sol = solve_projection(p_hat, sigma, [DistanceConstraint(0, 1, "max", 1.0)])
-    dxs, Ps = spread_correction(covs, idx, sol)
-    for k, (P, dx) in enumerate(zip(covs, dxs)):
+    sol = solve_projection(p_hat, P[pos][:, pos], [DistanceConstraint(0, 1, "max", 1.0)])
+    dx, P_new = spread_correction(P, pos, sol)
+    for k, C in enumerate(covs):
         dp = sol.p[3 * k:3 * k + 3] - p_hat[3 * k:3 * k + 3]
-        np.testing.assert_allclose(dx[:3], dp, atol=1e-10)
-        np.testing.assert_allclose(dx[3:], P[3:, :3] @ np.linalg.solve(P[:3, :3], dp), atol=1e-9)
-        np.testing.assert_allclose(Ps[k], Ps[k].T, atol=1e-12)
-        assert np.linalg.eigvalsh(Ps[k]).min() > -1e-10
+        block = dx[6 * k:6 * k + 6]
+        np.testing.assert_allclose(block[:3], dp, atol=1e-10)
+        np.testing.assert_allclose(block[3:], C[3:, :3] @ np.linalg.solve(C[:3, :3], dp), atol=1e-9)
+    np.testing.assert_allclose(P_new, P_new.T, atol=1e-12)
+    assert np.linalg.eigvalsh(P_new).min() > -1e-10
 
 
 def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet(tmp_path):
@@ -131,3 +134,27 @@ def test_run_writes_the_constraints_block(tmp_path):
     assert block["activations"] > 0
     assert block["max_violation_after_m"] < 1e-6
     assert set(block["solve_time_us"]) == {"median", "p99"}
+
+
+def test_tracking_cross_covariances_keeps_the_filter_consistent():
+    """Dropping the cross-covariances a constraint creates makes both systems overconfident
+    (NEES ≫ 2); tracking them keeps the NEES near 2, with the same estimates."""
+    nees = {}
+    for tracked in (False, True):
+        values = []
+        for seed in range(4):
+            res = run_layout(load_layout(WALKERS, [
+                "fuser.method=projection", f"fuser.cross_covariance={str(tracked).lower()}",
+                "systems.system_1.duration_s=30", "systems.system_2.duration_s=30"]), seed=seed)
+            for system in res.systems.values():
+                values.append(system.horizontal_nees()[1500:])
+        nees[tracked] = float(np.nanmean(np.concatenate(values)))
+    assert nees[False] > 20
+    assert 1.0 < nees[True] < 4.0
+
+
+def test_cross_covariance_tracking_runs_with_foot_systems():
+    res = run_layout(load_layout(VICON, ["fuser.cross_covariance=true"]))
+    assert res.fuser.activations > 0
+    for system in res.systems.values():
+        assert np.linalg.eigvalsh(system.P).min() > -1e-12

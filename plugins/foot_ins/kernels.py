@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusion.error_state import propagate_covariance
+from fusion.error_state import accumulate_propagation, propagate_covariance
 from fusion.strapdown import mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
 
@@ -20,14 +20,15 @@ C_ZUPTS, C_ZARUS, C_NIS_SUM = range(3)
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                  stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
-                 hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i], propagate P,
     and at stance samples apply the ZUPT (and the ZARU when its σ > 0).
 
     x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
     increments, see :func:`fusion.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
     ``hist_pos_var`` receives the state and the position variances (m^2) after sample i.
-    ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS].
+    ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS]. ``phi`` (15, 15) accumulates
+    the error-state transition for the fuser's cross-covariances (empty (0, 0): off).
     """
     q_diag = np.zeros(15)
     for k in range(3):
@@ -45,12 +46,14 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     for i in range(i0, i1):
         dt = t[i] - t[i - 1]
         C = mechanise(x, acc_b[i], gyro_b[i], dt, g, w_ie, f_n, mech_memory)
+        if phi.shape[0] > 0:
+            accumulate_propagation(phi, C, f_n, dt, work[0])
         propagate_covariance(P, C, f_n, dt, q_diag, work)
         if stance[i]:
-            counters[C_NIS_SUM] += zero_velocity_update(x, P, zupt_sigma, dx)
+            counters[C_NIS_SUM] += zero_velocity_update(x, P, zupt_sigma, dx, phi)
             counters[C_ZUPTS] += 1
             if zaru_sigma > 0:
-                zero_angular_rate_update(x, P, gyro_b[i], zaru_sigma, dx)
+                zero_angular_rate_update(x, P, gyro_b[i], zaru_sigma, dx, phi)
                 counters[C_ZARUS] += 1
         for k in range(16):
             hist_x[i, k] = x[k]

@@ -125,6 +125,7 @@ class FootIns(SensorSystem):
         self.hist_x[0] = self.x
         self.hist_pos_var[0] = np.diag(self.P)[:3]
         self.counters = np.zeros(3)
+        self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.mech_memory = np.zeros(6)
         self.fix_counts = GateCounts()
         self._next_fix = 0
@@ -149,7 +150,7 @@ class FootIns(SensorSystem):
             k = self._fix_index[self._next_fix]
             self._run_to(k + 1)
             position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
-                                self._fix_gate, self.fix_counts)
+                                self._fix_gate, self.fix_counts, self.phi)
             self.hist_x[k] = self.x
             self.hist_pos_var[k] = np.diag(self.P)[:3]
             self._next_fix += 1
@@ -160,8 +161,8 @@ class FootIns(SensorSystem):
         if i1 <= self._i + 1:
             return
         run_foot_ins(self.x, self.P, self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance,
-                     self._i + 1, i1, self._params, self.mech_memory, self.hist_x, self.hist_pos_var,
-                     self.counters)
+                     self._i + 1, i1, self._params, self.mech_memory, self.phi, self.hist_x,
+                     self.hist_pos_var, self.counters)
         self._i = i1 - 1
 
     # --- heading ------------------------------------------------------------------
@@ -206,6 +207,15 @@ class FootIns(SensorSystem):
         self.P = 0.5 * (P + P.T)
         self.hist_x[self._i] = self.x
         self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+
+    def track_transition(self) -> None:
+        self._tracking = True
+        self.phi = np.eye(15)
+
+    def transition_since_sync(self) -> np.ndarray:
+        phi = self.phi.copy()
+        self.phi = np.eye(15)
+        return phi
 
     def sync_times(self) -> np.ndarray:
         starts, _ = detectors.stance_events(self.stance)

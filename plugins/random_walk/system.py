@@ -56,9 +56,9 @@ class RandomWalk(SensorSystem):
         self.x = np.asarray(self.config.start_m, dtype=float).copy()
         self.P = np.eye(3) * self.config.initial_variance_m2
         self.hist_pos = np.empty((n, 3))
-        self.hist_var = np.empty((n, 3))
+        self.hist_cov = np.empty((n, 3, 3))
         self.hist_pos[0] = self.x
-        self.hist_var[0] = np.diag(self.P)
+        self.hist_cov[0] = self.P
         self._i = 0
 
     @property
@@ -83,11 +83,11 @@ class RandomWalk(SensorSystem):
             self.P = self.P + q * np.eye(3)
             self._i += 1
             self.hist_pos[self._i] = self.x
-            self.hist_var[self._i] = self.P.diagonal()
+            self.hist_cov[self._i] = self.P
             return
         steps = np.arange(self._i + 1, i1)
         self.hist_pos[steps] = self.x + np.cumsum(self.increments[steps - 1], axis=0)
-        self.hist_var[steps] = np.diag(self.P) + q * (steps - self._i)[:, None]
+        self.hist_cov[steps] = self.P + q * (steps - self._i)[:, None, None] * np.eye(3)
         self.P = self.P + q * len(steps) * np.eye(3)
         self.x = self.hist_pos[i1 - 1].copy()
         self._i = i1 - 1
@@ -113,7 +113,13 @@ class RandomWalk(SensorSystem):
         self.x = self.x + dx
         self.P = 0.5 * (P + P.T)
         self.hist_pos[self._i] = self.x
-        self.hist_var[self._i] = np.diag(self.P)
+        self.hist_cov[self._i] = self.P
+
+    def track_transition(self) -> None:
+        """Nothing to accumulate: the error state (δp) carries over unchanged, Φ = I."""
+
+    def transition_since_sync(self) -> np.ndarray:
+        return np.eye(3)
 
     def sync_times(self) -> np.ndarray:
         return self.t[1:]
@@ -123,7 +129,19 @@ class RandomWalk(SensorSystem):
 
     def trajectory(self) -> Trajectory:
         n = self._i + 1
-        return Trajectory(self.t[:n], self.hist_pos[:n], np.sqrt(np.maximum(self.hist_var[:n], 0.0)))
+        var = np.diagonal(self.hist_cov[:n], axis1=1, axis2=2)
+        return Trajectory(self.t[:n], self.hist_pos[:n], np.sqrt(np.maximum(var, 0.0)))
+
+    def horizontal_nees(self) -> np.ndarray:
+        """(N,) normalised estimation error squared of the horizontal position against the
+        truth, eᵀ P_hh⁻¹ e; a consistent filter averages 2 (undefined where P_hh = 0: NaN)."""
+        n = self._i + 1
+        e = (self.hist_pos[:n] - self.truth_pos_n[:n])[:, :2]
+        P = self.hist_cov[:n, :2, :2]
+        det = P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nees = (P[:, 1, 1] * e[:, 0] ** 2 - 2 * P[:, 0, 1] * e[:, 0] * e[:, 1] + P[:, 0, 0] * e[:, 1] ** 2) / det
+        return np.where(det > 0, nees, np.nan)
 
     def truth_trajectory(self) -> Trajectory:
         return Trajectory(self.t, self.truth_pos_n, np.zeros_like(self.truth_pos_n))
