@@ -138,22 +138,29 @@ class Fuser:
         if track:
             for s in members:
                 s.track_transition()
+        n3 = 3 * len(members)
+        p_hat = np.empty(n3)
+        sigma = np.zeros((n3, n3))
         rep = self.report
         for t in epoch_times(members, self.config):
-            for s in members:
+            covs = []
+            for k, s in enumerate(members):
                 s.advance(t)
+                P = s.covariance()
+                covs.append(P)
+                p_hat[3 * k:3 * k + 3] = s.position_n()
+                sigma[3 * k:3 * k + 3, 3 * k:3 * k + 3] = P[s.position_indices, s.position_indices]
             if track:
-                # cross blocks: C_ij ← Φ_i C_ij Φ_jᵀ; own blocks are the systems' current P
+                # cross blocks: C_ij ← Φ_i C_ij Φ_jᵀ, then the marginal position cross-covariances
                 phis = [s.transition_since_sync() for s in members]
                 for a in range(len(members)):
                     for b in range(a + 1, len(members)):
                         c = phis[a] @ joint[blocks[a], blocks[b]] @ phis[b].T
                         joint[blocks[a], blocks[b]] = c
                         joint[blocks[b], blocks[a]] = c.T
-            for k, s in enumerate(members):
-                joint[blocks[k], blocks[k]] = s.covariance()
-            p_hat = np.concatenate([s.position_n() for s in members])
-            sigma = joint[pos][:, pos]
+                        pa, pb = members[a].position_indices, members[b].position_indices
+                        sigma[3 * a:3 * a + 3, 3 * b:3 * b + 3] = c[pa, pb]
+                        sigma[3 * b:3 * b + 3, 3 * a:3 * a + 3] = c[pa, pb].T
             t0 = time.perf_counter_ns()
             sol = solver.solve(p_hat, sigma)
             rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
@@ -166,6 +173,8 @@ class Fuser:
                 continue
             rep.activations += 1
             rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
+            for k, P in enumerate(covs):
+                joint[blocks[k], blocks[k]] = P
             dx, P_new = spread_correction(joint, pos, sol)
             if track:
                 joint[:] = P_new

@@ -127,14 +127,27 @@ def test_trajectory_covers_every_sample(vicon, name):
 
 @pytest.mark.parametrize("name,file", [("left_foot", "imuMeasLeft.csv"), ("right_foot", "imuMeasRight.csv")])
 def test_stance_fraction_in_diagnostics_equals_the_label_fraction(vicon, name, file):
+    """With debouncing off, the labels detector is the labels."""
     header, d = read_imu(VICON_DATA / file)
     labels = d[:, header.index("is_zero_vel")]
-    diag = vicon.systems[name].diagnostics()
+    res = run_layout(load_layout(VICON_CFG, [*INDEPENDENT, f"systems.{name}.detector.min_stance_s=0",
+                                             f"systems.{name}.detector.min_swing_s=0"]))
+    diag = res.systems[name].diagnostics()
     assert diag["stance_fraction"] == pytest.approx(labels.mean(), abs=1e-12)
     # the ZUPT is applied at every stance sample after the first (the initial state is sample 0)
     assert diag["zupt_updates"] == int(labels[1:].sum())
     assert diag["zaru_updates"] == 0
     assert 0.1 < diag["zupt_mean_nis"] < 100.0
+
+
+def test_debounced_labels_drop_short_flickers(vicon):
+    """The layout's 0.05 s debounce: no stance or inner swing run shorter than 3 samples at 60 Hz."""
+    from fusion.detectors import stance_events
+
+    for system in vicon.systems.values():
+        starts, ends = stance_events(system.stance)
+        assert (ends - starts).min() >= 3
+        assert (starts[1:] - ends[:-1]).min() >= 3
 
 
 # --------------------------------------------------------------------------- determinism
