@@ -76,7 +76,9 @@ class FuserConfig(StrictModel):
     (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
     any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
     cross_covariance: keep the cross-covariances a constraint creates between systems
-    (the papers drop them).
+    (the papers drop them). correct: spread the correction to ``all`` error states through
+    their covariance with position (the papers), or correct ``positions`` only and keep the
+    other states as Schmidt consider states (robust when those correlations are poorly known).
     """
 
     method: Literal["none", "projection", "qp", "socp"] = "none"
@@ -85,6 +87,7 @@ class FuserConfig(StrictModel):
     tolerance_m: float = Field(default=1e-6, gt=0)
     max_iterations: int = Field(default=20, ge=1)
     cross_covariance: bool = False
+    correct: Literal["all", "positions"] = "all"
 
 
 class SmootherConfig(StrictModel):

@@ -79,12 +79,15 @@ def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
     return times[(times > t0) & (times <= t1)]
 
 
-def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSolution) -> tuple[np.ndarray, np.ndarray]:
+def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSolution,
+                      positions_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Joint error-state correction dx and covariance P* from a position-space solution.
 
     P: (n, n) joint error-state covariance of the constrained systems (block diagonal
     unless cross-covariances are tracked); pos: indices of their positions in it, in
-    the order of the solver's stacked positions.
+    the order of the solver's stacked positions. ``positions_only`` keeps every other
+    state out of the correction (Schmidt consider states: their rows of the gain are
+    zero; the Joseph form keeps P* the exact covariance of that sub-optimal update).
     """
     P_xp = P[:, pos]
     J = solution.jacobian
@@ -93,6 +96,10 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
     JS = J @ P[pos][:, pos] @ J.T
     M = np.zeros_like(P)
     M[:, pos] = P_xp @ J.T @ np.linalg.solve(JS, J)
+    if positions_only:
+        others = np.setdiff1d(np.arange(P.shape[0]), pos)
+        dx[others] = 0.0
+        M[others] = 0.0
     IM = np.eye(P.shape[0]) - M
     P_new = IM @ P @ IM.T
     return dx, 0.5 * (P_new + P_new.T)
@@ -175,7 +182,7 @@ class Fuser:
             rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
             for k, P in enumerate(covs):
                 joint[blocks[k], blocks[k]] = P
-            dx, P_new = spread_correction(joint, pos, sol)
+            dx, P_new = spread_correction(joint, pos, sol, self.config.correct == "positions")
             if track:
                 joint[:] = P_new
             for k, s in enumerate(members):

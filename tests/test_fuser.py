@@ -158,3 +158,18 @@ def test_cross_covariance_tracking_runs_with_foot_systems():
     assert res.fuser.activations > 0
     for system in res.systems.values():
         assert np.linalg.eigvalsh(system.P).min() > -1e-12
+
+
+def test_positions_only_correction_leaves_the_other_states_and_their_variances():
+    rng = np.random.default_rng(3)
+    covs = [random_spd(rng, 6, 0.01), random_spd(rng, 6, 0.01)]
+    P = joint(covs)
+    pos = np.array([0, 1, 2, 6, 7, 8])
+    sol = solve_projection(np.array([0.0, 0, 0, 3.0, 0, 0]), P[pos][:, pos], [DistanceConstraint(0, 1, "max", 1.0)])
+    dx_all, P_all = spread_correction(P, pos, sol)
+    dx, P_new = spread_correction(P, pos, sol, positions_only=True)
+    others = np.array([3, 4, 5, 9, 10, 11])
+    np.testing.assert_array_equal(dx[others], 0.0)
+    np.testing.assert_allclose(dx[pos], dx_all[pos], atol=1e-12)
+    np.testing.assert_allclose(P_new[np.ix_(others, others)], P[np.ix_(others, others)], atol=1e-12)
+    assert np.linalg.eigvalsh(P_new).min() > -1e-10
