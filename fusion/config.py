@@ -91,7 +91,24 @@ class FuserConfig(StrictModel):
 
 
 class SmootherConfig(StrictModel):
-    kind: Literal["none"] = "none"
+    """Smoothing of the systems that support it (the foot INS), after the fuser
+    (:mod:`fusion.smoothing`).
+
+    ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward
+    filter's error states); ``fb`` (forward–backward navigation, covariance-weighted
+    fusion, position re-integrated); ``fb-rts`` (the FB-RTS paper: both passes RTS-smoothed
+    before the fusion). Segments run between stance midpoints (stance runs shorter than
+    ``min_stance_s`` are ignored; segments longer than ``max_segment_s`` are split).
+    ``span`` (``rts`` only): ``whole`` smooths the whole run, ``segment`` each segment on
+    its own. Distance constraints act in the forward pass through the fuser
+    (``fuser.method``); ``constrain_smoothed`` applies them again on the smoothed tracks.
+    """
+
+    kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
+    span: Literal["whole", "segment"] = "whole"
+    min_stance_s: float = Field(default=0.04, ge=0)
+    max_segment_s: float = Field(default=10.0, gt=0)
+    constrain_smoothed: bool = False
 
 
 class HeadingAlignmentConfig(StrictModel):

@@ -101,6 +101,7 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
+import numba
 import numpy as np
 
 __all__ = [
@@ -226,7 +227,7 @@ class _Layout:
 
     __slots__ = (
         "n", "m", "cons", "i3", "j3", "dims", "d", "code", "b", "has_fixed",
-        "plus", "minus", "offs", "bmat",
+        "plus", "minus", "offs", "bmat", "idx", "geo", "dual_sign",
     )
 
     def __init__(self, n_systems: int, constraints: Sequence[DistanceConstraint]) -> None:
@@ -265,6 +266,13 @@ class _Layout:
         bm[np.arange(len(plus)), self.plus] = 1.0
         bm[np.arange(len(plus)), self.minus] -= 1.0
         self.bmat = bm  # (K, 3n): r = bmat p + b
+        # the same geometry for the kernels: (i3, j3, dims, kind code) and (d, b padded to 3)
+        self.idx = np.array([[self.i3[k], self.j3[k], self.dims[k], self.code[k]] for k in range(self.m)],
+                            dtype=np.int64).reshape(self.m, 4)
+        self.geo = np.array([[self.d[k]] + self.b[k] + [0.0] * (3 - self.dims[k]) for k in range(self.m)],
+                            dtype=float).reshape(self.m, 4)
+        # OSQP's multiplier sign: > 0 at an upper bound (max, fixed), < 0 at a lower one (min)
+        self.dual_sign = np.array([-1.0 if code == 1 else 1.0 for code in self.code])
 
     def r(self, pl: list[float], k: int) -> list[float]:
         """r_k as a Python list from positions given as a Python list."""
@@ -307,16 +315,34 @@ def _layout(n_systems: int, constraints: Sequence[DistanceConstraint]) -> _Layou
     return lay
 
 
+# Kernels: scalar loops only (array expressions cost numba compile time); the numpy
+# error model gives IEEE inf/nan instead of exceptions, results carry a status instead.
+_kernel = numba.njit(cache=True, error_model="numpy")
+
+
+@_kernel
+def _all_finite(p: np.ndarray, s: np.ndarray) -> bool:
+    """True when every entry of p (n,) and s (n, n) is finite."""
+    for a in range(p.shape[0]):
+        if not math.isfinite(p[a]):
+            return False
+        for b in range(s.shape[1]):
+            if not math.isfinite(s[a, b]):
+                return False
+    return True
+
+
 def _check_inputs(p_hat: Any, sigma: Any, n_systems: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    p = np.asarray(p_hat, dtype=float)
+    """p̂ (3n,) and Σ (3n, 3n) as C-contiguous float arrays (the kernels' one signature)."""
+    p = np.ascontiguousarray(p_hat, dtype=float)
     if p.ndim != 1 or p.shape[0] % 3 != 0 or p.shape[0] == 0:
         raise ValueError(f"p_hat must be a (3n,) vector, got shape {p.shape}")
     if n_systems is not None and p.shape[0] != 3 * n_systems:
         raise ValueError(f"p_hat must have shape ({3 * n_systems},), got {p.shape}")
-    s = np.asarray(sigma, dtype=float)
+    s = np.ascontiguousarray(sigma, dtype=float)
     if s.shape != (p.shape[0], p.shape[0]):
         raise ValueError(f"sigma must have shape {(p.shape[0], p.shape[0])}, got {s.shape}")
-    if not math.isfinite(float(p.sum()) + float(s.sum())):
+    if not _all_finite(p, s):
         raise ValueError("p_hat and sigma must be finite")
     return p, s
 
@@ -328,15 +354,37 @@ def _unit(v: Sequence[float]) -> list[float] | None:
     return [x / nv for x in v]
 
 
-def _hint(hints: dict[int, list[float]] | None, k: int, dim: int) -> list[float]:
-    if hints is not None and k in hints:
-        h = _unit(hints[k][:dim])
-        if h is not None:
-            return h
-    return [1.0] + [0.0] * (dim - 1)
+# Hint directions (module docstring) are kept resolved, one row per constraint of an
+# (m, 3) array: the unit direction within the constraint's dims, zero-padded; east
+# when there is none. Kernels and Python read row k's first dims entries.
 
 
-def _direction(r: list[float], hints: dict[int, list[float]] | None, k: int) -> list[float]:
+def _hint_array(lay: _Layout, directions: Any = None) -> np.ndarray:
+    """Hint rows from ``directions`` (m, ≤ 3) — each restricted to its constraint's dims,
+    east where that is zero — or all east."""
+    out = np.zeros((lay.m, 3))
+    out[:, 0] = 1.0
+    if directions is not None:
+        h = np.asarray(directions, dtype=float).reshape(lay.m, -1)
+        for k in range(lay.m):
+            u = _unit(h[k, : lay.dims[k]].tolist())
+            if u is not None:
+                out[k] = 0.0
+                out[k, : len(u)] = u
+    return out
+
+
+def _remember(hints: np.ndarray, dirs: dict[int, list[float]]) -> None:
+    """Store the directions of a solve (unit, length dims) as the constraints' hints."""
+    for k, u in dirs.items():
+        hints[k, : len(u)] = u
+
+
+def _hint(hints: np.ndarray, k: int, dim: int) -> list[float]:
+    return hints[k, :dim].tolist()
+
+
+def _direction(r: list[float], hints: np.ndarray, k: int) -> list[float]:
     u = _unit(r)
     return u if u is not None else _hint(hints, k, len(r))
 
@@ -456,34 +504,65 @@ def _eq_project_single(
     u: list[float],
     p_given: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_eq_project` for one constraint, without numpy.linalg."""
-    sl = sigma.tolist()
-    pl = p_hat.tolist()
-    i3, j3, D = lay.i3[k], lay.j3[k], lay.dims[k]
-    sgn = -1.0 if lay.code[k] == 1 else 1.0
-    sgt = []
-    for row in sl:
+    """:func:`_eq_project` for one constraint, by :func:`_eq58_pair`."""
+    n3 = p_hat.shape[0]
+    p = np.empty(n3) if p_given is None else p_given
+    mu = np.empty((n3, n3))
+    G = np.empty((1, n3))
+    ok, lam = _eq58_pair(p_hat, sigma, lay.idx, lay.geo, k, np.array(u), p_given is not None, p, mu, G)
+    if not ok:
+        raise np.linalg.LinAlgError("constraint direction has zero variance")
+    return p, np.array([lam]), mu, G
+
+
+@_kernel
+def _eq58_pair(
+    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, u: np.ndarray,
+    given: bool, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+) -> tuple[bool, float]:
+    """Eqs. 58–60 for constraint k linearised with unit direction u (first dims entries).
+
+    Jacobian row G = s·(uᵀE on block i, −uᵀE on block j), s = −1 for ``min`` else 1
+    (written to jac[0]); M = G Σ Gᵀ; gain μ = Σ Gᵀ G / M. Projection (``given`` false):
+    λ = s (u·r̂ − d)/M and p = p̂ − λ Σ Gᵀ (written to p). Given p (certifying another
+    solver's point, p read): λ = −G (p − p̂)/M, the least-squares multiplier of
+    Σ⁻¹(p − p̂) + λ Gᵀ = 0. Returns (M > 0, λ); nothing is meaningful when M ≤ 0.
+    """
+    n3 = p_hat.shape[0]
+    i3, j3, D = idx[k, 0], idx[k, 1], idx[k, 2]
+    sgn = -1.0 if idx[k, 3] == 1 else 1.0
+    for c in range(n3):
+        jac[0, c] = 0.0
+    for b in range(D):
+        jac[0, i3 + b] = sgn * u[b]
+        jac[0, j3 + b] -= sgn * u[b]
+    sgt = np.empty(n3)  # Σ Gᵀ
+    M = 0.0
+    for r in range(n3):
         acc = 0.0
         for b in range(D):
-            acc += (row[i3 + b] - row[j3 + b]) * u[b]
-        sgt.append(sgn * acc)
-    G = [0.0] * len(pl)
-    for b in range(D):
-        G[i3 + b] = sgn * u[b]
-        G[j3 + b] -= sgn * u[b]
-    M = sum(g * s for g, s in zip(G, sgt))
+            acc += (sigma[r, i3 + b] - sigma[r, j3 + b]) * u[b]
+        sgt[r] = sgn * acc
+        M += jac[0, r] * sgt[r]
     if not M > 0.0:
-        raise np.linalg.LinAlgError("constraint direction has zero variance")
-    if p_given is None:
-        r = lay.r(pl, k)
-        lam = sgn * (sum(a * b for a, b in zip(u, r)) - lay.d[k]) / M
-        p = np.array([x - lam * y for x, y in zip(pl, sgt)])
+        return False, 0.0
+    if given:
+        acc = 0.0
+        for c in range(n3):
+            acc += jac[0, c] * (p[c] - p_hat[c])
+        lam = -acc / M
     else:
-        lam = -sum(g * (a - b) for g, a, b in zip(G, p_given.tolist(), pl)) / M
-        p = p_given
-    Ga = np.array(G)
-    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
-    return p, np.array([lam]), mu, Ga[None, :]
+        ur = 0.0
+        for b in range(D):
+            ur += u[b] * (p_hat[i3 + b] - p_hat[j3 + b] + geo[k, 1 + b])
+        lam = sgn * (ur - geo[k, 0]) / M
+        for c in range(n3):
+            p[c] = p_hat[c] - lam * sgt[c]
+    inv_m = 1.0 / M
+    for r in range(n3):
+        for c in range(n3):
+            gain[r, c] = sgt[r] * (jac[0, c] * inv_m)
+    return True, lam
 
 
 def _finish(
@@ -509,252 +588,233 @@ def _finish(
 # projection, Newton scheme: one active constraint (scalar secular equation)
 # ---------------------------------------------------------------------------
 
-
-def _eig_sym(S: list[list[float]]) -> tuple[list[float], list[list[float]]]:
-    """Eigen-pairs of a symmetric 2x2/3x3 (nested lists), descending; vectors as lists."""
-    if len(S) == 2:
-        a, b, c = S[0][0], 0.5 * (S[0][1] + S[1][0]), S[1][1]
-        mean = 0.5 * (a + c)
-        rad = math.hypot(0.5 * (a - c), b)
-        th = 0.5 * math.atan2(2.0 * b, a - c)
-        ct, st = math.cos(th), math.sin(th)
-        return [mean + rad, mean - rad], [[ct, st], [-st, ct]]
-    w, V = np.linalg.eigh(np.array(S))
-    return w[::-1].tolist(), V[:, ::-1].T.tolist()
+_SOLVED, _INACTIVE, _FAILED = 0, 1, 2  # status of _project_pair
 
 
-def _secular(
-    S: list[list[float]], rhat: list[float], d: float, hint: list[float], tol: float, max_iter: int
-) -> tuple[list[float] | None, int]:
-    """Exact solution of min ½(r − r̂)ᵀS⁻¹(r − r̂) s.t. ‖r‖ = d, global for ‖r̂‖ ≠ d.
+@_kernel
+def _sym_eig(S: np.ndarray, D: int, w: np.ndarray, Q: np.ndarray) -> None:
+    """Eigen-pairs of the symmetric D×D (D ≤ 3) matrix with upper triangle S: w (D,)
+    descending, row a of Q the unit eigenvector of w[a].
 
-    Returns (unit direction of r*, iterations) or (None, it) on failure.
-    ‖r̂‖ > d: ν ∈ (0, ∞), the convex ``max`` case; ‖r̂‖ < d: ν ∈ (−1/s_max, 0),
-    the ``min`` case (global minimiser of the non-convex problem); Newton on
-    F(ν) = 1/d − 1/‖r(ν)‖ with bisection safeguard, r(ν) = (I + νS)⁻¹ r̂.
+    Cyclic Jacobi: the rotation of the (p, q) plane by θ = ½ atan2(2 A_pq, A_pp − A_qq)
+    diagonalises that 2x2 block, A_pp, A_qq ← mean ± hypot(½(A_pp − A_qq), A_pq), and
+    turns rows p, q of Q by θ. A 2x2 takes one rotation, a 3x3 converges quadratically.
     """
-    s, Q = _eig_sym(S)
-    D = len(rhat)
-    c = []
+    A = np.empty((3, 3))
+    for a in range(D):
+        for b in range(D):
+            A[a, b] = S[a, b] if a <= b else S[b, a]
+            Q[a, b] = 1.0 if a == b else 0.0
+    for _sweep in range(50):
+        off = 0.0
+        scale = 0.0
+        for a in range(D):
+            scale += abs(A[a, a])
+            for b in range(a + 1, D):
+                off += abs(A[a, b])
+        if not off > 1e-30 * scale:
+            break
+        for p in range(D - 1):
+            for q in range(p + 1, D):
+                apq = A[p, q]
+                if apq == 0.0:
+                    continue
+                app, aqq = A[p, p], A[q, q]
+                mean = 0.5 * (app + aqq)
+                rad = math.hypot(0.5 * (app - aqq), apq)
+                th = 0.5 * math.atan2(2.0 * apq, app - aqq)
+                c, s = math.cos(th), math.sin(th)
+                A[p, p] = mean + rad
+                A[q, q] = mean - rad
+                A[p, q] = 0.0
+                A[q, p] = 0.0
+                for t in range(D):
+                    if t != p and t != q:
+                        atp, atq = A[t, p], A[t, q]
+                        A[t, p] = c * atp + s * atq
+                        A[p, t] = A[t, p]
+                        A[t, q] = c * atq - s * atp
+                        A[q, t] = A[t, q]
+                    qp, qq = Q[p, t], Q[q, t]
+                    Q[p, t] = c * qp + s * qq
+                    Q[q, t] = c * qq - s * qp
+    for a in range(D):
+        w[a] = A[a, a]
+    for a in range(D - 1):  # selection sort, descending; ties keep their order
+        best = a
+        for b in range(a + 1, D):
+            if w[b] > w[best]:
+                best = b
+        if best != a:
+            w[a], w[best] = w[best], w[a]
+            for t in range(D):
+                Q[a, t], Q[best, t] = Q[best, t], Q[a, t]
+
+
+@_kernel
+def _secular(
+    S: np.ndarray, rhat: np.ndarray, D: int, d: float, hint: np.ndarray, tol: float, max_iter: int,
+    u: np.ndarray,
+) -> int:
+    """Direction of the exact solution of min ½(r − r̂)ᵀS⁻¹(r − r̂) s.t. ‖r‖ = d, global
+    for ‖r̂‖ ≠ d. Writes the unit r*/d to u; returns the iterations, −1 on failure.
+
+    With S = Σ_a s_a q_a q_aᵀ (s descending) and c_a = q_a·r̂, r(ν) = Σ_a c_a/(1 + ν s_a) q_a
+    (ν = λ/‖r‖). ‖r̂‖ > d: ν ∈ (0, ∞), the convex ``max`` case; ‖r̂‖ < d: ν ∈ (−1/s_1, 0),
+    the global minimiser of the non-convex ``min`` case. Safeguarded Newton on
+    F(ν) = 1/d − 1/‖r(ν)‖ (bisection when a step leaves the bracket) until
+    |‖r(ν)‖ − d| ≤ tol. Hard case (‖r̂‖ < d, c ≈ 0 on the top eigenspace T): if
+    ρ = ‖Σ_{a∉T} c_a/(1 − s_a/s_1) q_a‖ < d, r* is that vector plus √(d² − ρ²) v, v the
+    unit part in T of r̂, else of the hint, else ±q_1 (the sign closest to the hint).
+    """
+    w = np.empty(3)
+    Q = np.empty((3, 3))
+    c = np.empty(3)
+    r = np.empty(3)
+    _sym_eig(S, D, w, Q)
+    n2 = 0.0
     for a in range(D):
         acc = 0.0
         for t in range(D):
-            acc += Q[a][t] * rhat[t]
-        c.append(acc)
-    rho0 = math.sqrt(math.fsum([x * x for x in rhat]))
+            acc += Q[a, t] * rhat[t]
+        c[a] = acc
+        n2 += rhat[a] * rhat[a]
+    rho0 = math.sqrt(n2)
     if rho0 == d:
-        return _unit(rhat), 0
+        for t in range(D):
+            u[t] = rhat[t] / rho0
+        return 0 if rho0 > _DEGENERATE_M else -1
     if rho0 > d:
         lo, hi = 0.0, math.inf
-        if not any(s[a] > 0.0 and c[a] != 0.0 for a in range(D)):
-            return None, 0  # nothing can move this separation
+        movable = False
+        for a in range(D):
+            movable = movable or (w[a] > 0.0 and c[a] != 0.0)
+        if not movable:
+            return -1  # nothing can move this separation
     else:
-        smax = s[0]
+        smax = w[0]
         if not smax > 0.0:
-            return None, 0
+            return -1
         lo, hi = -1.0 / smax, 0.0
-        top = [a for a in range(D) if s[a] >= smax * (1.0 - 1e-10)]
-        cT = math.sqrt(sum(c[a] * c[a] for a in top))
-        if cT <= 1e-12 * d:
-            # hard case: r̂ has (almost) no component along the top eigenspace
-            rest = [0.0] * D
-            for a in range(D):
-                if a not in top:
-                    f = c[a] / (1.0 - s[a] / smax)
-                    for t in range(D):
-                        rest[t] += f * Q[a][t]
-            rr = math.sqrt(sum(x * x for x in rest))
+        ntop = 1
+        while ntop < D and w[ntop] >= smax * (1.0 - 1e-10):
+            ntop += 1
+        ct2 = 0.0
+        for a in range(ntop):
+            ct2 += c[a] * c[a]
+        ct = math.sqrt(ct2)
+        if ct <= 1e-12 * d:  # the hard case, in closed form
+            rr2 = 0.0
+            for t in range(D):
+                acc = 0.0
+                for a in range(ntop, D):
+                    acc += c[a] / (1.0 - w[a] / smax) * Q[a, t]
+                r[t] = acc
+                rr2 += acc * acc
+            rr = math.sqrt(rr2)
             if rr < d:
-                if cT > 0.0:
-                    v = [sum(c[a] * Q[a][t] for a in top) for t in range(D)]
-                else:
-                    v = [sum(sum(Q[a][q] * hint[q] for q in range(D)) * Q[a][t] for a in top) for t in range(D)]
-                vu = _unit(v)
-                if vu is None or math.sqrt(sum(x * x for x in v)) < 1e-6:
-                    vu = Q[top[0]]
-                    if sum(x * y for x, y in zip(vu, hint)) < 0.0:
-                        vu = [-x for x in vu]
+                v = np.empty(3)
+                nv2 = 0.0
+                for t in range(D):
+                    acc = 0.0
+                    for a in range(ntop):
+                        ca = c[a]
+                        if ct == 0.0:
+                            ca = 0.0
+                            for s in range(D):
+                                ca += Q[a, s] * hint[s]
+                        acc += ca * Q[a, t]
+                    v[t] = acc
+                    nv2 += acc * acc
+                nv = math.sqrt(nv2)
+                if not nv >= 1e-6:
+                    qh = 0.0
+                    for t in range(D):
+                        qh += Q[0, t] * hint[t]
+                    nv = -1.0 if qh < 0.0 else 1.0
+                    for t in range(D):
+                        v[t] = Q[0, t]
                 tau = math.sqrt(d * d - rr * rr)
-                return _unit([rest[t] + tau * vu[t] for t in range(D)]), 0
+                n2 = 0.0
+                for t in range(D):
+                    r[t] += tau * v[t] / nv
+                    n2 += r[t] * r[t]
+                nr = math.sqrt(n2)
+                for t in range(D):
+                    u[t] = r[t] / nr
+                return 0
     nu = 0.0
     for it in range(1, max_iter + 1):
         n2 = 0.0
         dn = 0.0
         for a in range(D):
-            den = 1.0 + nu * s[a]
-            q = c[a] / den
-            n2 += q * q
-            dn += q * q * s[a] / den
+            den = 1.0 + nu * w[a]
+            qa = c[a] / den
+            n2 += qa * qa
+            dn += qa * qa * w[a] / den
         rho = math.sqrt(n2)
         if abs(rho - d) <= tol:
-            r = [0.0] * D
-            for a in range(D):
-                f = c[a] / (1.0 + nu * s[a])
-                for t in range(D):
-                    r[t] += f * Q[a][t]
-            return _unit(r), it
+            for t in range(D):
+                acc = 0.0
+                for a in range(D):
+                    acc += c[a] / (1.0 + nu * w[a]) * Q[a, t]
+                u[t] = acc / rho
+            return it
         if rho > d:
             lo = nu
         else:
             hi = nu
-        # F = 1/d − 1/ρ, F' = ρ'/ρ² with ρ' = −dn/ρ
-        dF = -dn / (rho * n2)
-        step = -(1.0 / d - 1.0 / rho) / dF if dF != 0.0 else math.nan
-        nu_new = nu + step
-        if not (lo < nu_new < hi) or not math.isfinite(nu_new):
-            nu_new = 0.5 * (lo + hi) if math.isfinite(hi) else (2.0 * lo if lo > 0 else 1.0)
-        if nu_new == nu:
-            break
-        nu = nu_new
-    return None, max_iter
-
-
-def _secular2(
-    a: float, b: float, c: float, r0: float, r1: float, d: float,
-    hints: dict[int, list[float]] | None, k: int, tol: float, max_iter: int,
-) -> tuple[list[float] | None, int]:
-    """:func:`_secular` for a 2-D (horizontal) pair with S = [[a, b], [b, c]], in
-    scalars: the hot path of the projection. The hard case goes to the generic code."""
-    mean = 0.5 * (a + c)
-    rad = math.hypot(0.5 * (a - c), b)
-    th = 0.5 * math.atan2(2.0 * b, a - c)
-    ct, st = math.cos(th), math.sin(th)
-    s0, s1 = mean + rad, mean - rad  # eigenvectors (ct, st), (−st, ct)
-    c0 = ct * r0 + st * r1
-    c1 = ct * r1 - st * r0
-    rho0 = math.hypot(r0, r1)
-    if rho0 == d:
-        return [r0 / rho0, r1 / rho0], 0
-    if rho0 > d:
-        lo, hi = 0.0, math.inf
-        if not ((s0 > 0.0 and c0 != 0.0) or (s1 > 0.0 and c1 != 0.0)):
-            return None, 0
-    else:
-        if not s0 > 0.0:
-            return None, 0
-        cT = abs(c0) if s1 < s0 * (1.0 - 1e-10) else rho0
-        if cT <= 1e-12 * d:  # hard case: exact, in the generic code
-            return _secular([[a, b], [b, c]], [r0, r1], d, _hint(hints, k, 2), tol, max_iter)
-        lo, hi = -1.0 / s0, 0.0
-    nu = 0.0
-    for it in range(1, max_iter + 1):
-        den0 = 1.0 + nu * s0
-        den1 = 1.0 + nu * s1
-        q0 = c0 / den0
-        q1 = c1 / den1
-        n2 = q0 * q0 + q1 * q1
-        rho = math.sqrt(n2)
-        if abs(rho - d) <= tol:
-            x = (q0 * ct - q1 * st) / rho
-            y = (q0 * st + q1 * ct) / rho
-            return [x, y], it
-        if rho > d:
-            lo = nu
-        else:
-            hi = nu
-        dn = q0 * q0 * s0 / den0 + q1 * q1 * s1 / den1
+        # F = 1/d − 1/ρ, F′ = ρ′/ρ² with ρ′ = −dn/ρ
         nu_new = nu + (1.0 / d - 1.0 / rho) * rho * n2 / dn if dn != 0.0 else math.nan
         if not (lo < nu_new < hi):  # also catches NaN
             nu_new = 0.5 * (lo + hi) if hi != math.inf else (2.0 * lo if lo > 0.0 else 1.0)
         if nu_new == nu:
             break
         nu = nu_new
-    return None, max_iter
+    return -1
 
 
-def _single_fast(
-    p_hat: np.ndarray,
-    pl: list[float],
-    sl: list[list[float]],
-    lay: _Layout,
-    k: int,
-    hints: dict[int, list[float]] | None,
-    tol_m: float,
-    max_iter: int,
-) -> tuple[np.ndarray, float, list[float], np.ndarray, np.ndarray, int] | None:
-    """One active constraint: exact direction by the secular equation, then eq. 58/60.
+@_kernel
+def _project_pair(
+    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
+    tol: float, max_iter: int, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+) -> tuple[int, float, float, float, int, float, float, float]:
+    """Constraint k alone: g_k(p̂); when it is violated (or ``fixed``), the direction of
+    the solution from the secular equation (:func:`_secular`, S = E B Σ Bᵀ Eᵀ) and
+    eqs. 58–60 there (:func:`_eq58_pair`: p, gain, jac written).
 
-    Pure-Python floats (``pl = p̂.tolist()``, ``sl = Σ.tolist()``): for a handful
-    of numbers this is several times faster than small numpy calls.
+    Returns (status, g_k(p̂), g_k(p), λ, iterations, u0, u1, u2); status _INACTIVE (g_k ≤ 0,
+    nothing written) or _FAILED (nothing meaningful) or _SOLVED.
     """
-    i3, j3, D = lay.i3[k], lay.j3[k], lay.dims[k]
-    if D == 2:
-        return _single_fast2(p_hat, pl, sl, lay, k, hints, tol_m, max_iter)
-    rD = range(D)
-    S = [
-        [sl[i3 + a][i3 + b] - sl[i3 + a][j3 + b] - sl[j3 + a][i3 + b] + sl[j3 + a][j3 + b] for b in rD]
-        for a in rD
-    ]
-    rhat = lay.r(pl, k)
-    u, its = _secular(S, rhat, lay.d[k], _hint(hints, k, D), 1e-3 * tol_m, max(4 * max_iter, 60))
-    if u is None:
-        return None
-    sgn = -1.0 if lay.code[k] == 1 else 1.0
-    M = 0.0
-    ur = 0.0
-    for a in rD:
-        ur += u[a] * rhat[a]
-        for b in rD:
-            M += u[a] * S[a][b] * u[b]
-    if not M > 0.0:
-        return None
-    # eq. 58 at direction u: G = sgn·(uᵀE on block i, −uᵀE on block j)
-    lam = sgn * (ur - lay.d[k]) / M
-    sgt = []  # Σ Gᵀ
-    for row in sl:
-        acc = 0.0
-        for b in rD:
-            acc += (row[i3 + b] - row[j3 + b]) * u[b]
-        sgt.append(sgn * acc)
-    p = np.array([x - lam * y for x, y in zip(pl, sgt)])
-    G = [0.0] * len(pl)
-    for b in rD:
-        G[i3 + b] = sgn * u[b]
-        G[j3 + b] -= sgn * u[b]
-    Ga = np.array(G)
-    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
-    return p, lam, u, mu, Ga, its
-
-
-def _single_fast2(
-    p_hat: np.ndarray,
-    pl: list[float],
-    sl: list[list[float]],
-    lay: _Layout,
-    k: int,
-    hints: dict[int, list[float]] | None,
-    tol_m: float,
-    max_iter: int,
-) -> tuple[np.ndarray, float, list[float], np.ndarray, np.ndarray, int] | None:
-    """:func:`_single_fast` for a horizontal pair, in scalars."""
-    i, j = lay.i3[k], lay.j3[k]
-    i1, j1 = i + 1, j + 1
-    ri, rj, ri1, rj1 = sl[i], sl[j], sl[i1], sl[j1]
-    a = ri[i] - ri[j] - rj[i] + rj[j]
-    b = ri[i1] - ri[j1] - rj[i1] + rj[j1]
-    c = ri1[i1] - ri1[j1] - rj1[i1] + rj1[j1]
-    bk = lay.b[k]
-    r0 = pl[i] - pl[j] + bk[0]
-    r1 = pl[i1] - pl[j1] + bk[1]
-    u, its = _secular2(a, b, c, r0, r1, lay.d[k], hints, k, 1e-3 * tol_m, max(4 * max_iter, 60))
-    if u is None:
-        return None
-    u0, u1 = u
-    M = u0 * u0 * a + 2.0 * u0 * u1 * b + u1 * u1 * c
-    if not M > 0.0:
-        return None
-    sgn = -1.0 if lay.code[k] == 1 else 1.0
-    lam = sgn * (u0 * r0 + u1 * r1 - lay.d[k]) / M  # eq. 58
-    f0, f1 = sgn * u0, sgn * u1
-    sgt = [(row[i] - row[j]) * f0 + (row[i1] - row[j1]) * f1 for row in sl]  # Σ Gᵀ
-    p = np.array([x - lam * y for x, y in zip(pl, sgt)])
-    G = [0.0] * len(pl)
-    G[i], G[i1] = f0, f1
-    G[j] -= f0
-    G[j1] -= f1
-    Ga = np.array(G)
-    mu = np.multiply.outer(np.array(sgt), Ga * (1.0 / M))
-    return p, lam, u, mu, Ga, its
+    i3, j3, D, code = idx[k, 0], idx[k, 1], idx[k, 2], idx[k, 3]
+    d = geo[k, 0]
+    rhat = np.empty(3)
+    n2 = 0.0
+    for a in range(D):
+        rhat[a] = p_hat[i3 + a] - p_hat[j3 + a] + geo[k, 1 + a]
+        n2 += rhat[a] * rhat[a]
+    rho = math.sqrt(n2)
+    g0 = d - rho if code == 1 else rho - d
+    if code != 2 and g0 <= 0.0:
+        return _INACTIVE, g0, g0, 0.0, 0, 0.0, 0.0, 0.0
+    S = np.empty((3, 3))
+    for a in range(D):
+        for b in range(a, D):
+            S[a, b] = sigma[i3 + a, i3 + b] - sigma[i3 + a, j3 + b] - sigma[j3 + a, i3 + b] + sigma[j3 + a, j3 + b]
+    u = np.zeros(3)
+    its = _secular(S, rhat, D, d, hints[k], tol, max_iter, u)
+    if its < 0:
+        return _FAILED, g0, g0, 0.0, its, 0.0, 0.0, 0.0
+    ok, lam = _eq58_pair(p_hat, sigma, idx, geo, k, u, False, p, gain, jac)
+    if not ok:
+        return _FAILED, g0, g0, 0.0, its, 0.0, 0.0, 0.0
+    n2 = 0.0
+    for a in range(D):
+        x = p[i3 + a] - p[j3 + a] + geo[k, 1 + a]
+        n2 += x * x
+    rho = math.sqrt(n2)
+    g1 = d - rho if code == 1 else rho - d
+    return _SOLVED, g0, g1, lam, its, u[0], u[1], u[2]
 
 
 # ---------------------------------------------------------------------------

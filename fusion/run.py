@@ -16,6 +16,7 @@ from fusion.heading import align_headings
 from fusion.metrics import PlanarTransform, SystemScore, score_systems
 from fusion.plugins import get_registry
 from fusion.readers import read_truth_csv, read_truth_long_csv
+from fusion.smoothing import smooth_systems
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import InputReport, Trajectory, TruthTrack
 
@@ -89,6 +90,11 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     rotations = align_headings(systems, loaded.layout.heading_alignment)
     report = Fuser(systems, loaded.layout.fuser, loaded.layout.constraints).run()
     timings["navigation_s"] = time.perf_counter() - t0
+
+    if loaded.layout.smoother.kind != "none":
+        t0 = time.perf_counter()
+        smooth_systems(systems, loaded.layout.smoother, loaded.layout.constraints, loaded.layout.fuser)
+        timings["smoothing_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     trajectories = {name: s.trajectory() for name, s in systems.items()}

@@ -130,6 +130,13 @@ class FootIns(SensorSystem):
         self.fix_counts = GateCounts()
         self._next_fix = 0
         self._i = 0  # index of the sample the state refers to
+        # for the smoother (fusion.smoothing): covariances left by corrections outside the
+        # compiled loop (fuser constraints, position fixes), and the smoothed result
+        self._override_idx: list[int] = []
+        self._override_P: list[np.ndarray] = []
+        self.smoothed_x: np.ndarray | None = None
+        self.smoothed_pos_var: np.ndarray | None = None
+        self.smoothing_diagnostics: dict | None = None
 
     # --- time ---------------------------------------------------------------------
     @property
@@ -153,6 +160,7 @@ class FootIns(SensorSystem):
                                 self._fix_gate, self.fix_counts, self.phi)
             self.hist_x[k] = self.x
             self.hist_pos_var[k] = np.diag(self.P)[:3]
+            self._record_override(k)
             self._next_fix += 1
         self._run_to(i1)
 
@@ -207,6 +215,7 @@ class FootIns(SensorSystem):
         self.P = 0.5 * (P + P.T)
         self.hist_x[self._i] = self.x
         self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+        self._record_override(self._i)
 
     def track_transition(self) -> None:
         self._tracking = True
@@ -224,9 +233,38 @@ class FootIns(SensorSystem):
     def sample_times(self) -> np.ndarray:
         return self.stream.t
 
+    # --- smoothing (fusion.smoothing) --------------------------------------------------
+    def _record_override(self, i: int) -> None:
+        self._override_idx.append(int(i))
+        self._override_P.append(self.P.copy())
+
+    def smoothing_record(self) -> dict:
+        """What the smoother needs to rebuild this filter's run (nothing is copied but the
+        few covariances set outside the compiled loop): IMU samples, stance flags, filter
+        parameters, the recorded nominal history, the initial covariance, and the sample
+        indices (sorted) with the covariance left there by a fuser correction or a fix."""
+        n = self._i + 1
+        idx = np.asarray(self._override_idx, dtype=np.int64)
+        Ps = np.asarray(self._override_P, dtype=np.float64).reshape(-1, 15, 15)
+        order = np.argsort(idx, kind="stable")
+        return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
+                "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
+                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[order]),
+                "override_P": np.ascontiguousarray(Ps[order]), "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
+
+    def set_smoothed(self, x: np.ndarray | None, pos_var: np.ndarray | None, diagnostics: dict) -> None:
+        """Store the smoother's result: (n, 16) nominal states and (n, 3) position
+        variances replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
+        self.smoothed_x = x
+        self.smoothed_pos_var = pos_var
+        self.smoothing_diagnostics = diagnostics
+
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         n = self._i + 1
+        if self.smoothed_x is not None and self.smoothed_pos_var is not None:
+            return Trajectory(self.stream.t[:n], self.smoothed_x[:n, 0:3],
+                              np.sqrt(np.maximum(self.smoothed_pos_var[:n], 0.0)))
         return Trajectory(self.stream.t[:n], self.hist_x[:n, 0:3], np.sqrt(np.maximum(self.hist_pos_var[:n], 0.0)))
 
     @property
@@ -246,4 +284,5 @@ class FootIns(SensorSystem):
             "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
             **({"position_fixes_accepted": self.fix_counts.accepted,
                 "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
+            **({"smoothing": self.smoothing_diagnostics} if self.smoothing_diagnostics is not None else {}),
         }
