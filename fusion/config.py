@@ -391,17 +391,29 @@ class ImuCsvConfig(StrictModel):
     """An IMU recorded as CSV: column names, units and time base (see :func:`fusion.readers.read_imu_csv`)."""
 
     path: DataPath
+    """CSV file; relative to the layout file."""
     acc_columns: tuple[str, str, str]
+    """Header names of the accelerometer x, y, z columns (body frame)."""
     gyro_columns: tuple[str, str, str]
+    """Header names of the gyroscope x, y, z columns (body frame)."""
     stance_column: str | None = None
+    """Optional 0/1 stance labels given with the data."""
     acc_unit: Literal["m/s^2", "g"] = "m/s^2"
+    """Unit of the accelerometer columns: m/s^2 or g (9.80665 m/s^2)."""
     gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    """Unit of the gyroscope columns: rad/s or deg/s."""
     time_column: str | None = None
+    """Column of sample times, multiplied by time_scale to give seconds."""
     time_scale: float = Field(default=1.0, gt=0)
+    """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
     rate_hz: float | None = Field(default=None, gt=0)
+    """Fixed sample rate (Hz) when the file has no time column."""
     skip_rows: int = Field(default=0, ge=0)
+    """Lines before the header line."""
     delimiter: str = ","
+    """Field separator."""
     timestamp_policy: Literal["drop", "sort", "error"] = "drop"
+    """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
 
     @model_validator(mode="after")
     def _time_source(self) -> "ImuCsvConfig":

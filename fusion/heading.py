@@ -27,11 +27,18 @@ def align_headings(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentCon
     auto = [name for name, s in systems.items() if s.heading_is_auto]
     if not auto:
         return {}
-    ref = cfg.reference
-    if ref is None:
-        fixed = [name for name, s in systems.items() if not s.heading_is_auto]
-        ref = fixed[0] if fixed else next(iter(systems))
-    ref_azimuth = systems[ref].initial_travel_azimuth(cfg.distance_m)
+    ref, ref_azimuth = cfg.reference, None
+    if ref is None:  # the first system with a fixed heading that travels far enough, else the first that does
+        candidates = [n for n, s in systems.items() if not s.heading_is_auto] or list(systems)
+        for name in candidates:
+            ref_azimuth = systems[name].initial_travel_azimuth(cfg.distance_m)
+            if ref_azimuth is not None:
+                ref = name
+                break
+        if ref is None:
+            raise FusionError(f"heading alignment: no system travels {cfg.distance_m} m to serve as reference")
+    else:
+        ref_azimuth = systems[ref].initial_travel_azimuth(cfg.distance_m)
     if ref_azimuth is None:
         raise FusionError(f"heading alignment: reference system {ref!r} never travels {cfg.distance_m} m")
     applied: dict[str, float] = {}

@@ -41,6 +41,9 @@ class SensorSystem(ABC):
     plugin_name: ClassVar[str]
     Config: ClassVar[type[BaseModel]]
     position_indices: ClassVar[slice] = slice(0, 3)
+    error_model: ClassVar[str | None] = None
+    """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
+    :func:`fusion.testing.check_system` can check its Jacobians."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         self.name = name

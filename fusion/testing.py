@@ -725,7 +725,7 @@ class _Checker:
         if diff:
             _fail("seed", f"two builds with seed {seed} differ: {diff}")
         if self.stochastic is None:
-            return f"same seed, same bits (other seeds not checked: pass stochastic=True/False)"
+            return "same seed, same bits (other seeds not checked: pass stochastic=True/False)"
         c = _Snapshot.of(self.run_to_end(self.build(seed + 1)))
         other = a.first_difference(c)
         if self.stochastic and other is None:

@@ -14,13 +14,21 @@ class FootFilterConfig(StrictModel):
     rad/s/√Hz; bias random walks m/s^3/√Hz and rad/s^2/√Hz; ZUPT σ in m/s, ZARU σ in rad/s."""
 
     kind: Literal["ekf"] = "ekf"
+    """Error-state filter: ekf (15-state extended Kalman filter)."""
     acc_noise_density: float = Field(default=0.02, gt=0)
+    """Accelerometer white noise, m/s^2/√Hz."""
     gyro_noise_density: float = Field(default=0.002, gt=0)
+    """Gyroscope white noise, rad/s/√Hz."""
     acc_bias_random_walk: float = Field(default=1e-4, ge=0)
+    """Accelerometer bias random walk, m/s^3/√Hz."""
     gyro_bias_random_walk: float = Field(default=1e-5, ge=0)
+    """Gyroscope bias random walk, rad/s^2/√Hz."""
     zupt_sigma_mps: float = Field(default=0.01, gt=0)
+    """Zero-velocity pseudo-measurement noise, m/s."""
     zaru_sigma_radps: float | None = Field(default=None, gt=0)
+    """Zero-angular-rate update noise, rad/s; unset: no ZARU."""
     earth_rate: bool = False
+    """Include the Earth rotation rate in the mechanisation."""
 
 
 class DetectorConfig(StrictModel):
@@ -33,10 +41,13 @@ class DetectorConfig(StrictModel):
     """
 
     kind: Literal["labels", "shoe", "magnitude", "axes_band"] = "shoe"
+    """labels, shoe, magnitude or axes_band."""
     window: int = Field(default=5, ge=1)
     threshold: float | None = Field(default=None, gt=0)
     sigma_acc: float = Field(default=0.01, gt=0)
+    """SHOE accelerometer noise σ_a, m/s^2."""
     sigma_gyro: float = Field(default=0.1 * 3.141592653589793 / 180, gt=0)
+    """SHOE gyroscope noise σ_ω, rad/s."""
     low: float | None = None
     high: float | None = None
     min_stance_s: float = Field(default=0.0, ge=0)
@@ -52,11 +63,17 @@ class InitialStateConfig(StrictModel):
     heading_deg: float | Literal["auto"] = 0.0
     stationary_s: float = Field(default=1.0, gt=0)
     position_sd_m: float = Field(default=1e-3, gt=0)
+    """Initial position one-sigma, m."""
     velocity_sd_mps: float = Field(default=1e-2, gt=0)
+    """Initial velocity one-sigma, m/s."""
     level_sd_deg: float = Field(default=1.0, gt=0)
+    """Initial roll and pitch one-sigma, degrees."""
     heading_sd_deg: float = Field(default=1.0, gt=0)
+    """Initial heading one-sigma, degrees."""
     acc_bias_sd_mps2: float = Field(default=0.05, gt=0)
+    """Initial accelerometer bias one-sigma, m/s^2."""
     gyro_bias_sd_radps: float = Field(default=1e-3, gt=0)
+    """Initial gyroscope bias one-sigma (after the stationary-window estimate), rad/s."""
 
 
 class PositionFixConfig(StrictModel):
@@ -66,13 +83,20 @@ class PositionFixConfig(StrictModel):
     ``axis_signs`` turn the file's axes into east, north, up."""
 
     path: DataPath
+    """CSV file of fixes; relative to the layout file."""
     columns: tuple[str, str, str]
+    """Header names of the three position columns."""
     axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
+    """Column of fix times, multiplied by time_scale to give seconds."""
     time_scale: float = Field(default=1.0, gt=0)
+    """Factor from the time column to seconds."""
     rate_hz: float | None = Field(default=None, gt=0)
+    """Fixed fix rate (Hz) when the file has no time column."""
     delimiter: str = ","
+    """Field separator."""
     sigma_m: float = Field(default=0.3, gt=0)
+    """Fix noise one-sigma per axis, m."""
     gate_probability: float = Field(default=0.99, gt=0, lt=1)
 
     @model_validator(mode="after")

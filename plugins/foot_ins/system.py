@@ -54,6 +54,7 @@ class FootIns(SensorSystem):
 
     plugin_name = "foot_ins"
     Config = FootInsConfig
+    error_model = "strapdown15"
 
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)

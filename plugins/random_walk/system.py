@@ -31,7 +31,9 @@ class RandomWalkConfig(StrictModel):
     rate_hz: float = Field(default=100.0, gt=0)
     duration_s: float = Field(default=60.0, gt=0)
     increment_variance_m2: float = Field(default=0.05, ge=0)
+    """Noise variance of each step's position increment, m² per axis."""
     initial_variance_m2: float = Field(default=0.0, ge=0)
+    """Initial position variance, m² per axis."""
 
 
 class RandomWalk(SensorSystem):
@@ -86,10 +88,12 @@ class RandomWalk(SensorSystem):
             self.hist_cov[self._i] = self.P
             return
         steps = np.arange(self._i + 1, i1)
-        self.hist_pos[steps] = self.x + np.cumsum(self.increments[steps - 1], axis=0)
-        self.hist_cov[steps] = self.P + q * (steps - self._i)[:, None, None] * np.eye(3)
-        self.P = self.P + q * len(steps) * np.eye(3)
+        # accumulate in sample order from the current state, as the one-step path does
+        self.hist_pos[steps] = np.cumsum(np.concatenate([self.x[None], self.increments[steps - 1]]), axis=0)[1:]
+        self.hist_cov[steps] = np.cumsum(np.concatenate([self.P[None], np.broadcast_to(q * np.eye(3), (len(steps), 3, 3))]),
+                                         axis=0)[1:]
         self.x = self.hist_pos[i1 - 1].copy()
+        self.P = self.hist_cov[i1 - 1].copy()
         self._i = i1 - 1
 
     @property
