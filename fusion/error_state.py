@@ -20,11 +20,29 @@ import numpy as np
 from fusion.quaternion import quat_from_rotvec, quat_multiply, quat_normalise
 
 ERROR_SIZE = 15
+
+# The filter parameter vector ``params`` of the compiled 15-state kernels (the foot INS
+# and its smoothers): noise densities, stance-update σs, gravity (m/s^2), Earth rate (ENU).
+P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY = range(7)
+P_EARTH_RATE = slice(7, 10)
+PARAMS_SIZE = 10
 DPOS = slice(0, 3)
 DVEL = slice(3, 6)
 DATT = slice(6, 9)
 DACC_BIAS = slice(9, 12)
 DGYRO_BIAS = slice(12, 15)
+
+
+@numba.njit(cache=True)
+def process_noise_diag(params: np.ndarray) -> np.ndarray:
+    """Diagonal (15,) of the continuous process noise (densities², per Hz) from ``params``."""
+    q = np.zeros(15)
+    for k in range(3):
+        q[3 + k] = params[P_ACC_ND] ** 2
+        q[6 + k] = params[P_GYRO_ND] ** 2
+        q[9 + k] = params[P_ACC_RW] ** 2
+        q[12 + k] = params[P_GYRO_RW] ** 2
+    return q
 
 
 @numba.njit(cache=True)

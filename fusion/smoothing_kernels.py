@@ -22,25 +22,11 @@ import math
 import numba
 import numpy as np
 
-from fusion.error_state import _apply_A_left, inject, propagate_covariance, update_selected
+from fusion.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_SIGMA, _apply_A_left, inject, process_noise_diag,
+                                propagate_covariance, update_selected)
 from fusion.quaternion import quat_multiply
 from fusion.strapdown import mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
-
-# params layout is that of fusion_plugins.foot_ins.kernels (duplicated to keep fusion/ plugin-free)
-_P_ACC_ND, _P_GYRO_ND, _P_ACC_RW, _P_GYRO_RW, _P_ZUPT_SIGMA, _P_ZARU_SIGMA, _P_GRAVITY = range(7)
-
-
-@numba.njit(cache=True)
-def _q_diag(params: np.ndarray) -> np.ndarray:
-    q = np.zeros(15)
-    for k in range(3):
-        q[3 + k] = params[_P_ACC_ND] ** 2
-        q[6 + k] = params[_P_GYRO_ND] ** 2
-        q[9 + k] = params[_P_ACC_RW] ** 2
-        q[12 + k] = params[_P_GYRO_RW] ** 2
-    return q
-
 
 @numba.njit(cache=True)
 def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
@@ -142,11 +128,11 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
     stance samples, and at sample indices in ``ov_idx`` (sorted) the covariance the fuser
     or a position fix left (``ov_P``). With ``store`` the block buffers are filled
     (j = i − a). Returns the posterior covariance at b."""
-    q_diag = _q_diag(params)
-    g = params[_P_GRAVITY]
+    q_diag = process_noise_diag(params)
+    g = params[P_GRAVITY]
     w_ie = params[7:10].copy()
-    zs = params[_P_ZUPT_SIGMA]
-    zr = params[_P_ZARU_SIGMA]
+    zs = params[P_ZUPT_SIGMA]
+    zr = params[P_ZARU_SIGMA]
     P = P_a.copy()
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
@@ -199,13 +185,13 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
     same form (paper §3.1). ZUPT (and ZARU on the negated rate) at stance samples.
     ``xb`` (L+1, 16) receives the backward nominal states (backward form).
     counters[0] += ZUPTs applied."""
-    q_diag = _q_diag(params)
-    g = params[_P_GRAVITY]
+    q_diag = process_noise_diag(params)
+    g = params[P_GRAVITY]
     w_neg = np.empty(3)
     for k in range(3):
         w_neg[k] = -params[7 + k]
-    zs = params[_P_ZUPT_SIGMA]
-    zr = params[_P_ZARU_SIGMA]
+    zs = params[P_ZUPT_SIGMA]
+    zr = params[P_ZARU_SIGMA]
     x = x_end.copy()
     for k in range(3):
         x[3 + k] = -x[3 + k]

@@ -5,14 +5,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fusion.error_state import accumulate_propagation, propagate_covariance
+from fusion.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_SIGMA, accumulate_propagation,
+                                process_noise_diag, propagate_covariance)
 from fusion.strapdown import mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
 
-# Layout of the ``params`` vector passed to :func:`run_foot_ins`.
-P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY = range(7)
-P_EARTH_RATE = slice(7, 10)
-PARAMS_SIZE = 10
 # Layout of the ``counters`` vector.
 C_ZUPTS, C_ZARUS, C_NIS_SUM = range(3)
 
@@ -30,12 +27,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS]. ``phi`` (15, 15) accumulates
     the error-state transition for the fuser's cross-covariances (empty (0, 0): off).
     """
-    q_diag = np.zeros(15)
-    for k in range(3):
-        q_diag[3 + k] = params[P_ACC_ND] ** 2
-        q_diag[6 + k] = params[P_GYRO_ND] ** 2
-        q_diag[9 + k] = params[P_ACC_RW] ** 2
-        q_diag[12 + k] = params[P_GYRO_RW] ** 2
+    q_diag = process_noise_diag(params)
     g = params[P_GRAVITY]
     w_ie = params[7:10].copy()
     zupt_sigma = params[P_ZUPT_SIGMA]

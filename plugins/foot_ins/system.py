@@ -13,7 +13,8 @@ from fusion.strapdown import NOMINAL_SIZE
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import ImuStream, InputReport, Trajectory
 from fusion_plugins.foot_ins.config import DetectorConfig, FootInsConfig
-from fusion_plugins.foot_ins.kernels import C_NIS_SUM, C_ZARUS, C_ZUPTS, PARAMS_SIZE, run_foot_ins
+from fusion.error_state import PARAMS_SIZE
+from fusion_plugins.foot_ins.kernels import C_NIS_SUM, C_ZARUS, C_ZUPTS, run_foot_ins
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
 
