@@ -67,6 +67,14 @@ class ConstraintConfig(StrictModel):
     """Per system, the offset (ENU, m) from its navigated point to the constrained point."""
 
 
+class OutageConfig(StrictModel):
+    """A window (s, on the system's clock) in which a system's GNSS is masked."""
+
+    system: str
+    start_s: float
+    duration_s: float = Field(gt=0)
+
+
 class FuserConfig(StrictModel):
     """How constraints are enforced.
 
@@ -128,12 +136,16 @@ class TruthConfig(StrictModel):
 
     ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
     ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
+    ``phone_log``: the surveyed points (POSI lines) of a GetSensorData log, sparse truth
+    for ``score_systems``, converted to ENU about the layout's geodetic origin.
     ``axis_signs`` turn the file's three position axes into east, north, up.
     """
 
     path: DataPath | None = None
-    format: Literal["wide", "long"] = "wide"
+    format: Literal["wide", "long", "phone_log"] = "wide"
     systems: dict[str, tuple[str, str, str]] = Field(default_factory=dict)
+    score_systems: list[str] = Field(default_factory=list)
+    """phone_log format: the systems scored at the log's surveyed points (POSI lines)."""
     axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
     time_scale: float = Field(default=1.0, gt=0)
@@ -148,6 +160,10 @@ class TruthConfig(StrictModel):
     @model_validator(mode="after")
     def _time_source(self) -> "TruthConfig":
         if self.path is None or self.format == "long":
+            return self
+        if self.format == "phone_log":
+            if not self.score_systems:
+                raise ValueError("score_systems: name the systems to score at the surveyed points")
             return self
         if (self.time_column is None) == (self.rate_hz is None):
             raise ValueError("give exactly one of time_column or rate_hz")
@@ -169,7 +185,11 @@ class Layout(StrictModel):
     gravity_mps2: float | None = Field(default=None, gt=9.7, lt=9.9)
     latitude_deg: float = Field(default=45.0, ge=-90, le=90)
     height_m: float = 0.0
+    geodetic_origin: tuple[float, float, float] | None = None
+    """Latitude (deg), longitude (deg), height (m) of the ENU frame's origin, for GNSS,
+    surveyed points and geo-referenced output; unset: the first GNSS fix."""
     systems: dict[str, SystemSection]
+    outages: list[OutageConfig] = Field(default_factory=list)
     heading_alignment: HeadingAlignmentConfig = Field(default_factory=HeadingAlignmentConfig)
     constraints: list[ConstraintConfig] = Field(default_factory=list)
     fuser: FuserConfig = Field(default_factory=FuserConfig)
@@ -200,7 +220,13 @@ class Layout(StrictModel):
             pair[c.kind] = c.distance_m
             if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
                 raise KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
+        for k, outage in enumerate(self.outages):
+            if outage.system not in names:
+                raise KeyedError(f"outages.{k}.system", f"unknown system {outage.system!r} (have {sorted(names)})")
         if self.truth is not None:
+            for k, sys_name in enumerate(self.truth.score_systems):
+                if sys_name not in names:
+                    raise KeyedError(f"truth.score_systems.{k}", f"unknown system (have {sorted(names)})")
             for sys_name in self.truth.systems:
                 if sys_name not in names:
                     raise KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")

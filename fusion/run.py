@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pymap3d
 
 from fusion.config import LoadedLayout, load_layout
 from fusion.earth import normal_gravity
@@ -14,6 +15,7 @@ from fusion.errors import ConfigError
 from fusion.fuser import Fuser, FuserReport
 from fusion.heading import align_headings
 from fusion.metrics import PlanarTransform, SystemScore, score_systems
+from fusion.phone_log import read_getsensordata
 from fusion.plugins import get_registry
 from fusion.readers import read_truth_csv, read_truth_long_csv
 from fusion.smoothing import smooth_systems
@@ -33,6 +35,7 @@ class RunResult:
     scores: dict[str, SystemScore]
     fuser: FuserReport
     heading_rotations_rad: dict[str, float]
+    geodetic_origin: tuple[float, float, float] | None
     timings_s: dict[str, float]
 
     @property
@@ -46,7 +49,11 @@ class RunResult:
 def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
     lay = loaded.layout
     g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
-    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.path.resolve().parent, seed=seed)
+    outages: dict[str, tuple[tuple[float, float], ...]] = {}
+    for o in lay.outages:
+        outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
+    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.path.resolve().parent,
+                         seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages)
 
 
 def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem]:
@@ -63,10 +70,26 @@ def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, Sen
     return systems
 
 
-def load_truth(loaded: LoadedLayout) -> dict[str, TruthTrack]:
+def geodetic_origin(loaded: LoadedLayout, systems: dict[str, SensorSystem]) -> tuple[float, float, float] | None:
+    """The ENU frame's origin: the layout's, else the first system's that has one (its first fix)."""
+    if loaded.layout.geodetic_origin is not None:
+        return loaded.layout.geodetic_origin
+    return next((s.geodetic_origin for s in systems.values() if getattr(s, "geodetic_origin", None)), None)
+
+
+def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None = None) -> dict[str, TruthTrack]:
     truth = loaded.layout.truth
     if truth is None or truth.path is None:
         return {}
+    if truth.format == "phone_log":
+        ref = read_getsensordata(truth.path).reference
+        if ref is None:
+            raise ConfigError("truth.path", "the log has no POSI lines", loaded.path)
+        if origin is None:
+            raise ConfigError("geodetic_origin", "surveyed truth needs a geodetic origin", loaded.path)
+        e, n, _ = pymap3d.geodetic2enu(ref.lat_deg, ref.lon_deg, np.full(len(ref.t), origin[2]), *origin)
+        pos = np.column_stack([e, n, np.zeros(len(ref.t))])
+        return {name: TruthTrack(ref.t, pos, sparse=True) for name in truth.score_systems}
     if truth.format == "long":
         tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
         return {name: tr for name, tr in tracks.items() if name in loaded.layout.systems}
@@ -83,7 +106,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     t0 = time.perf_counter()
     context = layout_context(loaded, seed)
     systems = build_systems(loaded, context)
-    truths = load_truth(loaded)
+    origin = geodetic_origin(loaded, systems)
+    truths = load_truth(loaded, origin)
     timings["load_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -105,7 +129,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     else:
         transform, scores = PlanarTransform.identity(), {}
     timings["scoring_s"] = time.perf_counter() - t0
-    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, timings)
+    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings)
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,

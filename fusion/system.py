@@ -9,7 +9,7 @@ and hands back a correction with :meth:`SensorSystem.apply_correction`.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
@@ -22,12 +22,16 @@ from fusion.types import InputReport, Trajectory
 
 @dataclass(frozen=True)
 class LayoutContext:
-    """Layout-wide facts a system needs: gravity (m/s^2), latitude (deg), config folder."""
+    """Layout-wide facts a system needs: gravity (m/s^2), latitude (deg), config folder,
+    run seed, the geodetic origin of the ENU frame (lat deg, lon deg, height m; None:
+    not set) and the GNSS outage windows per system ((start s, duration s), ...)."""
 
     gravity_mps2: float
     latitude_deg: float
     base_dir: Path
     seed: int = 0
+    geodetic_origin: tuple[float, float, float] | None = None
+    outages: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
 
 
 class SensorSystem(ABC):

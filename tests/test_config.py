@@ -165,9 +165,9 @@ def test_same_system_name_twice_in_systems_is_refused(tmp_path):
 
 
 def test_unknown_plugin_is_refused_with_installed_names():
-    err = refused(VICON_CFG, ["systems.left_foot.plugin=hand_pdr"])
+    err = refused(VICON_CFG, ["systems.left_foot.plugin=sonar_insole"])
     assert err.key == "systems.left_foot.plugin"
-    assert "hand_pdr" in str(err) and "foot_ins" in str(err)
+    assert "sonar_insole" in str(err) and "foot_ins" in str(err) and "hand_pdr" in str(err)
     assert "dual_foot_vicon.yaml" in str(err)
 
 

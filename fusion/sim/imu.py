@@ -199,6 +199,20 @@ PRESETS: dict[str, dict[str, float]] = {
         "acc_bias_instability_mps2": 162.0 * _UG,          # µg → m/s^2
         "acc_bias_tau_s": 100.0,
     },
+    # A smartphone-grade MEMS IMU (BMI160 / LSM6DS-class datasheet values, after the OS's
+    # own gyro calibration): gyroscope white noise 0.007 °/s/√Hz, bias instability 10 °/h
+    # (Gauss–Markov, τ = 100 s) and a turn-on bias of σ 0.05 °/s; accelerometer
+    # 180 µg/√Hz, bias instability 100 µg (τ = 100 s) and a turn-on bias of σ 5 mg.
+    "phone": {
+        "gyro_noise_density": 0.007 * _DEG,               # °/s/√Hz → rad/s/√Hz
+        "gyro_bias_instability_radps": 10.0 * _DEG / 3600.0,
+        "gyro_bias_tau_s": 100.0,
+        "gyro_bias_sd_radps": 0.05 * _DEG,
+        "acc_noise_density": 180.0 * _UG,
+        "acc_bias_instability_mps2": 100.0 * _UG,
+        "acc_bias_tau_s": 100.0,
+        "acc_bias_sd_mps2": 5000.0 * _UG,
+    },
 }
 """Named error sets; any field of :class:`ImuErrorConfig` given beside ``preset`` overrides it."""
 
@@ -210,7 +224,7 @@ class ImuErrorConfig(StrictModel):
     Misalignment: six small angles (mrad) for the off-diagonal entries xy, xz, yx, yz, zx, zy.
     """
 
-    preset: Literal["perfect", "icm20948"] = "perfect"
+    preset: Literal["perfect", "icm20948", "phone"] = "perfect"
     acc_noise_density: float | None = Field(default=None, ge=0)
     gyro_noise_density: float | None = Field(default=None, ge=0)
     acc_bias_instability_mps2: float | None = Field(default=None, ge=0)

@@ -10,6 +10,8 @@ A scenario (YAML, validated strictly: unknown keys are errors)::
     systems:
       left_foot:  {kind: foot_imu, foot: left,  imu: {preset: icm20948}}
       right_foot: {kind: foot_imu, foot: right, imu: {preset: icm20948}, mount_yaw_deg: 7}
+      hand_phone: {kind: hand_phone, imu: {preset: phone}, gnss: {outages: [{start_s: 120, duration_s: 60}]}}
+    geodetic_origin: [49.4613, 11.1109, 390.0]   # lat, lon, h of the ENU frame (for GNSS)
     layout: {}                        # merged over the generated config.yaml
 
 ``path``: see :mod:`fusion.sim.paths`; ``gait``: :class:`fusion.sim.gait.GaitConfig`;
@@ -17,7 +19,16 @@ A scenario (YAML, validated strictly: unknown keys are errors)::
 its own strict model and simulation function, so later kinds — a hand-held phone, a
 GNSS receiver, a UWB tag — plug in by adding one entry); ``layout``: any part of the
 layout (constraints, fuser, a system's detector or filter ...), deep-merged over what
-the simulator generates.
+the simulator generates (except ``layout.outages``, which is appended to the outages the
+systems generate).
+
+``kind: hand_phone`` (:class:`HandPhoneSystem`, motion in :mod:`fusion.sim.hand`, receiver
+in :mod:`fusion.sim.gnss`): a phone held in front of the body with a GNSS receiver; it
+writes ``<system>_imu.csv`` (with a ``step`` column: 1 at each true heel strike) and
+``<system>_gnss.csv``, a ``plugin: hand_pdr`` section, and its GNSS ``outages`` into the
+layout's ``outages`` list (fixes are not removed from the file). ``geodetic_origin``
+(default :data:`DEFAULT_GEODETIC_ORIGIN`) goes into the layout when a system uses GNSS
+or the scenario sets it.
 
 :func:`simulate` writes into ``out_dir``: ``<system>_imu.csv`` per IMU, ``truth.csv``
 (``system,t,east_m,north_m,up_m``, one row per system per sample) and ``config.yaml``,
@@ -35,16 +46,21 @@ from typing import Any, Literal
 
 import numpy as np
 import yaml
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from fusion.config import Layout, StrictModel, apply_overrides, read_yaml, validate_section
 from fusion.errors import ConfigError
 from fusion.sim.gait import GaitConfig, GaitPlan, plan_gait
+from fusion.sim.gnss import GnssReceiverConfig, simulate_fixes, write_gnss_csv
+from fusion.sim.hand import HandSwayConfig, hand_motion, heel_strikes
 from fusion.sim.imu import ImuErrorConfig, corrupt, error_generators, ideal_imu
 from fusion.sim.paths import PATH_KINDS, PathConfig
 
 __all__ = [
+    "DEFAULT_GEODETIC_ORIGIN",
     "FootImuSystem",
+    "HAND_IMU_COLUMNS",
+    "HandPhoneSystem",
     "IMU_COLUMNS",
     "LoadedScenario",
     "Scenario",
@@ -59,7 +75,10 @@ __all__ = [
 ]
 
 IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "stance")
+HAND_IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "step")
 TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
+DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
+"""Latitude (deg), longitude (deg), ellipsoidal height (m) of the ENU frame when a scenario gives none."""
 TRUTH_FILE = "truth.csv"
 CONFIG_FILE = "config.yaml"
 _FLOAT = "%.10g"
@@ -75,7 +94,16 @@ class Scenario(StrictModel):
     path: dict[str, Any]
     gait: GaitConfig = Field(default_factory=GaitConfig)
     systems: dict[str, dict[str, Any]] = Field(min_length=1)
+    geodetic_origin: tuple[float, float, float] | None = None
+    """(lat deg, lon deg, h m) of the ENU frame; unset: :data:`DEFAULT_GEODETIC_ORIGIN`."""
     layout: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("geodetic_origin")
+    @classmethod
+    def _origin_range(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if v is not None and (abs(v[0]) > 90 or abs(v[1]) > 180):
+            raise ValueError("latitude must be within ±90 deg and longitude within ±180 deg")
+        return v
 
 
 class FootImuSystem(StrictModel):
@@ -98,6 +126,12 @@ class SimContext:
     seed: int
     out_dir: Path
 
+    @property
+    def geodetic_origin(self) -> tuple[float, float, float]:
+        """The scenario's geodetic origin, or :data:`DEFAULT_GEODETIC_ORIGIN`."""
+        origin = self.scenario.geodetic_origin
+        return tuple(float(v) for v in (origin if origin is not None else DEFAULT_GEODETIC_ORIGIN))  # type: ignore[return-value]
+
 
 @dataclass
 class SystemOutput:
@@ -108,6 +142,10 @@ class SystemOutput:
     layout: dict[str, Any]
     samples: int
     files: list[Path] = field(default_factory=list)
+    outages: list[dict[str, Any]] = field(default_factory=list)
+    """Entries for the layout's ``outages`` list (system, start_s, duration_s)."""
+    uses_geodetic_origin: bool = False
+    """The system's data is geodetic (GNSS): the layout needs the scenario's origin."""
 
 
 @dataclass(frozen=True)
@@ -182,8 +220,81 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
     return SystemOutput(t, pos, section, int(t.size), [csv_path])
 
 
+# --------------------------------------------------------------------------- hand-held phone
+
+
+class HandPhoneSystem(StrictModel):
+    """A phone held in front of the body with a GNSS receiver (``kind: hand_phone``).
+
+    ``offset_m``: (forward, left, up) from the body path point, in the walking frame;
+    ``bounce_m``: vertical body bounce amplitude (one period per step);
+    ``lateral_sway_m``: body sway towards the stance foot (one period per stride);
+    ``sway``: the hand's own smooth random wobble; ``mount_yaw_deg``: the phone's x axis
+    turned clockwise (from above) from the walking direction; ``gnss``: the receiver
+    (``null`` for none). Motion in :mod:`fusion.sim.hand`, receiver in :mod:`fusion.sim.gnss`.
+    """
+
+    kind: Literal["hand_phone"]
+    imu: ImuErrorConfig = Field(default_factory=lambda: ImuErrorConfig(preset="phone"))
+    offset_m: tuple[float, float, float] = (0.3, -0.2, 1.1)
+    bounce_m: float = Field(default=0.03, ge=0, le=0.2)
+    lateral_sway_m: float = Field(default=0.02, ge=0, le=0.2)
+    mount_yaw_deg: float = Field(default=0.0, ge=-180, le=180)
+    sway: HandSwayConfig = Field(default_factory=HandSwayConfig)
+    gnss: GnssReceiverConfig | None = Field(default_factory=GnssReceiverConfig)
+
+
+def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> SystemOutput:
+    sc = ctx.scenario
+    cycle_s, _ = sc.gait.cycle_s()
+    motion = hand_motion(ctx.plan, int(round(cycle_s * sc.rate_hz)), seed=ctx.seed, name=name,
+                         offset_m=cfg.offset_m, bounce_m=cfg.bounce_m, lateral_sway_m=cfg.lateral_sway_m,
+                         mount_yaw_deg=cfg.mount_yaw_deg, sway=cfg.sway)
+    t = ctx.t
+    acc, gyro = ideal_imu(motion, t, sc.gravity_mps2)
+    errors = cfg.imu.resolve()
+    rngs = error_generators(ctx.seed, name)
+    acc = corrupt(acc, sc.rate_hz, errors.acc, rngs, "acc")
+    gyro = corrupt(gyro, sc.rate_hz, errors.gyro, rngs, "gyro")
+    steps = np.zeros(t.size, dtype=bool)
+    steps[heel_strikes(ctx.plan)] = True
+    imu_path = ctx.out_dir / f"{name}_imu.csv"
+    table = np.column_stack([t, acc, gyro, steps.astype(float)])
+    np.savetxt(imu_path, table, fmt=[_FLOAT] * 7 + ["%d"], delimiter=",", header=",".join(HAND_IMU_COLUMNS),
+               comments="")
+    files = [imu_path]
+
+    pos = motion.evaluate(t).pos
+    _, az0 = ctx.plan.path.start
+    section: dict[str, Any] = {
+        "plugin": "hand_pdr",
+        "imu": {
+            "path": imu_path.name,
+            "time_column": "t",
+            "acc_columns": list(HAND_IMU_COLUMNS[1:4]),
+            "gyro_columns": list(HAND_IMU_COLUMNS[4:7]),
+        },
+    }
+    outages: list[dict[str, Any]] = []
+    if cfg.gnss is not None:
+        fixes, _ = simulate_fixes(motion, float(t[-1]), ctx.geodetic_origin, cfg.gnss, seed=ctx.seed, name=name)
+        gnss_path = ctx.out_dir / f"{name}_gnss.csv"
+        write_gnss_csv(gnss_path, fixes)
+        files.append(gnss_path)
+        section["gnss"] = {"format": "csv", "path": gnss_path.name}
+        outages = [{"system": name, "start_s": float(o.start_s), "duration_s": float(o.duration_s)}
+                   for o in cfg.gnss.outages]
+    section["initial"] = {
+        "position_m": [float(v) for v in pos[0]],
+        "heading_deg": float(math.degrees(az0) % 360.0),
+    }
+    return SystemOutput(t, pos, section, int(t.size), files, outages=outages,
+                        uses_geodetic_origin=cfg.gnss is not None)
+
+
 SYSTEM_KINDS: dict[str, SystemKind] = {
     "foot_imu": SystemKind(FootImuSystem, _simulate_foot_imu),
+    "hand_phone": SystemKind(HandPhoneSystem, _simulate_hand_phone),
 }
 """``systems.<name>.kind`` → how to validate and simulate it."""
 
@@ -271,10 +382,18 @@ def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
     layout: dict[str, Any] = {
         "name": name,
         "gravity_mps2": scenario.gravity_mps2,
-        "systems": {n: out.layout for n, out in outputs.items()},
-        "truth": {"path": TRUTH_FILE, "format": "long", "alignment": "none", "loop": plan.path.closed},
     }
-    layout = _deep_merge(layout, scenario.layout)
+    if scenario.geodetic_origin is not None or any(out.uses_geodetic_origin for out in outputs.values()):
+        layout["geodetic_origin"] = list(ctx.geodetic_origin)
+    layout["systems"] = {n: out.layout for n, out in outputs.items()}
+    outages = [o for out in outputs.values() for o in out.outages]
+    if outages:
+        layout["outages"] = outages
+    layout["truth"] = {"path": TRUTH_FILE, "format": "long", "alignment": "none", "loop": plan.path.closed}
+    over = dict(scenario.layout)
+    if outages and isinstance(over.get("outages"), list):
+        over["outages"] = outages + list(over["outages"])
+    layout = _deep_merge(layout, over)
     validate_section(Layout, layout, key="layout", path=scenario_path, base_dir=out_dir)
     config_path = out_dir / CONFIG_FILE
     header = (f"# Simulated by `fusion simulate` from {scenario_path.name} (seed {int(seed)}"

@@ -1,0 +1,320 @@
+"""Hand-held phone: pedestrian dead reckoning corrected by GNSS (PDR/GNSS paper §5).
+
+Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
+clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s). Error state (6):
+[δE, δN, δU, δψ, δS, δb], δS the current step's length error (white, σ_S).
+
+At each step k (eq. 37):  E += S_k sin ψ_k,  N += S_k cos ψ_k, and (eqs. 38–40)
+    δE' = δE + S cos ψ δψ + sin ψ δS,   δN' = δN − S sin ψ δψ + cos ψ δS.
+Between events, over Δt:  ψ += Δψ_gyro − b Δt;  δψ' = δψ − Δt δb + w_ψ;
+δb' = e^{−Δt/τ} δb + w_b (first-order Gauss–Markov, τ = 1/α);  δU' = δU + w_U.
+(The paper writes δψ' = δψ + Δt δb for a bias error of the opposite sign; here b is
+subtracted from the azimuth rate, so its error enters with a minus.)
+GNSS (eqs. 41–44): position z = p_gnss − p̂, H = [I3 0 0 0]; heading from the GNSS
+course when the speed is above a threshold, z = wrap(ψ_gnss − ψ̂). Each update is gated
+by the chi-square test on its innovation; fixes inside a layout outage are skipped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.errors import ConfigError
+from fusion.gnss import GnssFixes, read_gnss_csv, read_nmea
+from fusion.heading import wrap_angle
+from fusion.measurements import chi2_gate
+from fusion.phone_log import read_getsensordata
+from fusion.readers import read_imu_csv
+from fusion.system import LayoutContext, SensorSystem
+from fusion.types import InputReport, Trajectory
+from fusion_plugins.hand_pdr.config import HandPdrConfig
+from fusion_plugins.hand_pdr.pdr import azimuth_increments, detect_steps, step_lengths, up_in_body
+
+E, N, U, PSI, S, B = range(6)
+
+
+class HandPdr(SensorSystem):
+    """PDR from a phone's IMU with a 6-state error Kalman filter corrected by GNSS.
+
+    Results: :meth:`trajectory` (one epoch per step and per GNSS update), ``step_index``
+    (IMU sample of each detected step), ``step_length_m``, ``gnss_counts`` (accepted,
+    rejected, masked), ``geodetic_origin`` (lat, lon, h of the ENU frame).
+    """
+
+    plugin_name = "hand_pdr"
+    Config = HandPdrConfig
+
+    def __init__(self, name: str, config: HandPdrConfig, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        key = f"systems.{name}"
+        report = InputReport()
+        fixes: GnssFixes | None = None
+        if config.phone_log is not None:
+            log = read_getsensordata(config.phone_log)
+            report = log.report
+            self.t = log.acc.t
+            acc = log.acc.xyz
+            gyro = np.column_stack([np.interp(self.t, log.gyro.t, log.gyro.xyz[:, k]) for k in range(3)])
+            if config.gnss is not None and config.gnss.format == "phone_log":
+                fixes = log.gnss
+        else:
+            d = config.imu
+            stream = read_imu_csv(d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns,
+                                  acc_unit=d.acc_unit, gyro_unit=d.gyro_unit, time_column=d.time_column,
+                                  time_scale=d.time_scale, rate_hz=d.rate_hz, skip_rows=d.skip_rows,
+                                  delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
+            report = stream.report
+            self.t, acc, gyro = stream.t, stream.acc_b, stream.gyro_b
+        g = config.gnss
+        if g is not None and g.format == "csv":
+            fixes = read_gnss_csv(g.path, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
+                                  height_column=g.height_column, accuracy_column=g.accuracy_column,
+                                  speed_column=g.speed_column, course_column=g.course_column)
+        elif g is not None and g.format == "nmea":
+            fixes = read_nmea(g.path)
+        if fixes is not None:
+            report = report.merge(fixes.report)
+        self._report = report
+        self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
+        self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
+        self._azimuth = azimuth_increments(self.t, gyro, up_in_body(self.t, acc))
+        self.geodetic_origin = context.geodetic_origin
+        if fixes is not None and len(fixes):
+            if self.geodetic_origin is None:
+                self.geodetic_origin = (float(fixes.lat_deg[0]), float(fixes.lon_deg[0]), float(fixes.height_m[0]))
+            self._fix_t = fixes.t
+            self._fix_pos = fixes.enu(self.geodetic_origin)
+            sd = config.filter.accuracy_to_sigma * fixes.accuracy_m
+            self._fix_sd = np.where(np.isfinite(sd) & (sd > 0), sd, config.filter.default_sigma_m)
+            self._fix_speed = fixes.speed_mps
+            self._fix_course = np.deg2rad(fixes.course_deg)
+            masked = np.zeros(len(fixes), dtype=bool)
+            for start, duration in context.outages.get(name, ()):
+                masked |= (fixes.t >= start) & (fixes.t < start + duration)
+            self._fix_masked = masked
+        else:
+            self._fix_t = np.empty(0)
+            self._fix_masked = np.empty(0, dtype=bool)
+        self._events = self._event_list()
+        ini = config.initial
+        if ini.position_m == "gnss":
+            usable = np.flatnonzero(~self._fix_masked)
+            if usable.size == 0:
+                raise ConfigError(f"{key}.initial.position_m", "no GNSS fix to start from")
+            self._p0 = self._fix_pos[usable[0]].copy()
+        else:
+            self._p0 = np.asarray(ini.position_m, dtype=float)
+        if ini.heading_deg == "gnss_track":
+            self._psi0 = self._heading_from_gnss_track(key)
+        elif ini.heading_deg == "auto":
+            self._psi0 = 0.0
+        else:
+            self._psi0 = float(np.deg2rad(ini.heading_deg))
+        self._gate_pos = chi2_gate(config.filter.gate_probability, 3)
+        self._gate_psi = chi2_gate(config.filter.gate_probability, 1)
+        self.restart()
+
+    # --- set-up -----------------------------------------------------------------
+    def _event_list(self) -> list[tuple[float, int, int]]:
+        """(time, kind, index) of steps (kind 0) and GNSS fixes (kind 1), in time order."""
+        ev = [(float(self.t[i]), 0, k) for k, i in enumerate(self.step_index)]
+        ev += [(float(tf), 1, j) for j, tf in enumerate(self._fix_t) if self.t[0] < tf <= self.t[-1]]
+        return sorted(ev)
+
+    def _pdr_track(self, psi0: float) -> tuple[np.ndarray, np.ndarray]:
+        """Step times and horizontal PDR positions (from the start, no filter) for heading psi0."""
+        psi = psi0 + self._azimuth[self.step_index]
+        d = np.column_stack([self.step_length_m * np.sin(psi), self.step_length_m * np.cos(psi)])
+        return self.t[self.step_index], np.cumsum(d, axis=0)
+
+    def _heading_from_gnss_track(self, key: str) -> float:
+        """Initial heading rotating the PDR track's first ``align_distance_m`` onto the GNSS
+        track's (the angle between the two displacement vectors over the same interval)."""
+        usable = np.flatnonzero(~self._fix_masked)
+        if usable.size < 2:
+            raise ConfigError(f"{key}.initial.heading_deg", "gnss_track needs GNSS fixes")
+        pos = self._fix_pos[usable, :2]
+        far = np.flatnonzero(np.hypot(*(pos - pos[0]).T) >= self.config.initial.align_distance_m)
+        if far.size == 0:
+            raise ConfigError(f"{key}.initial.heading_deg",
+                              f"GNSS never moves {self.config.initial.align_distance_m} m from its first fix")
+        t0, t1 = self._fix_t[usable[0]], self._fix_t[usable[far[0]]]
+        ts, track = self._pdr_track(0.0)
+        if len(ts) < 2:
+            raise ConfigError(f"{key}.initial.heading_deg", "no steps detected to align")
+        p0, p1 = (np.array([np.interp(t, ts, track[:, c]) for c in range(2)]) for t in (t0, t1))
+        d_pdr, d_gnss = p1 - p0, pos[far[0]] - pos[0]
+        return float(np.arctan2(d_gnss[0], d_gnss[1]) - np.arctan2(d_pdr[0], d_pdr[1]))
+
+    def restart(self) -> None:
+        ini, f = self.config.initial, self.config.filter
+        self.x = np.array([*self._p0, self._psi0, 0.0])  # E, N, U, ψ, b
+        self.P = np.diag([ini.position_sd_m**2, ini.position_sd_m**2, ini.height_sd_m**2,
+                          np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2])
+        self._tc = float(self.t[0])  # time the heading and covariance are propagated to
+        self._next = 0
+        self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "heading_accepted": 0, "heading_rejected": 0}
+        self._hist: list[tuple[float, float, float, float, float, float, float]] = []
+        self._record()
+        self.phi = None
+
+    # --- the filter -------------------------------------------------------------
+    def _propagate_to(self, t: float) -> None:
+        dt = t - self._tc
+        if dt <= 0:
+            return
+        f = self.config.filter
+        i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
+        self.x[3] += self._azimuth[i1] - self._azimuth[i0] - self.x[4] * dt
+        F = np.eye(6)
+        F[PSI, B] = -dt
+        decay = np.exp(-dt / f.correlation_time_s)
+        F[B, B] = decay
+        Q = np.zeros(6)
+        Q[PSI] = f.heading_noise_density**2 * dt
+        Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
+        Q[U] = f.height_noise_density**2 * dt
+        self._transition(F, Q)
+        self._tc = t
+
+    def _transition(self, F: np.ndarray, q_diag: np.ndarray) -> None:
+        self.P = F @ self.P @ F.T + np.diag(q_diag)
+        self.P = 0.5 * (self.P + self.P.T)
+        if self.phi is not None:
+            self.phi = F @ self.phi
+
+    def _step(self, k: int) -> None:
+        """Eq. 37 for step k, and the covariance by eqs. 38–40 (fresh white δS first)."""
+        s, psi = self.step_length_m[k], self.x[3]
+        self.P[S, :] = 0.0
+        self.P[:, S] = 0.0
+        self.P[S, S] = self.config.filter.step_length_sd_m**2
+        F = np.eye(6)
+        F[E, PSI], F[E, S] = s * np.cos(psi), np.sin(psi)
+        F[N, PSI], F[N, S] = -s * np.sin(psi), np.cos(psi)
+        self.x[0] += s * np.sin(psi)
+        self.x[1] += s * np.cos(psi)
+        self._transition(F, np.zeros(6))
+
+    def _update(self, H: np.ndarray, y: np.ndarray, R: np.ndarray, gate: float) -> bool:
+        """Gated Kalman update (Joseph form), closed-loop reset; False if rejected."""
+        S_ = H @ self.P @ H.T + R
+        if float(y @ np.linalg.solve(S_, y)) > gate:
+            return False
+        K = self.P @ H.T @ np.linalg.inv(S_)
+        dx = K @ y
+        self.x[[0, 1, 2, 3, 4]] += dx[[E, N, U, PSI, B]]  # δS is white: nothing to feed back
+        IKH = np.eye(6) - K @ H
+        self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
+        self.P = 0.5 * (self.P + self.P.T)
+        if self.phi is not None:
+            self.phi = IKH @ self.phi
+        return True
+
+    def _gnss(self, j: int) -> None:
+        if self._fix_masked[j]:
+            self.gnss_counts["masked"] += 1
+            return
+        f = self.config.filter
+        H = np.zeros((3, 6))
+        H[0, E] = H[1, N] = H[2, U] = 1.0
+        sd = self._fix_sd[j]
+        R = np.diag([sd**2, sd**2, (2.0 * sd) ** 2])
+        ok = self._update(H, self._fix_pos[j] - self.x[:3], R, self._gate_pos)
+        self.gnss_counts["accepted" if ok else "rejected"] += 1
+        if ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps:
+            Hp = np.zeros((1, 6))
+            Hp[0, PSI] = 1.0
+            y = np.array([wrap_angle(self._fix_course[j] - self.x[3])])
+            okh = self._update(Hp, y, np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi)
+            self.gnss_counts["heading_accepted" if okh else "heading_rejected"] += 1
+
+    def _record(self) -> None:
+        self._hist.append((self._tc, *self.x[:3], *np.sqrt(np.maximum(np.diag(self.P)[:3], 0.0))))
+
+    # --- time -------------------------------------------------------------------
+    @property
+    def t_start(self) -> float:
+        return float(self.t[0])
+
+    @property
+    def t_end(self) -> float:
+        return float(self.t[-1])
+
+    @property
+    def t_now(self) -> float:
+        return self._tc
+
+    def advance(self, t: float) -> None:
+        while self._next < len(self._events) and self._events[self._next][0] <= t:
+            te, kind, idx = self._events[self._next]
+            self._propagate_to(te)
+            if kind == 0:
+                self._step(idx)
+            else:
+                self._gnss(idx)
+            self._record()
+            self._next += 1
+        self._propagate_to(min(t, self.t_end))
+
+    # --- heading ------------------------------------------------------------------
+    @property
+    def heading_is_auto(self) -> bool:
+        return self.config.initial.heading_deg == "auto"
+
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        ts, track = self._pdr_track(self._psi0)
+        far = np.flatnonzero(np.hypot(*track.T) >= distance_m)
+        return None if far.size == 0 else float(np.arctan2(*track[far[0]]))
+
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        self._psi0 += delta_rad
+        self.restart()
+
+    # --- fuser interface ------------------------------------------------------------
+    def position_n(self) -> np.ndarray:
+        return self.x[:3].copy()
+
+    def covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        self.x[[0, 1, 2, 3, 4]] += dx[[E, N, U, PSI, B]]
+        self.P = 0.5 * (P + P.T)
+        self._record()
+
+    def track_transition(self) -> None:
+        self.phi = np.eye(6)
+
+    def transition_since_sync(self) -> np.ndarray:
+        phi, self.phi = self.phi, np.eye(6)
+        return phi
+
+    def sync_times(self) -> np.ndarray:
+        return self.t[self.step_index]
+
+    def sample_times(self) -> np.ndarray:
+        return self.t
+
+    # --- results ----------------------------------------------------------------------
+    def trajectory(self) -> Trajectory:
+        h = np.array(self._hist)
+        # several records at one time (an update right after a step): keep the last
+        last = np.concatenate([h[1:, 0] > h[:-1, 0], [True]])
+        h = h[last]
+        return Trajectory(h[:, 0], h[:, 1:4], h[:, 4:7])
+
+    @property
+    def samples(self) -> int:
+        return len(self.t)
+
+    @property
+    def input_report(self) -> InputReport:
+        return self._report
+
+    def diagnostics(self) -> dict:
+        return {"steps": int(len(self.step_index)),
+                "mean_step_length_m": float(self.step_length_m.mean()) if len(self.step_length_m) else None,
+                "gnss": dict(self.gnss_counts)}
+
+
