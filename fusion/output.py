@@ -96,6 +96,20 @@ def write_trajectories(path: Path, result: RunResult, decimate: int = 1) -> None
             np.savetxt(fh, block, fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
 
 
+def write_geojson(path: Path, result: RunResult, decimate: int = 1) -> None:
+    """track.geojson: one WGS84 LineString per system (lon, lat, height), when the run has a
+    geodetic origin."""
+    from fusion.gnss import enu_to_geodetic
+
+    features = []
+    for name, traj in result.trajectories.items():
+        llh = enu_to_geodetic(traj.pos_n[::decimate], result.geodetic_origin)
+        coords = [[round(float(lon), 8), round(float(lat), 8), round(float(h), 3)] for lat, lon, h in llh]
+        features.append({"type": "Feature", "properties": {"system": name},
+                         "geometry": {"type": "LineString", "coordinates": coords}})
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n")
+
+
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float) -> None:
     """metrics.json, trajectories.csv and (unless switched off) the PNG plots."""
     try:
@@ -104,6 +118,8 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     output = result.loaded.layout.output
     write_trajectories(out_dir / "trajectories.csv", result, output.decimate)
+    if result.geodetic_origin is not None:
+        write_geojson(out_dir / "track.geojson", result, output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     if output.plots:

@@ -396,20 +396,66 @@ def test_degenerate_uses_previous_direction():
 @settings(max_examples=15, **SETTINGS)
 @given(seeds, n_systems, flags, st.sampled_from(["max", "min", "fixed"]))
 def test_qp_variants_agree(seed, n, lever, kind):
-    """OSQP through its public API, and the SQP started at the projection, give the
-    same answer as the default QP."""
+    """The default QP (started at the projection: one QP certifies it), OSQP through
+    its public API, and the SQP started at p̂ (independent of the projection) agree."""
     ratio = {"max": 1.6, "min": 0.6, "fixed": 1.4}[kind]
     p_hat, sigma, c = pair_problem(seed, n, True, True, lever, kind, ratio)
     ref = QpSolver(n, [c]).solve(p_hat, sigma)
     public = QpSolver(n, [c], fast_calls=False).solve(p_hat, sigma)
-    cert = QpSolver(n, [c], start="projection").solve(p_hat, sigma)
-    for sol in (ref, public, cert):
+    independent = QpSolver(n, [c], start="p_hat").solve(p_hat, sigma)
+    for sol in (ref, public, independent):
         assert sol.converged and not sol.fallback and sol.method == "qp"
     np.testing.assert_allclose(public.p, ref.p, rtol=0, atol=1e-9)
-    assert np.max(np.abs(cert.p - ref.p)) <= TOL
-    assert cert.iterations <= 2
+    assert np.max(np.abs(independent.p - ref.p)) <= TOL
+    assert ref.iterations == 1
     with pytest.raises(ValueError):
         QpSolver(n, [c], start="somewhere")
+
+
+def test_qp_certifies_with_osqp(monkeypatch):
+    """Started at the projection, the QP still solves its own QP: one OSQP solve when
+    the start is the KKT point, more SQP steps to the same answer when it is not."""
+    p_hat, sigma, c = pair_problem(5, 2, True, True, True, "max", 1.5)
+    exact = solve_projection(p_hat, sigma, [c])
+    qp = QpSolver(2, [c])
+    calls = []
+    osqp_solve = qp._qp
+    monkeypatch.setattr(qp, "_qp", lambda *args: calls.append(1) or osqp_solve(*args))
+    sol = qp.solve(p_hat, sigma)
+    assert len(calls) == 1 and sol.iterations == 1 and sol.method == "qp" and not sol.fallback
+    assert 0.0 < np.max(np.abs(sol.p - exact.p)) <= TOL  # OSQP's point, not a copy
+
+    projection = fc._projection
+
+    def off_by_a_millimetre(*args, **kwargs):
+        ref, dirs = projection(*args, **kwargs)
+        ref.p = ref.p + 1e-3
+        return ref, dirs
+
+    monkeypatch.setattr(fc, "_projection", off_by_a_millimetre)
+    calls.clear()
+    sol = qp.solve(p_hat, sigma)
+    assert sol.method == "qp" and not sol.fallback and sol.converged
+    assert sol.iterations >= 2 and len(calls) == sol.iterations
+    assert np.max(np.abs(sol.p - exact.p)) <= TOL
+    check_kkt(sol, p_hat, sigma, [c])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_symmetric_eigen_kernel(dim):
+    """The projection's Jacobi eigen-solver against numpy, distinct and repeated eigenvalues."""
+    rng = np.random.default_rng(dim)
+    q, _ = np.linalg.qr(rng.normal(size=(dim, dim)))
+    for ev in (rng.uniform(0.1, 1.0, dim), np.full(dim, 0.3), np.r_[0.5, np.full(dim - 1, 0.2)]):
+        S = np.zeros((3, 3))
+        S[:dim, :dim] = (q * ev) @ q.T
+        w, Q = np.empty(3), np.empty((3, 3))
+        fc._sym_eig(S, dim, w, Q)
+        w, Q = w[:dim], Q[:dim, :dim]
+        np.testing.assert_allclose(w, np.sort(ev)[::-1], rtol=0, atol=1e-14)
+        assert np.all(np.diff(w) <= 0.0)
+        np.testing.assert_allclose(Q @ Q.T, np.eye(dim), rtol=0, atol=1e-14)
+        np.testing.assert_allclose((Q * w[:, None]).T @ Q, S[:dim, :dim], rtol=0, atol=1e-14)
 
 
 # ---------------------------------------------------------------------------
@@ -545,6 +591,12 @@ def test_constraint_validation_and_equality():
         solve_projection(np.zeros(6), np.eye(6), [DistanceConstraint(0, 2, "max", 1.0)])
     with pytest.raises(ValueError):
         solve_projection(np.full(6, np.nan), np.eye(6), [DistanceConstraint(0, 1, "max", 1.0)])
+    sigma = np.eye(6)
+    sigma[4, 1] = np.inf
+    for solver in (ProjectionSolver(2, [DistanceConstraint(0, 1, "max", 1.0)]),
+                   QpSolver(2, [DistanceConstraint(0, 1, "max", 1.0)])):
+        with pytest.raises(ValueError):
+            solver.solve(np.zeros(6), sigma)
 
 
 def test_module_exports():

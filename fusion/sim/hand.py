@@ -7,7 +7,10 @@ first heel strike, a smooth speed-up over ``T`` (speed ``v_c · r(τ)``,
 speed), and a smooth slow-down over ``T`` ending at the last heel strike ``t1``:
 ``v_c = L / (t1 − t0 − T)``. At the k-th heel strike the body is at (k − ½) step
 lengths, halfway between the footprints. Its heading is the path azimuth at ``s(t)``
-(rate κ(s)·ṡ, κ the path curvature, positive turning right).
+(rate κ(s)·ṡ, κ the path curvature, positive turning right). The body *frame* (the
+hand's offset and the phone's yaw) turns with that azimuth smoothed over
+``heading_smoothing_m`` of arc length, so its turn rate is continuous at the joints of
+lines and arcs (a rate jump would make the offset phone's velocity jump).
 
 Step rhythm. With ``T`` = one step (half a gait cycle) and ``t_h0`` the first heel
 strike, the phase is ``φ = 2π (t − t_h0) / T``; the heel strikes are the swing ends of
@@ -131,6 +134,43 @@ def _curvature(path: BodyPath, s: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class _SmoothHeading:
+    """The path azimuth smoothed over ``width`` metres of arc length.
+
+    The path azimuth is piecewise linear in s (lines, arcs): ψ(s) = ψ₀ + Σ c_j max(s − s_j, 0)
+    with c_j the curvature change at segment boundary s_j. Convolving with the biweight
+    kernel K(u) = (15/16)(1 − x²)²/h, x = u/h, h = width/2, turns each kink into a C² ramp
+    whose second derivative is c_j K: the heading rate of the body frame is continuous (a
+    point offset from the body moves without velocity jumps) and its derivative bounded.
+    """
+
+    az0: float
+    knots: np.ndarray
+    jumps: np.ndarray
+    half: float
+
+    @classmethod
+    def of(cls, path: BodyPath, width: float) -> "_SmoothHeading":
+        kappa = _curvature(path, path.s_start + 1e-12)
+        jumps = np.diff(np.concatenate([[0.0], kappa]))
+        keep = jumps != 0
+        return cls(path.start[1], path.s_start[keep], jumps[keep], 0.5 * width)
+
+    def __call__(self, s: np.ndarray) -> Deriv:
+        """ψ_h(s), dψ_h/ds, d²ψ_h/ds²."""
+        h = self.half
+        v, d1, d2 = np.full(s.shape, self.az0), np.zeros(s.shape), np.zeros(s.shape)
+        for sj, c in zip(self.knots, self.jumps):
+            x = np.clip((s - sj) / h, -1.0, 1.0)
+            ramp = np.where(s - sj >= h, s - sj,
+                            h * (15 / 16 * (x**2 / 2 - x**4 / 6 + x**6 / 30) + x / 2 + 5 / 32))
+            v += c * ramp
+            d1 += c * (15 / 16 * (x - 2 * x**3 / 3 + x**5 / 5) + 0.5)
+            d2 += c * 15 / 16 * (1 - x**2) ** 2 / h
+        return v, d1, d2
+
+
+@dataclass(frozen=True)
 class _Progress:
     """Arc length s(t) along the path: still, speed-up over ``ramp`` s, constant, slow-down."""
 
@@ -172,6 +212,7 @@ class HandMotion:
 
     path: BodyPath
     progress: _Progress
+    heading: _SmoothHeading
     step_s: float
     t_first: float
     t_last: float
@@ -192,10 +233,12 @@ class HandMotion:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         env = self.envelope(t)
         s, sd, sdd = self.progress(t)
-        xy, az = self.path.at(s)
+        xy, az_path = self.path.at(s)
         kappa = _curvature(self.path, s)
-        w, wd = kappa * sd, kappa * sdd  # heading rate and its derivative
+        az, dh, ddh = self.heading(s)  # the body frame's (smoothed) heading
+        w, wd = dh * sd, ddh * sd**2 + dh * sdd  # its rate and the rate's derivative
         f, lv = direction(az), left_normal(az)
+        fp, lp = direction(az_path), left_normal(az_path)
 
         omega_step = 2 * math.pi / self.step_s
         bounce = _product(env, _sinusoid(t, -self.bounce_m, omega_step, -omega_step * self.t_first + math.pi / 2))
@@ -206,14 +249,16 @@ class HandMotion:
         b = _add(_const(t, self.offset_m[1]), sway, wob["left"])
         z = _add(_const(t, self.offset_m[2]), bounce, wob["up"])
 
-        # Horizontal: P(s) + a f + b l, with df/dt = −ω l, dl/dt = ω f.
-        fa = (a[1] + w * b[0])
-        la = (b[1] - w * a[0])
-        facc = sdd + a[2] + wd * b[0] + 2 * w * b[1] - w**2 * a[0]
-        lacc = -kappa * sd**2 + b[2] - wd * a[0] - 2 * w * a[1] - w**2 * b[0]
+        # Horizontal: P(s) + a f + b l, with f, l the body frame's forward and left
+        # (df/dt = −ω l, dl/dt = ω f); the path point moves along the path's own tangent fp.
+        fa = a[1] + w * b[0]
+        la = b[1] - w * a[0]
+        facc = a[2] + wd * b[0] + 2 * w * b[1] - w**2 * a[0]
+        lacc = b[2] - wd * a[0] - 2 * w * a[1] - w**2 * b[0]
+        path_acc = sdd[:, None] * fp - (kappa * sd**2)[:, None] * lp
         pos = np.column_stack([xy + a[0][:, None] * f + b[0][:, None] * lv, z[0]])
-        vel = np.column_stack([(sd + fa)[:, None] * f + la[:, None] * lv, z[1]])
-        acc = np.column_stack([facc[:, None] * f + lacc[:, None] * lv, z[2]])
+        vel = np.column_stack([sd[:, None] * fp + fa[:, None] * f + la[:, None] * lv, z[1]])
+        acc = np.column_stack([path_acc + facc[:, None] * f + lacc[:, None] * lv, z[2]])
 
         # Attitude: yaw (ENU, counter-clockwise from East), pitch about y, roll about x.
         yaw = 0.5 * math.pi - az - self.mount_yaw_rad - wob["yaw"][0]
@@ -239,7 +284,8 @@ def _quat_axis(angle: np.ndarray, axis: int) -> np.ndarray:
 
 
 def hand_motion(plan: GaitPlan, cycle_samples: int, *, seed: int, name: str, offset_m: tuple[float, float, float],
-                bounce_m: float, lateral_sway_m: float, mount_yaw_deg: float, sway: HandSwayConfig) -> HandMotion:
+                bounce_m: float, lateral_sway_m: float, mount_yaw_deg: float, sway: HandSwayConfig,
+                heading_smoothing_m: float = 1.0) -> HandMotion:
     """The phone of system ``name`` carried through ``plan``; ``cycle_samples``: one gait
     cycle in samples (as :func:`fusion.sim.gait.plan_gait` rounded it). The hand sway is
     drawn from its own stream, ``system_seed(seed, name + "#sway")``."""
@@ -263,5 +309,6 @@ def hand_motion(plan: GaitPlan, cycle_samples: int, *, seed: int, name: str, off
            "roll": math.radians(sway.attitude_sd_deg), "pitch": math.radians(sway.attitude_sd_deg),
            "yaw": math.radians(sway.yaw_sd_deg)}
     wobble = {k: _Wobble.draw(rng, sd, sway) for k, sd in sds.items()}
-    return HandMotion(plan.path, progress, 0.5 * cycle, t_first, t_last, tuple(float(v) for v in offset_m),
+    heading = _SmoothHeading.of(plan.path, heading_smoothing_m)
+    return HandMotion(plan.path, progress, heading, 0.5 * cycle, t_first, t_last, tuple(float(v) for v in offset_m),
                       bounce_m, lateral_sway_m, lateral_sign, math.radians(mount_yaw_deg), wobble)

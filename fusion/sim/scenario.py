@@ -229,7 +229,8 @@ class HandPhoneSystem(StrictModel):
     ``offset_m``: (forward, left, up) from the body path point, in the walking frame;
     ``bounce_m``: vertical body bounce amplitude (one period per step);
     ``lateral_sway_m``: body sway towards the stance foot (one period per stride);
-    ``sway``: the hand's own smooth random wobble; ``mount_yaw_deg``: the phone's x axis
+    ``sway``: the hand's own smooth random wobble; ``heading_smoothing_m``: arc length over
+    which the body frame's heading is smoothed at the path's corners; ``mount_yaw_deg``: the phone's x axis
     turned clockwise (from above) from the walking direction; ``gnss``: the receiver
     (``null`` for none). Motion in :mod:`fusion.sim.hand`, receiver in :mod:`fusion.sim.gnss`.
     """
@@ -241,6 +242,7 @@ class HandPhoneSystem(StrictModel):
     lateral_sway_m: float = Field(default=0.02, ge=0, le=0.2)
     mount_yaw_deg: float = Field(default=0.0, ge=-180, le=180)
     sway: HandSwayConfig = Field(default_factory=HandSwayConfig)
+    heading_smoothing_m: float = Field(default=1.0, gt=0)
     gnss: GnssReceiverConfig | None = Field(default_factory=GnssReceiverConfig)
 
 
@@ -249,7 +251,8 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
     cycle_s, _ = sc.gait.cycle_s()
     motion = hand_motion(ctx.plan, int(round(cycle_s * sc.rate_hz)), seed=ctx.seed, name=name,
                          offset_m=cfg.offset_m, bounce_m=cfg.bounce_m, lateral_sway_m=cfg.lateral_sway_m,
-                         mount_yaw_deg=cfg.mount_yaw_deg, sway=cfg.sway)
+                         mount_yaw_deg=cfg.mount_yaw_deg, sway=cfg.sway,
+                         heading_smoothing_m=cfg.heading_smoothing_m)
     t = ctx.t
     acc, gyro = ideal_imu(motion, t, sc.gravity_mps2)
     errors = cfg.imu.resolve()

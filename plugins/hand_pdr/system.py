@@ -38,7 +38,8 @@ class HandPdr(SensorSystem):
 
     Results: :meth:`trajectory` (one epoch per step and per GNSS update), ``step_index``
     (IMU sample of each detected step), ``step_length_m``, ``gnss_counts`` (accepted,
-    rejected, masked), ``geodetic_origin`` (lat, lon, h of the ENU frame).
+    rejected, masked), ``geodetic_origin`` (lat, lon, h of the ENU frame),
+    ``heading_alignment_end_s`` (time of the last fix used by ``gnss_track``).
     """
 
     plugin_name = "hand_pdr"
@@ -96,6 +97,7 @@ class HandPdr(SensorSystem):
             self._fix_t = np.empty(0)
             self._fix_masked = np.empty(0, dtype=bool)
         self._events = self._event_list()
+        self.heading_alignment_end_s: float | None = None
         ini = config.initial
         if ini.position_m == "gnss":
             usable = np.flatnonzero(~self._fix_masked)
@@ -139,6 +141,7 @@ class HandPdr(SensorSystem):
             raise ConfigError(f"{key}.initial.heading_deg",
                               f"GNSS never moves {self.config.initial.align_distance_m} m from its first fix")
         t0, t1 = self._fix_t[usable[0]], self._fix_t[usable[far[0]]]
+        self.heading_alignment_end_s = float(t1)
         ts, track = self._pdr_track(0.0)
         if len(ts) < 2:
             raise ConfigError(f"{key}.initial.heading_deg", "no steps detected to align")
