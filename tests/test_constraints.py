@@ -413,8 +413,9 @@ def test_qp_variants_agree(seed, n, lever, kind):
 
 
 def test_qp_certifies_with_osqp(monkeypatch):
-    """Started at the projection, the QP still solves its own QP: one OSQP solve when
-    the start is the KKT point, more SQP steps to the same answer when it is not."""
+    """Started at the projection, the QP still solves its own QP with OSQP: one solve
+    when the start is the KKT point; from a start off by a millimetre that QP does
+    not settle it, and the SQP takes more steps to the same answer."""
     p_hat, sigma, c = pair_problem(5, 2, True, True, True, "max", 1.5)
     exact = solve_projection(p_hat, sigma, [c])
     qp = QpSolver(2, [c])
@@ -425,18 +426,24 @@ def test_qp_certifies_with_osqp(monkeypatch):
     assert len(calls) == 1 and sol.iterations == 1 and sol.method == "qp" and not sol.fallback
     assert 0.0 < np.max(np.abs(sol.p - exact.p)) <= TOL  # OSQP's point, not a copy
 
-    projection = fc._projection
+    certify_start, projection = fc._qp_start_pair, fc._projection
 
-    def off_by_a_millimetre(*args, **kwargs):
+    def start_off(*args):
+        out = certify_start(*args)
+        args[9][:] += 1e-3  # the projection p0
+        return out
+
+    def projection_off(*args, **kwargs):
         ref, dirs = projection(*args, **kwargs)
         ref.p = ref.p + 1e-3
         return ref, dirs
 
-    monkeypatch.setattr(fc, "_projection", off_by_a_millimetre)
+    monkeypatch.setattr(fc, "_qp_start_pair", start_off)
+    monkeypatch.setattr(fc, "_projection", projection_off)
     calls.clear()
     sol = qp.solve(p_hat, sigma)
     assert sol.method == "qp" and not sol.fallback and sol.converged
-    assert sol.iterations >= 2 and len(calls) == sol.iterations
+    assert sol.iterations >= 2 and len(calls) == 1 + sol.iterations
     assert np.max(np.abs(sol.p - exact.p)) <= TOL
     check_kkt(sol, p_hat, sigma, [c])
 

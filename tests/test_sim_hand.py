@@ -14,7 +14,7 @@ from fusion.gnss import read_gnss_csv
 from fusion.sim import simulate
 from fusion.sim.gait import GaitConfig, plan_gait
 from fusion.sim.gnss import RADIUS_68_PER_SIGMA, GnssReceiverConfig, simulate_fixes
-from fusion.sim.hand import HandSwayConfig, hand_motion, heel_strikes
+from fusion.sim.hand import HandSwayConfig, hand_motion
 from fusion.sim.imu import MotionState, ideal_imu
 from fusion.sim.paths import PolylinePath
 from fusion.sim.scenario import DEFAULT_GEODETIC_ORIGIN
@@ -118,10 +118,12 @@ def test_one_step_peak_per_true_step(tmp_path):
     peaks = detect_steps(t, acc, StepConfig(), G)
     assert peaks.size == true.size
     assert np.abs(peaks - true).max() <= 2
-    # The step column marks every heel strike of either foot.
-    plan_steps = np.sort(np.concatenate([np.loadtxt(res.out_dir / f"{f}_imu.csv", delimiter=",",
-                                                    skiprows=1)[:, 7] for f in ("left_foot",)]))
-    assert plan_steps.size  # the feet files are there too
+    # The step column marks every heel strike of either foot: where a foot's stance starts.
+    strikes = []
+    for foot in ("left_foot", "right_foot"):
+        stance = np.loadtxt(res.out_dir / f"{foot}_imu.csv", delimiter=",", skiprows=1)[:, 7].astype(int)
+        strikes.append(np.flatnonzero(np.diff(stance) == 1) + 1)
+    np.testing.assert_array_equal(np.sort(np.concatenate(strikes)), true)
 
 
 # --------------------------------------------------------------------------- GNSS

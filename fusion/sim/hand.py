@@ -1,12 +1,12 @@
 """A phone held in the hand of the walking pedestrian (``kind: hand_phone``).
 
 Body. The body point moves along the body path (:mod:`fusion.sim.paths`) by arc length
-``s(t)``, kept midway between the feet: still until ``t0`` = one step ``T`` before the
-first heel strike, a smooth speed-up over ``T`` (speed ``v_c · r(τ)``,
-``r = 10τ³ − 15τ⁴ + 6τ⁵``), constant speed ``v_c`` = step length / ``T`` (the gait's
-speed), and a smooth slow-down over ``T`` ending at the last heel strike ``t1``:
-``v_c = L / (t1 − t0 − T)``. At the k-th heel strike the body is at (k − ½) step
-lengths, halfway between the footprints. Its heading is the path azimuth at ``s(t)``
+``s(t)``, kept midway between the feet: at the k-th heel strike it is (k − ½) step
+lengths along, halfway between the footprints, so its linear progress at ``v_c`` = step
+length / ``T`` (the gait's speed, ``T`` one step) starts half a step before the first
+heel strike and ends half a step before the last; a smooth speed-up and slow-down of
+one gait cycle ``2T`` are centred on those instants (speed ``v_c · r(τ)``,
+``r = 10τ³ − 15τ⁴ + 6τ⁵``). Its heading is the path azimuth at ``s(t)``
 (rate κ(s)·ṡ, κ the path curvature, positive turning right). The body *frame* (the
 hand's offset and the phone's yaw) turns with that azimuth smoothed over
 ``heading_smoothing_m`` of arc length, so its turn rate is continuous at the joints of
@@ -18,8 +18,9 @@ both feet (each within half a sample of φ ≡ 0). The body bounces vertically,
 ``−bounce_m · e(t) · cos φ`` (lowest, i.e. the vertical acceleration at its peak
 ``bounce_m (2π/T)²``, at each heel strike: one clear peak of ‖f‖ − g per step), and
 sways laterally towards the stance foot, ``±lateral_sway_m · e(t) · sin(φ/2)``. The
-envelope ``e`` rises smoothly (C²) from 0 at ``t_h0 − T`` to 1 at ``t_h0`` and falls
-from 1 at the last heel strike to 0 one step later.
+envelope ``e`` rises smoothly (C²) from 0 at ``t_h0 − T/2`` to 1 at ``t_h0`` and falls
+from 1 at the last heel strike to 0 half a step later (over a longer ramp the bounce's
+half-grown crest a step before the first heel strike would read as an extra step).
 
 Hand. The phone sits ``offset_m`` = (forward, left, up) from the body point in the
 body's heading frame, plus hand sway: on each of forward, left, up (``position_sd_m``)
@@ -224,7 +225,7 @@ class HandMotion:
     wobble: dict[str, _Wobble]
 
     def envelope(self, t: np.ndarray) -> Deriv:
-        T = self.step_s
+        T = 0.5 * self.step_s  # half a step: a slower ramp would show as an extra ‖f‖ peak a step early
         up = _smoothstep(t, self.t_first - T, self.t_first)
         down = _smoothstep(t, self.t_last, self.t_last + T)
         return _add(up, _scale(down, -1.0))
@@ -297,10 +298,12 @@ def hand_motion(plan: GaitPlan, cycle_samples: int, *, seed: int, name: str, off
     step = 0.5 * cycle
     # Centred between the feet: at the k-th heel strike (k = 1, 2, ...) the body is at
     # (k − ½)·step length, i.e. linear progress reaches 0 half a step before the first heel
-    # strike and the end half a step before the last; ramps of one step around those.
-    t0 = max(t_first - step, 0.0)
-    ramp = min(step, 0.45 * (t1 - t0))
-    progress = _Progress(t0, t1, ramp, plan.path.length)
+    # strike and the end half a step before the last; speed-up and slow-down of one gait
+    # cycle centred on those instants (peak surge ≈ 1.9 v/cycle ≈ 2 m/s² at a normal gait).
+    ramp = min(cycle, 0.45 * (t1 - t_first))
+    t0 = max(t_first - 0.5 * step - 0.5 * ramp, 0.0)
+    t_end = t_last - 0.5 * step + 0.5 * ramp
+    progress = _Progress(t0, t_end, ramp, plan.path.length)
     lead = "left" if plan.feet["left"].k_start[0] <= plan.feet["right"].k_start[0] else "right"
     # After the lead foot's heel strike the body moves over it (mid-stance a quarter cycle later).
     lateral_sign = 1.0 if lead == "left" else -1.0
