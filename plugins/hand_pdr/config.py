@@ -55,7 +55,7 @@ class StepConfig(StrictModel):
 
 
 class PdrFilterConfig(StrictModel):
-    """The PDR error filter (PDR/GNSS paper eqs. 38–44), state [δE, δN, δU, δψ, δS, δb].
+    """The PDR error filter (PDR/GNSS paper eqs. 38–44), state [δE, δN, δU, δψ, δS, δb, δβE, δβN].
 
     step_length_sd_m: white step-length error σ_S; heading_noise_density: gyro angle
     random walk, rad/√s; gyro_bias_sd: steady-state σ of the first-order Gauss–Markov
@@ -63,7 +63,11 @@ class PdrFilterConfig(StrictModel):
     of the height, m/√s; GNSS: per-axis σ from the receiver's accuracy
     (``accuracy_to_sigma`` × accuracy) or ``default_sigma_m``; GNSS heading (eq. 44)
     only above ``min_speed_for_heading_mps`` with σ ``gnss_heading_sd_deg``;
-    chi-square gating with ``gate_probability``.
+    chi-square gating with ``gate_probability``. GNSS errors are correlated in time
+    (multipath, atmosphere): a horizontal first-order Gauss–Markov bias with σ
+    ``gnss_bias_sd_m`` and correlation time ``gnss_bias_time_s`` is estimated beside the
+    white noise (two more states; σ 0 switches it off), so that a minute of fixes is not
+    taken for a minute of independent evidence.
     """
 
     step_length_sd_m: float = Field(default=0.1, gt=0)
@@ -76,6 +80,8 @@ class PdrFilterConfig(StrictModel):
     gnss_heading_sd_deg: float = Field(default=15.0, gt=0)
     min_speed_for_heading_mps: float = Field(default=0.8, ge=0)
     gate_probability: float = Field(default=0.999, gt=0, lt=1)
+    gnss_bias_sd_m: float = Field(default=3.0, ge=0)
+    gnss_bias_time_s: float = Field(default=60.0, gt=0)
 
 
 class PdrInitialConfig(StrictModel):

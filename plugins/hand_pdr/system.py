@@ -1,8 +1,9 @@
 """Hand-held phone: pedestrian dead reckoning corrected by GNSS (PDR/GNSS paper §5).
 
 Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
-clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s). Error state (6):
-[δE, δN, δU, δψ, δS, δb], δS the current step's length error (white, σ_S).
+clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s), horizontal GNSS
+error β (m, first-order Gauss–Markov). Error state (8):
+[δE, δN, δU, δψ, δS, δb, δβE, δβN], δS the current step's length error (white, σ_S).
 
 At each step k (eq. 37):  E += S_k sin ψ_k,  N += S_k cos ψ_k, and (eqs. 38–40)
     δE' = δE + S cos ψ δψ + sin ψ δS,   δN' = δN − S sin ψ δψ + cos ψ δS.
@@ -10,7 +11,8 @@ Between events, over Δt:  ψ += Δψ_gyro − b Δt;  δψ' = δψ − Δt δb 
 δb' = e^{−Δt/τ} δb + w_b (first-order Gauss–Markov, τ = 1/α);  δU' = δU + w_U.
 (The paper writes δψ' = δψ + Δt δb for a bias error of the opposite sign; here b is
 subtracted from the azimuth rate, so its error enters with a minus.)
-GNSS (eqs. 41–44): position z = p_gnss − p̂, H = [I3 0 0 0]; heading from the GNSS
+GNSS (eqs. 41–44, with the correlated error): position z = p_gnss − (p̂ + β̂),
+H = [I3 0 0 0 I2]; δβ' = e^{−Δt/τ_β} δβ + w_β; heading from the GNSS
 course when the speed is above a threshold, z = wrap(ψ_gnss − ψ̂). Each update is gated
 by the chi-square test on its innovation; fixes inside a layout outage are skipped.
 """
@@ -30,7 +32,9 @@ from fusion.types import InputReport, Trajectory
 from fusion_plugins.hand_pdr.config import HandPdrConfig
 from fusion_plugins.hand_pdr.pdr import azimuth_increments, detect_steps, step_lengths, up_in_body
 
-E, N, U, PSI, S, B = range(6)
+E, N, U, PSI, S, B, BE, BN = range(8)
+NOMINAL = [E, N, U, PSI, B, BE, BN]
+"""Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN)."""
 
 
 class HandPdr(SensorSystem):
@@ -151,9 +155,10 @@ class HandPdr(SensorSystem):
 
     def restart(self) -> None:
         ini, f = self.config.initial, self.config.filter
-        self.x = np.array([*self._p0, self._psi0, 0.0])  # E, N, U, ψ, b
+        self.x = np.array([*self._p0, self._psi0, 0.0, 0.0, 0.0])  # E, N, U, ψ, b, βE, βN
         self.P = np.diag([ini.position_sd_m**2, ini.position_sd_m**2, ini.height_sd_m**2,
-                          np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2])
+                          np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2,
+                          f.gnss_bias_sd_m**2, f.gnss_bias_sd_m**2])
         self._tc = float(self.t[0])  # time the heading and covariance are propagated to
         self._next = 0
         self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "heading_accepted": 0, "heading_rejected": 0}
@@ -169,35 +174,41 @@ class HandPdr(SensorSystem):
         f = self.config.filter
         i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
         self.x[3] += self._azimuth[i1] - self._azimuth[i0] - self.x[4] * dt
-        F = np.eye(6)
+        F = np.eye(8)
         F[PSI, B] = -dt
         decay = np.exp(-dt / f.correlation_time_s)
         F[B, B] = decay
-        Q = np.zeros(6)
+        beta_decay = np.exp(-dt / f.gnss_bias_time_s)
+        F[BE, BE] = F[BN, BN] = beta_decay
+        self.x[5:7] *= beta_decay
+        Q = np.zeros(8)
         Q[PSI] = f.heading_noise_density**2 * dt
         Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
         Q[U] = f.height_noise_density**2 * dt
+        Q[BE] = Q[BN] = f.gnss_bias_sd_m**2 * (1.0 - beta_decay**2)
         self._transition(F, Q)
         self._tc = t
 
-    def _transition(self, F: np.ndarray, q_diag: np.ndarray) -> None:
-        self.P = F @ self.P @ F.T + np.diag(q_diag)
+    def _transition(self, F: np.ndarray, Q: np.ndarray) -> None:
+        """P ← F P Fᵀ + Q (Q a full matrix or its diagonal); the fuser's Φ ← F Φ."""
+        self.P = F @ self.P @ F.T + (np.diag(Q) if Q.ndim == 1 else Q)
         self.P = 0.5 * (self.P + self.P.T)
         if self.phi is not None:
             self.phi = F @ self.phi
 
     def _step(self, k: int) -> None:
-        """Eq. 37 for step k, and the covariance by eqs. 38–40 (fresh white δS first)."""
+        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
         s, psi = self.step_length_m[k], self.x[3]
-        self.P[S, :] = 0.0
-        self.P[:, S] = 0.0
-        self.P[S, S] = self.config.filter.step_length_sd_m**2
-        F = np.eye(6)
+        F = np.eye(8)
         F[E, PSI], F[E, S] = s * np.cos(psi), np.sin(psi)
         F[N, PSI], F[N, S] = -s * np.sin(psi), np.cos(psi)
+        fresh = np.eye(8)
+        fresh[S, S] = 0.0  # the previous step's δS does not carry over
+        Q = np.zeros(8)
+        Q[S] = self.config.filter.step_length_sd_m**2
         self.x[0] += s * np.sin(psi)
         self.x[1] += s * np.cos(psi)
-        self._transition(F, np.zeros(6))
+        self._transition(F @ fresh, F @ np.diag(Q) @ F.T)
 
     def _update(self, H: np.ndarray, y: np.ndarray, R: np.ndarray, gate: float) -> bool:
         """Gated Kalman update (Joseph form), closed-loop reset; False if rejected."""
@@ -206,8 +217,8 @@ class HandPdr(SensorSystem):
             return False
         K = self.P @ H.T @ np.linalg.inv(S_)
         dx = K @ y
-        self.x[[0, 1, 2, 3, 4]] += dx[[E, N, U, PSI, B]]  # δS is white: nothing to feed back
-        IKH = np.eye(6) - K @ H
+        self.x += dx[NOMINAL]  # δS is white: nothing to feed back
+        IKH = np.eye(8) - K @ H
         self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
         self.P = 0.5 * (self.P + self.P.T)
         if self.phi is not None:
@@ -219,14 +230,16 @@ class HandPdr(SensorSystem):
             self.gnss_counts["masked"] += 1
             return
         f = self.config.filter
-        H = np.zeros((3, 6))
+        H = np.zeros((3, 8))
         H[0, E] = H[1, N] = H[2, U] = 1.0
+        H[0, BE] = H[1, BN] = 1.0
         sd = self._fix_sd[j]
         R = np.diag([sd**2, sd**2, (2.0 * sd) ** 2])
-        ok = self._update(H, self._fix_pos[j] - self.x[:3], R, self._gate_pos)
+        predicted = self.x[:3] + np.array([self.x[5], self.x[6], 0.0])
+        ok = self._update(H, self._fix_pos[j] - predicted, R, self._gate_pos)
         self.gnss_counts["accepted" if ok else "rejected"] += 1
         if ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps:
-            Hp = np.zeros((1, 6))
+            Hp = np.zeros((1, 8))
             Hp[0, PSI] = 1.0
             y = np.array([wrap_angle(self._fix_course[j] - self.x[3])])
             okh = self._update(Hp, y, np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi)
@@ -282,15 +295,15 @@ class HandPdr(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        self.x[[0, 1, 2, 3, 4]] += dx[[E, N, U, PSI, B]]
+        self.x += dx[NOMINAL]
         self.P = 0.5 * (P + P.T)
         self._record()
 
     def track_transition(self) -> None:
-        self.phi = np.eye(6)
+        self.phi = np.eye(8)
 
     def transition_since_sync(self) -> np.ndarray:
-        phi, self.phi = self.phi, np.eye(6)
+        phi, self.phi = self.phi, np.eye(8)
         return phi
 
     def sync_times(self) -> np.ndarray:
