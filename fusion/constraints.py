@@ -59,7 +59,9 @@ linearised at p*.
       safeguarded Newton on 1/d − 1/‖r(ν)‖ (the Moré–Sorensen secular
       equation: a few scalar iterations, monotone for ``max``, the global
       minimum for the non-convex ``min``, the degenerate "hard case" in
-      closed form). Eqs. 58–60 are then applied at that direction.
+      closed form). Eqs. 58–60 are then applied at that direction. With a
+      single constraint all of it, including finding the constraint
+      inactive (the early exit of most epochs), is one kernel call.
     * several candidates: the SQP described under ``qp`` with a small dense
       QP solver (Lawson–Hanson on the dual) in place of OSQP, then eqs. 58–60
       at the converged point with that QP's active set.
@@ -76,8 +78,15 @@ linearised at p*.
     previous QP's multipliers; the first QP's curvature is seeded with eq. 58's
     multipliers at p̂. Negative curvature (active ``min``) is scaled down to
     keep P ⪰ 0.1 I. OSQP is set up once with fixed sparsity (dense upper
-    triangle of P, dense A); each QP is ``update(Px, q, Ax, l, u)`` plus a
-    warm-started ``solve``. Typically 3 QPs per epoch.
+    triangle of P, dense A); each QP is ``update(Px, q, Ax, l, u)``, a warm
+    start at the linearisation point (primal and dual) and ``solve``. By
+    default the SQP starts from the projection's point and multipliers: when
+    that is the KKT point, the first QP (the Newton step from it) has it as
+    its solution, the warm-started ADMM stops after one iteration, the
+    nonlinear constraints are checked to ``tol_m`` at OSQP's point and λ, μ
+    recomputed there by eqs. 58–60: one QP per epoch (more SQP steps when the
+    start is not the KKT point). Started at p̂ instead (``start="p_hat"``,
+    independent of the projection): typically 3–4 QPs.
 ``socp`` (:class:`SocpSolver`)
     cvxpy, DPP (compiled once), same whitened variable. ``max`` constraints
     are exact second-order cones; ``min`` constraints half-spaces linearised
@@ -92,6 +101,11 @@ linearised at p*.
 
 Solver failure never raises: :class:`QpSolver` and :class:`SocpSolver` then
 return the projection solution with ``fallback=True``.
+
+Implementation: the per-epoch work of the usual case — one constraint
+(projection, certification of a QP's point), the QP's whitening and
+linearisation — runs in numba kernels (scalar loops, cached on disk); several
+active constraints, the fixed-point scheme and the SOCP use numpy.
 """
 
 from __future__ import annotations
@@ -461,8 +475,6 @@ def _eq_project(
     least-squares multiplier of the stationarity condition at that point
     (used to certify QP/SOCP solutions).
     """
-    if len(W) == 1:
-        return _eq_project_single(p_hat, sigma, lay, W[0], dirs[W[0]], p_given)
     rows = lay.rows(W)
     K = len(rows)
     U = np.zeros((K, len(W)))
@@ -496,39 +508,27 @@ def _eq_project(
     return p, lam, mu, G
 
 
-def _eq_project_single(
-    p_hat: np.ndarray,
-    sigma: np.ndarray,
-    lay: _Layout,
-    k: int,
-    u: list[float],
-    p_given: np.ndarray | None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_eq_project` for one constraint, by :func:`_eq58_pair`."""
-    n3 = p_hat.shape[0]
-    p = np.empty(n3) if p_given is None else p_given
-    mu = np.empty((n3, n3))
-    G = np.empty((1, n3))
-    ok, lam = _eq58_pair(p_hat, sigma, lay.idx, lay.geo, k, np.array(u), p_given is not None, p, mu, G)
-    if not ok:
-        raise np.linalg.LinAlgError("constraint direction has zero variance")
-    return p, np.array([lam]), mu, G
+@_kernel
+def _separation(p: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, r: np.ndarray) -> float:
+    """r ← r_k(p) = E (p_i + l_i − p_j − l_j) (first dims entries); returns ‖r_k(p)‖."""
+    i3, j3 = idx[k, 0], idx[k, 1]
+    n2 = 0.0
+    for t in range(idx[k, 2]):
+        r[t] = p[i3 + t] - p[j3 + t] + geo[k, 1 + t]
+        n2 += r[t] * r[t]
+    return math.sqrt(n2)
 
 
 @_kernel
-def _eq58_pair(
-    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, u: np.ndarray,
-    given: bool, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
-) -> tuple[bool, float]:
-    """Eqs. 58–60 for constraint k linearised with unit direction u (first dims entries).
-
-    Jacobian row G = s·(uᵀE on block i, −uᵀE on block j), s = −1 for ``min`` else 1
-    (written to jac[0]); M = G Σ Gᵀ; gain μ = Σ Gᵀ G / M. Projection (``given`` false):
-    λ = s (u·r̂ − d)/M and p = p̂ − λ Σ Gᵀ (written to p). Given p (certifying another
-    solver's point, p read): λ = −G (p − p̂)/M, the least-squares multiplier of
-    Σ⁻¹(p − p̂) + λ Gᵀ = 0. Returns (M > 0, λ); nothing is meaningful when M ≤ 0.
+def _pair_gain(
+    sigma: np.ndarray, idx: np.ndarray, k: int, u: np.ndarray, sgt: np.ndarray, gain: np.ndarray, jac: np.ndarray
+) -> float:
+    """Eqs. 58–60's matrices for constraint k linearised with unit direction u (its
+    first dims entries): the Jacobian row G = s·(uᵀE on block i, −uᵀE on block j),
+    s = −1 for ``min`` else 1, to jac[0]; Σ Gᵀ to sgt; μ = Σ Gᵀ G / M to gain.
+    Returns M = G Σ Gᵀ (gain is meaningless unless M > 0).
     """
-    n3 = p_hat.shape[0]
+    n3 = sigma.shape[0]
     i3, j3, D = idx[k, 0], idx[k, 1], idx[k, 2]
     sgn = -1.0 if idx[k, 3] == 1 else 1.0
     for c in range(n3):
@@ -536,7 +536,6 @@ def _eq58_pair(
     for b in range(D):
         jac[0, i3 + b] = sgn * u[b]
         jac[0, j3 + b] -= sgn * u[b]
-    sgt = np.empty(n3)  # Σ Gᵀ
     M = 0.0
     for r in range(n3):
         acc = 0.0
@@ -544,25 +543,42 @@ def _eq58_pair(
             acc += (sigma[r, i3 + b] - sigma[r, j3 + b]) * u[b]
         sgt[r] = sgn * acc
         M += jac[0, r] * sgt[r]
-    if not M > 0.0:
-        return False, 0.0
-    if given:
-        acc = 0.0
-        for c in range(n3):
-            acc += jac[0, c] * (p[c] - p_hat[c])
-        lam = -acc / M
-    else:
-        ur = 0.0
-        for b in range(D):
-            ur += u[b] * (p_hat[i3 + b] - p_hat[j3 + b] + geo[k, 1 + b])
-        lam = sgn * (ur - geo[k, 0]) / M
-        for c in range(n3):
-            p[c] = p_hat[c] - lam * sgt[c]
     inv_m = 1.0 / M
     for r in range(n3):
         for c in range(n3):
             gain[r, c] = sgt[r] * (jac[0, c] * inv_m)
-    return True, lam
+    return M
+
+
+@_kernel
+def _pair_direction(
+    p: np.ndarray, idx: np.ndarray, geo: np.ndarray, hints: np.ndarray, k: int, u: np.ndarray
+) -> float:
+    """u ← r_k(p)/‖r_k(p)‖ (first dims entries), the hint when ‖r_k‖ ≤ _DEGENERATE_M;
+    returns ‖r_k(p)‖."""
+    rho = _separation(p, idx, geo, k, u)
+    for t in range(idx[k, 2]):
+        u[t] = u[t] / rho if rho > _DEGENERATE_M else hints[k, t]
+    return rho
+
+
+@_kernel
+def _certify_pair(
+    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
+    p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+) -> tuple[bool, float, float, float, float]:
+    """Eqs. 58–60 at another solver's point p with constraint k active: its direction
+    u at p (:func:`_pair_direction`), :func:`_pair_gain` there (gain, jac written) and
+    λ = −G (p − p̂)/M, the least-squares multiplier of Σ⁻¹(p − p̂) + λ Gᵀ = 0.
+    Returns (M > 0, λ, u0, u1, u2)."""
+    u = np.zeros(3)
+    _pair_direction(p, idx, geo, hints, k, u)
+    sgt = np.empty(p.shape[0])
+    M = _pair_gain(sigma, idx, k, u, sgt, gain, jac)
+    acc = 0.0
+    for c in range(p.shape[0]):
+        acc += jac[0, c] * (p[c] - p_hat[c])
+    return M > 0.0, -acc / M, u[0], u[1], u[2]
 
 
 def _finish(
@@ -704,44 +720,34 @@ def _secular(
             ct2 += c[a] * c[a]
         ct = math.sqrt(ct2)
         if ct <= 1e-12 * d:  # the hard case, in closed form
+            if ct == 0.0:  # v from the hint instead
+                for a in range(ntop):
+                    c[a] = 0.0
+                    for t in range(D):
+                        c[a] += Q[a, t] * hint[t]
             rr2 = 0.0
+            nv2 = 0.0
             for t in range(D):
-                acc = 0.0
-                for a in range(ntop, D):
-                    acc += c[a] / (1.0 - w[a] / smax) * Q[a, t]
-                r[t] = acc
-                rr2 += acc * acc
-            rr = math.sqrt(rr2)
-            if rr < d:
-                v = np.empty(3)
-                nv2 = 0.0
-                for t in range(D):
-                    acc = 0.0
-                    for a in range(ntop):
-                        ca = c[a]
-                        if ct == 0.0:
-                            ca = 0.0
-                            for s in range(D):
-                                ca += Q[a, s] * hint[s]
-                        acc += ca * Q[a, t]
-                    v[t] = acc
-                    nv2 += acc * acc
+                r[t] = 0.0  # the part outside T
+                u[t] = 0.0  # v, not yet normalised
+                for a in range(D):
+                    if a < ntop:
+                        u[t] += c[a] * Q[a, t]
+                    else:
+                        r[t] += c[a] / (1.0 - w[a] / smax) * Q[a, t]
+                rr2 += r[t] * r[t]
+                nv2 += u[t] * u[t]
+            if rr2 < d * d:
                 nv = math.sqrt(nv2)
-                if not nv >= 1e-6:
-                    qh = 0.0
+                if not nv >= 1e-6:  # ±q_1, the sign closest to the hint
+                    nv = 0.0
                     for t in range(D):
-                        qh += Q[0, t] * hint[t]
-                    nv = -1.0 if qh < 0.0 else 1.0
-                    for t in range(D):
-                        v[t] = Q[0, t]
-                tau = math.sqrt(d * d - rr * rr)
-                n2 = 0.0
-                for t in range(D):
-                    r[t] += tau * v[t] / nv
-                    n2 += r[t] * r[t]
-                nr = math.sqrt(n2)
-                for t in range(D):
-                    u[t] = r[t] / nr
+                        u[t] = Q[0, t]
+                        nv += Q[0, t] * hint[t]
+                    nv = -1.0 if nv < 0.0 else 1.0
+                tau = math.sqrt(d * d - rr2)
+                for t in range(D):  # ‖r + τ v‖ = d: the parts are orthogonal
+                    u[t] = (r[t] + tau * u[t] / nv) / d
                 return 0
     nu = 0.0
     for it in range(1, max_iter + 1):
@@ -779,24 +785,22 @@ def _project_pair(
     p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
     tol: float, max_iter: int, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
 ) -> tuple[int, float, float, float, int, float, float, float]:
-    """Constraint k alone: g_k(p̂); when it is violated (or ``fixed``), the direction of
-    the solution from the secular equation (:func:`_secular`, S = E B Σ Bᵀ Eᵀ) and
-    eqs. 58–60 there (:func:`_eq58_pair`: p, gain, jac written).
+    """Constraint k alone: g_k(p̂); when it is violated (or ``fixed``), the direction u
+    of the solution from the secular equation (:func:`_secular`, S = E B Σ Bᵀ Eᵀ) and
+    eqs. 58–60 there: λ = s (u·r̂ − d)/M, p = p̂ − λ Σ Gᵀ (:func:`_pair_gain`; p, gain,
+    jac written).
 
-    Returns (status, g_k(p̂), g_k(p), λ, iterations, u0, u1, u2); status _INACTIVE (g_k ≤ 0,
-    nothing written) or _FAILED (nothing meaningful) or _SOLVED.
+    Returns (status, violation at p̂, violation at p, λ, iterations, u0, u1, u2), the
+    violations as in ``violation_before_m``; status _INACTIVE (g_k(p̂) ≤ 0, nothing
+    written), _FAILED (nothing meaningful) or _SOLVED.
     """
     i3, j3, D, code = idx[k, 0], idx[k, 1], idx[k, 2], idx[k, 3]
     d = geo[k, 0]
     rhat = np.empty(3)
-    n2 = 0.0
-    for a in range(D):
-        rhat[a] = p_hat[i3 + a] - p_hat[j3 + a] + geo[k, 1 + a]
-        n2 += rhat[a] * rhat[a]
-    rho = math.sqrt(n2)
-    g0 = d - rho if code == 1 else rho - d
-    if code != 2 and g0 <= 0.0:
-        return _INACTIVE, g0, g0, 0.0, 0, 0.0, 0.0, 0.0
+    rho = _separation(p_hat, idx, geo, k, rhat)
+    v0 = abs(rho - d) if code == 2 else max(d - rho if code == 1 else rho - d, 0.0)
+    if v0 == 0.0 and code != 2:
+        return _INACTIVE, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0
     S = np.empty((3, 3))
     for a in range(D):
         for b in range(a, D):
@@ -804,17 +808,20 @@ def _project_pair(
     u = np.zeros(3)
     its = _secular(S, rhat, D, d, hints[k], tol, max_iter, u)
     if its < 0:
-        return _FAILED, g0, g0, 0.0, its, 0.0, 0.0, 0.0
-    ok, lam = _eq58_pair(p_hat, sigma, idx, geo, k, u, False, p, gain, jac)
-    if not ok:
-        return _FAILED, g0, g0, 0.0, its, 0.0, 0.0, 0.0
-    n2 = 0.0
+        return _FAILED, v0, v0, 0.0, its, 0.0, 0.0, 0.0
+    sgt = np.empty(p_hat.shape[0])
+    M = _pair_gain(sigma, idx, k, u, sgt, gain, jac)
+    if not M > 0.0:
+        return _FAILED, v0, v0, 0.0, its, 0.0, 0.0, 0.0
+    ur = 0.0  # eq. 58: λ = s (u·r̂ − d)/M, p = p̂ − λ Σ Gᵀ
     for a in range(D):
-        x = p[i3 + a] - p[j3 + a] + geo[k, 1 + a]
-        n2 += x * x
-    rho = math.sqrt(n2)
-    g1 = d - rho if code == 1 else rho - d
-    return _SOLVED, g0, g1, lam, its, u[0], u[1], u[2]
+        ur += u[a] * rhat[a]
+    lam = (ur - d) / M if code != 1 else (d - ur) / M
+    for c in range(p_hat.shape[0]):
+        p[c] = p_hat[c] - lam * sgt[c]
+    rho = _separation(p, idx, geo, k, rhat)
+    v1 = abs(rho - d) if code == 2 else max(d - rho if code == 1 else rho - d, 0.0)
+    return _SOLVED, v0, v1, lam, its, u[0], u[1], u[2]
 
 
 # ---------------------------------------------------------------------------
@@ -867,7 +874,7 @@ def _fixed_point(
     p_hat: np.ndarray,
     sigma: np.ndarray,
     lay: _Layout,
-    hints: dict[int, list[float]] | None,
+    hints: np.ndarray,
     tol_m: float,
     max_iter: int,
 ) -> tuple[np.ndarray, list[int], dict[int, list[float]], int, bool]:
@@ -903,16 +910,37 @@ def _fixed_point(
 
 
 # ---------------------------------------------------------------------------
-# whitening
+# whitening and the SQP's QPs
 # ---------------------------------------------------------------------------
+
+
+@_kernel
+def _cholesky(S: np.ndarray, L: np.ndarray) -> bool:
+    """Lower-triangular L with S = L Lᵀ (S's lower triangle is read); False unless S ≻ 0."""
+    n = S.shape[0]
+    for j in range(n):
+        for i in range(j):
+            L[i, j] = 0.0
+        s = S[j, j]
+        for t in range(j):
+            s -= L[j, t] * L[j, t]
+        if not s > 0.0:
+            return False
+        ljj = math.sqrt(s)
+        L[j, j] = ljj
+        for i in range(j + 1, n):
+            acc = S[i, j]
+            for t in range(j):
+                acc -= L[i, t] * L[j, t]
+            L[i, j] = acc / ljj
+    return True
 
 
 def _sqrt_cov(sigma: np.ndarray) -> np.ndarray | None:
     """L with Σ = L Lᵀ: Cholesky, or the symmetric square root for PSD Σ."""
-    try:
-        return np.linalg.cholesky(sigma)
-    except np.linalg.LinAlgError:
-        pass
+    L = np.empty_like(sigma)
+    if _cholesky(sigma, L):
+        return L
     s = 0.5 * (sigma + sigma.T)
     w, V = np.linalg.eigh(s)
     if not np.all(np.isfinite(w)) or w[0] < -1e-9 * max(1.0, abs(w[-1])):
@@ -920,125 +948,268 @@ def _sqrt_cov(sigma: np.ndarray) -> np.ndarray | None:
     return V * np.sqrt(np.clip(w, 0.0, None))
 
 
+@_kernel
+def _curvature_scale(H: np.ndarray, neg: np.ndarray) -> float:
+    """The largest t in 1, ½, …, 2⁻²⁹ with I + H + t·neg ⪰ 0.1 I (a Cholesky
+    factorisation of 0.9 I + H + t·neg succeeds), else 0."""
+    n = H.shape[0]
+    work = np.empty((n, n))
+    fac = np.empty((n, n))
+    t = 1.0
+    for _ in range(30):
+        for a in range(n):
+            for b in range(n):
+                work[a, b] = H[a, b] + t * neg[a, b]
+            work[a, a] += 0.9
+        if _cholesky(work, fac):
+            return t
+        t *= 0.5
+    return 0.0
+
+
+@_kernel
+def _linearise(
+    p_hat: np.ndarray, L: np.ndarray, idx: np.ndarray, geo: np.ndarray, hints: np.ndarray,
+    p: np.ndarray, duals: np.ndarray, A: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray,
+) -> None:
+    """The constraints of one SQP step (:func:`_sqp`) linearised at p, and its Hessian.
+
+    Row k of A: a_k = u_kᵀ BL_k, BL_k = E B_k L, u_k the direction at p
+    (:func:`_pair_direction`); bound lin_k = d_k − u_k·r̂_k into lo/hi on the side(s)
+    of its kind (±1e30, OSQP's infinity, on the other). P = I + H with the curvature
+    H = Σ_k duals_k (BL_kᵀBL_k − a_k a_kᵀ)/‖r_k‖ = Σ_k duals_k Lᵀ∇²‖r_k‖L; its
+    negative part (duals < 0: active ``min``) scaled by :func:`_curvature_scale`.
+    """
+    n3 = p.shape[0]
+    neg = np.zeros((n3, n3))
+    has_neg = False
+    BL = np.empty((3, n3))
+    u = np.empty(3)
+    rhat = np.empty(3)
+    for a in range(n3):
+        for b in range(n3):
+            P[a, b] = 0.0
+    for k in range(idx.shape[0]):
+        i3, j3, D, code = idx[k, 0], idx[k, 1], idx[k, 2], idx[k, 3]
+        rho = _pair_direction(p, idx, geo, hints, k, u)
+        _separation(p_hat, idx, geo, k, rhat)
+        lin = geo[k, 0]
+        for t in range(D):
+            lin -= u[t] * rhat[t]
+        lo[k] = -1e30 if code == 0 else lin
+        hi[k] = 1e30 if code == 1 else lin
+        for c in range(n3):
+            acc = 0.0
+            for t in range(D):
+                BL[t, c] = L[i3 + t, c] - L[j3 + t, c]
+                acc += u[t] * BL[t, c]
+            A[k, c] = acc
+        if duals[k] == 0.0 or not rho > _DEGENERATE_M:
+            continue
+        wk = duals[k] / rho
+        H = P if wk > 0.0 else neg
+        has_neg = has_neg or wk < 0.0
+        for a in range(n3):
+            for b in range(n3):
+                btb = 0.0
+                for t in range(D):
+                    btb += BL[t, a] * BL[t, b]
+                H[a, b] += wk * (btb - A[k, a] * A[k, b])
+    if has_neg:
+        t = _curvature_scale(P, neg)
+        for a in range(n3):
+            for b in range(n3):
+                P[a, b] += t * neg[a, b]
+    for a in range(n3):
+        P[a, a] += 1.0
+
+
+@_kernel
+def _stationary_point(A: np.ndarray, duals: np.ndarray, y: np.ndarray) -> None:
+    """y = −Aᵀ duals: the whitened point at which multipliers ``duals`` (OSQP's sign)
+    satisfy stationarity, y + Σ_k duals_k a_k = 0 (its KKT point, for the projection's)."""
+    for c in range(A.shape[1]):
+        acc = 0.0
+        for k in range(A.shape[0]):
+            acc -= duals[k] * A[k, c]
+        y[c] = acc
+
+
+@_kernel
+def _linear_term(P: np.ndarray, y: np.ndarray, q: np.ndarray) -> None:
+    """q = −H y = y − P y (P = I + H): the QP's linear term, its minimiser the Newton step from y."""
+    for a in range(y.shape[0]):
+        acc = y[a]
+        for b in range(y.shape[0]):
+            acc -= P[a, b] * y[b]
+        q[a] = acc
+
+
+@_kernel
+def _advance(
+    p_hat: np.ndarray, L: np.ndarray, y: np.ndarray, p: np.ndarray, idx: np.ndarray, geo: np.ndarray,
+    p_new: np.ndarray, g: np.ndarray,
+) -> float:
+    """p_new = p̂ + L y and g_k(p_new) for every constraint (module docstring);
+    returns the step max |p_new − p|, inf when p_new is not finite."""
+    n3 = p.shape[0]
+    step = 0.0
+    for a in range(n3):
+        acc = p_hat[a]
+        for b in range(n3):
+            acc += L[a, b] * y[b]
+        p_new[a] = acc
+        if not math.isfinite(acc):
+            return math.inf
+        step = max(step, abs(acc - p[a]))
+    r = np.empty(3)
+    for k in range(idx.shape[0]):
+        rho = _separation(p_new, idx, geo, k, r)
+        g[k] = geo[k, 0] - rho if idx[k, 3] == 1 else rho - geo[k, 0]
+    return step
+
+
+# the usual case, one constraint: the projection certified by one QP
+
+
+@_kernel
+def _qp_start_pair(
+    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
+    tol: float, max_iter: int, L: np.ndarray, p0: np.ndarray, duals: np.ndarray, y0: np.ndarray,
+    A: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray, q: np.ndarray,
+) -> tuple[int, float]:
+    """The QP that certifies the projection onto constraint k, the only one: the
+    projection p0 (:func:`_project_pair`), its multiplier in OSQP's sign to duals[k],
+    Σ = L Lᵀ (:func:`_cholesky`) and the SQP's QP at p0, started from that KKT point
+    (:func:`_linearise`, :func:`_stationary_point` to y0, :func:`_linear_term`).
+    Returns (status, violation at p̂); _FAILED also when Σ is not positive definite."""
+    n3 = p_hat.shape[0]
+    gain = np.empty((n3, n3))
+    jac = np.empty((1, n3))
+    status, v0, _, lam, _, _, _, _ = _project_pair(p_hat, sigma, idx, geo, k, hints, tol, max_iter, p0, gain, jac)
+    if status != _SOLVED:
+        return status, v0
+    if not _cholesky(sigma, L):
+        return _FAILED, v0
+    duals[k] = -lam if idx[k, 3] == 1 else lam
+    _linearise(p_hat, L, idx, geo, hints, p0, duals, A, lo, hi, P)
+    _stationary_point(A, duals, y0)
+    _linear_term(P, y0, q)
+    return _SOLVED, v0
+
+
+@_kernel
+def _qp_finish_pair(
+    p_hat: np.ndarray, sigma: np.ndarray, L: np.ndarray, y: np.ndarray, p0: np.ndarray, idx: np.ndarray,
+    geo: np.ndarray, k: int, hints: np.ndarray, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+) -> tuple[float, float, bool, float, float, float, float]:
+    """OSQP's point p = p̂ + L y of the QP of :func:`_qp_start_pair` (:func:`_advance`)
+    and eqs. 58–60 there for constraint k (:func:`_certify_pair`; p, gain, jac
+    written). Returns (step from p0, g_k(p), M > 0, λ, u0, u1, u2)."""
+    g = np.empty(idx.shape[0])
+    step = _advance(p_hat, L, y, p0, idx, geo, p, g)
+    ok, lam, u0, u1, u2 = _certify_pair(p_hat, sigma, idx, geo, k, hints, p, gain, jac)
+    return step, g[k], ok, lam, u0, u1, u2
+
+
+def _sqp_work(n3: int, m: int) -> tuple[np.ndarray, ...]:
+    """Buffers of :func:`_sqp`'s QPs: A (m, n3), lo, hi (m), P (n3, n3), q (n3), g (m)."""
+    return np.empty((m, n3)), np.empty(m), np.empty(m), np.empty((n3, n3)), np.empty(n3), np.empty(m)
+
+
+def _seed_duals(p_hat: np.ndarray, L: np.ndarray, lay: _Layout) -> np.ndarray:
+    """Eq. 58's multiplier at p̂ of each violated (or fixed) constraint taken alone,
+    (‖r̂‖ − d)/‖a‖² with a = (r̂/‖r̂‖)ᵀ E B L, in OSQP's sign: the first QP's curvature."""
+    pl = p_hat.tolist()
+    g0, rho0 = lay.g_all(pl)
+    duals = np.zeros(lay.m)
+    for k in range(lay.m):
+        if (g0[k] > 0.0 or lay.code[k] == 2) and rho0[k] > _DEGENERATE_M:
+            blk = L[lay.i3[k] : lay.i3[k] + lay.dims[k]] - L[lay.j3[k] : lay.j3[k] + lay.dims[k]]
+            a = np.asarray([x / rho0[k] for x in lay.r(pl, k)]) @ blk
+            duals[k] = (rho0[k] - lay.d[k]) / float(a @ a)
+    return duals
+
+
 def _sqp(
     p_hat: np.ndarray,
     L: np.ndarray,
     lay: _Layout,
-    g0: list[float],
-    rho0: list[float],
-    hints: dict[int, list[float]] | None,
+    hints: np.ndarray,
     tol: float,
     max_iter: int,
     backend,
     step_tol: float | None = None,
-    start: tuple[np.ndarray, np.ndarray, list[float]] | None = None,
+    start: tuple[np.ndarray, np.ndarray] | None = None,
+    work: tuple[np.ndarray, ...] | None = None,
 ):
     """Sequential QP in y = L⁻¹(p − p̂) with the constraints' curvature.
 
-    Each QP: min ½ yᵀ(I + H)y − (H y_k)ᵀ y  s.t.  lo ≤ A y ≤ hi, with A the
-    distance gradients at p_k (rows a_k = u_kᵀ E B_k L) and
+    Each QP (:func:`_linearise`, :func:`_linear_term`):
+    min ½ yᵀ(I + H)y − (H y_k)ᵀ y  s.t.  lo ≤ A y ≤ hi, with A the distance
+    gradients at p_k (rows a_k = u_kᵀ E B_k L) and
     H = Σ_k y_k (BL_kᵀBL_k − a_k a_kᵀ)/‖r_k‖ = Σ_k y_k Lᵀ∇²‖r_k‖L, y_k the
-    previous QP's multipliers in OSQP's sign (> 0 at an upper bound). The
-    first QP's curvature is seeded with eq. 58's multiplier of each violated
-    constraint at p̂, so it is already a Newton step. Negative curvature
-    (active ``min`` constraints) is scaled down so that I + H ⪰ 0.1 I.
+    previous QP's multipliers in OSQP's sign (> 0 at an upper bound). Without
+    ``start`` the SQP begins at p̂ and the first QP's curvature is seeded with
+    eq. 58's multiplier of each violated constraint (:func:`_seed_duals`), so it
+    is already a Newton step. ``start``: (p0, duals0), a KKT point and its
+    multipliers in OSQP's sign (the projection's), whitened by
+    :func:`_stationary_point`; the first QP is then the Newton step from there,
+    its solution p0 itself. Negative curvature (active ``min`` constraints) is
+    scaled down so that I + H ⪰ 0.1 I.
 
-    ``backend(H, q, A, lo, hi) -> (ok, y, duals)`` solves one QP. Converged:
-    violations ≤ ``tol`` and the step ≤ ``step_tol`` (default ``tol``).
-    ``start``: (p0, y0 = L⁻¹(p0 − p̂), duals0) instead of (p̂, 0, eq. 58 seeds).
-    Returns (p, g(p), duals, iterations, converged), or None on QP failure.
+    ``backend(P, q, A, lo, hi, y_k, duals_k) -> (ok, y, duals)`` solves one QP,
+    warm-started at the linearisation point. Converged: violations ≤ ``tol`` and
+    the step ≤ ``step_tol`` (default ``tol``), or Newton's rate shows the next
+    step would be. ``work``: :func:`_sqp_work` buffers to reuse. Returns (p, g(p),
+    duals, iterations, converged), or None on QP failure; max_iter ≥ 1.
     """
     stol = tol if step_tol is None else step_tol
     n3, m = p_hat.shape[0], lay.m
-    pl = p_hat.tolist()
-    blks = [L[lay.i3[k] : lay.i3[k] + lay.dims[k]] - L[lay.j3[k] : lay.j3[k] + lay.dims[k]] for k in range(m)]
-    btb: list[np.ndarray | None] = [None] * m
-    rhat = [lay.r(pl, k) for k in range(m)]
-    duals = [0.0] * m
-    for k in range(m if start is None else 0):
-        if (g0[k] > 0.0 or lay.code[k] == 2) and rho0[k] > _DEGENERATE_M:
-            a = np.asarray([x / rho0[k] for x in rhat[k]]) @ blks[k]
-            duals[k] = (rho0[k] - lay.d[k]) / float(a @ a)
-    eye = np.eye(n3)
-    y = np.zeros(n3)
-    p, pk = p_hat, pl
-    if start is not None:
-        p, y, duals = start[0], start[1], list(start[2])
-        pk = p.tolist()
-    A = np.empty((m, n3))
-    lo = [0.0] * m
-    hi = [0.0] * m
+    A, lo, hi, P, q, g_new = _sqp_work(n3, m) if work is None else work
+    if start is None:
+        p, duals, y = p_hat, _seed_duals(p_hat, L, lay), np.zeros(n3)
+    else:
+        (p, duals), y = start, np.empty(n3)
     prev_step = math.inf
-    g = g0
     for it in range(1, max_iter + 1):
-        H = None
-        neg = None
-        for k in range(m):
-            r = lay.r(pk, k)
-            rho = math.sqrt(math.fsum([x * x for x in r]))
-            u = [x / rho for x in r] if rho > _DEGENERATE_M else _hint(hints, k, lay.dims[k])
-            a = np.asarray(u) @ blks[k]
-            A[k] = a
-            lin = lay.d[k] - math.fsum([x * z for x, z in zip(u, rhat[k])])
-            code = lay.code[k]
-            lo[k] = -1e30 if code == 0 else lin
-            hi[k] = 1e30 if code == 1 else lin
-            if duals[k] != 0.0 and rho > _DEGENERATE_M:
-                if btb[k] is None:
-                    btb[k] = blks[k].T @ blks[k]
-                curv = (duals[k] / rho) * (btb[k] - np.multiply.outer(a, a))
-                if duals[k] > 0.0:
-                    H = curv if H is None else H + curv
-                else:
-                    neg = curv if neg is None else neg + curv
-        if neg is not None:
-            base = eye if H is None else eye + H
-            t = 1.0
-            for _ in range(30):
-                if np.linalg.eigvalsh(base + t * neg)[0] >= 0.1:
-                    break
-                t *= 0.5
-            else:
-                t = 0.0
-            H = t * neg if H is None else H + t * neg
-        q = None if H is None else -(H @ y)
-        ok, y_new, yd = backend(H, q, A, lo, hi)
+        _linearise(p_hat, L, lay.idx, lay.geo, hints, p, duals, A, lo, hi, P)
+        if it == 1 and start is not None:
+            _stationary_point(A, duals, y)
+        _linear_term(P, y, q)
+        ok, y_new, duals_new = backend(P, q, A, lo, hi, y, duals)
         if not ok:
             return None
-        p_new = p_hat + L @ y_new
-        pn = p_new.tolist()
-        if not math.isfinite(math.fsum(pn)):
+        p_new = np.empty(n3)
+        step = _advance(p_hat, L, y_new, p, lay.idx, lay.geo, p_new, g_new)
+        if not math.isfinite(step):
             return None
-        step = max([abs(x - z) for x, z in zip(pn, pk)])
-        y, duals, p, pk = y_new, yd, p_new, pn
-        g, _ = lay.g_all(pk)
-        if _max_violation(lay, g) <= tol and (
-            step <= stol
-            # Newton (quadratic) convergence: the next step would be ≈ step³/prev²;
-            # the bounds keep this safe even under linear convergence (rate ≤ 0.01)
-            or (step <= 100.0 * stol and step**3 <= 1e-2 * stol * prev_step**2)
-        ):
+        y, duals, p, g = y_new, duals_new, p_new, g_new.tolist()
+        if _settled(_max_violation(lay, g), step, prev_step, tol, stol):
             return p, g, duals, it, True
         prev_step = step
     return p, g, duals, max_iter, False
 
 
+def _settled(viol: float, step: float, prev_step: float, tol: float, stol: float) -> bool:
+    """SQP convergence: violations ≤ tol and the step ≤ stol, or Newton's (quadratic)
+    rate shows the next step (≈ step³/prev²) would be; the bounds keep this safe
+    even under linear convergence (rate ≤ 0.01)."""
+    return viol <= tol and (step <= stol or (step <= 100.0 * stol and step**3 <= 1e-2 * stol * prev_step**2))
+
+
 def _dense_qp_backend(lay: _Layout, tol: float):
-    """Small dense QP solver for :func:`_sqp` (dual active set, no OSQP)."""
-    sgn = np.array([-1.0 if code == 1 else 1.0 for code in lay.code])
+    """Small dense QP solver for :func:`_sqp` (dual active set, no OSQP, no warm start)."""
+    sgn = lay.dual_sign
     is_eq = np.array([code == 2 for code in lay.code])
 
-    def solve(H, q, A, lo, hi):
-        b = np.array([-lo[k] if lay.code[k] == 1 else hi[k] for k in range(lay.m)])
+    def solve(P, q, A, lo, hi, y_warm, duals_warm):
+        b = np.where(sgn < 0.0, -lo, hi)
         Ar = A * sgn[:, None]  # every row as Ar y ≤ b (== for fixed)
-        if H is None:
-            pinv_at, y0 = Ar.T, np.zeros(A.shape[1])
-        else:
-            P = np.eye(A.shape[1]) + H
-            sol = np.linalg.solve(P, np.column_stack([Ar.T, -q]))
-            pinv_at, y0 = sol[:, :-1], sol[:, -1]
+        sol = np.linalg.solve(P, np.column_stack([Ar.T, -q]))
+        pinv_at, y0 = sol[:, :-1], sol[:, -1]
         lam = _dual_active_set(Ar @ pinv_at, Ar @ y0 - b, is_eq, 1e-3 * tol)
-        return True, y0 - pinv_at @ lam, (sgn * lam).tolist()
+        return True, y0 - pinv_at @ lam, sgn * lam
 
     return solve
 
@@ -1048,15 +1219,72 @@ def _dense_qp_backend(lay: _Layout, tol: float):
 # ---------------------------------------------------------------------------
 
 
+def _secular_limits(tol_m: float, max_iter: int) -> tuple[float, int]:
+    """Tolerance on ‖r‖ − d and iteration limit of the secular equation (:func:`_secular`)."""
+    return 1e-3 * tol_m, max(4 * max_iter, 60)
+
+
+def _pair_solution(
+    p_hat: np.ndarray,
+    sigma: np.ndarray,
+    lay: _Layout,
+    k: int,
+    hints: np.ndarray,
+    tol_m: float,
+    max_iter: int,
+    viol0: float | None,
+) -> tuple[ConstraintSolution, dict[int, list[float]]] | None:
+    """Constraint k projected alone (:func:`_project_pair`): (solution, {k: direction}).
+
+    None when that fails, or when another constraint is violated at the result (if
+    they all hold, it is a KKT point of the whole problem with the others'
+    multipliers zero: the optimum when convex). ``viol0`` is the violation at p̂;
+    None with a single constraint, whose kernel call also finds it inactive.
+    """
+    n3 = p_hat.shape[0]
+    p = np.empty(n3)
+    mu = np.empty((n3, n3))
+    G = np.empty((1, n3))
+    status, viol0k, viol1, lam, its, u0, u1, u2 = _project_pair(
+        p_hat, sigma, lay.idx, lay.geo, k, hints, *_secular_limits(tol_m, max_iter), p, mu, G
+    )
+    if status == _INACTIVE:
+        return _unconstrained_solution(p_hat, lay, "projection", 0.0), {}
+    if status == _FAILED:
+        return None
+    if viol0 is None:
+        viol0 = viol0k
+    else:
+        g1, _ = lay.g_all(p.tolist())
+        if any(g1[q] > tol_m for q in range(lay.m) if q != k):
+            return None
+        viol1 = _max_violation(lay, g1)
+    lam_full = np.zeros(lay.m)
+    lam_full[k] = lam
+    sol = ConstraintSolution(
+        p=p, active=[k], multipliers=lam_full, gain=mu,
+        violation_before_m=viol0, violation_after_m=viol1,
+        iterations=its, converged=viol1 <= tol_m, method="projection", jacobian=G,
+    )
+    return sol, {k: [u0, u1, u2][: lay.dims[k]]}
+
+
 def _projection(
     p_hat: np.ndarray,
     sigma: np.ndarray,
     lay: _Layout,
-    hints: dict[int, list[float]] | None,
+    hints: np.ndarray,
     tol_m: float,
     max_iter: int,
     scheme: str = "newton",
 ) -> tuple[ConstraintSolution, dict[int, list[float]]]:
+    """The projection method (module docstring): (solution, directions of its active constraints)."""
+    newton = scheme == "newton" and max_iter > 0
+    if newton and lay.m == 1:
+        # the usual case: a single kernel call, which also finds the constraint inactive
+        out = _pair_solution(p_hat, sigma, lay, 0, hints, tol_m, max_iter, None)
+        if out is not None:
+            return out
     pl = p_hat.tolist()
     g0, _ = lay.g_all(pl)
     viol0 = _max_violation(lay, g0)
@@ -1065,54 +1293,29 @@ def _projection(
         return _unconstrained_solution(p_hat, lay, "projection", viol0), {}
     n3 = p_hat.shape[0]
 
-    if scheme == "newton" and max_iter > 0:
-        # --- fast path: one constraint active ------------------------------
-        # Try each candidate alone (most violated first; a fixed constraint is
-        # always active, so with one only it can be tried). If the result
-        # satisfies every other constraint, it is a KKT point of the whole
-        # problem with the others' multipliers zero (the optimum when convex).
-        if len(W) == 1:
-            singles = W
-        else:
-            fixed = [k for k in W if lay.code[k] == 2]
-            singles = fixed if len(fixed) == 1 else (sorted(W, key=lambda q: -g0[q]) if not fixed else [])
-        sl = sigma.tolist() if singles else None
-        for k in singles:
-            out = _single_fast(p_hat, pl, sl, lay, k, hints, tol_m, max_iter)
-            if out is not None:
-                p, lam, u, mu, G, its = out
-                if lay.m == 1:
-                    r = lay.r(p.tolist(), 0)
-                    g1 = [math.sqrt(math.fsum([x * x for x in r])) - lay.d[0]]
-                    if lay.code[0] == 1:
-                        g1[0] = -g1[0]
-                else:
-                    g1, _ = lay.g_all(p.tolist())
-                if all(g1[q] <= tol_m for q in range(lay.m) if q != k):
-                    lam_full = np.zeros(lay.m)
-                    lam_full[k] = lam
-                    viol1 = _max_violation(lay, g1)
-                    return (
-                        ConstraintSolution(
-                            p=p, active=[k], multipliers=lam_full, gain=mu,
-                            violation_before_m=viol0, violation_after_m=viol1,
-                            iterations=its, converged=viol1 <= tol_m, method="projection",
-                            jacobian=G[None, :],
-                        ),
-                        {k: u},
-                    )
+    if newton:
+        # --- one constraint active: try each candidate alone (most violated first; a
+        # fixed constraint is always active, so with one only it can be tried). A
+        # single constraint was tried above.
+        if lay.m > 1:
+            if len(W) == 1:
+                singles = W
+            else:
+                fixed = [k for k in W if lay.code[k] == 2]
+                singles = fixed if len(fixed) == 1 else (sorted(W, key=lambda q: -g0[q]) if not fixed else [])
+            for k in singles:
+                out = _pair_solution(p_hat, sigma, lay, k, hints, tol_m, max_iter, viol0)
+                if out is not None:
+                    return out
         # --- several candidates: SQP with a dense QP, then eq. 58 at its point ---
         L = _sqrt_cov(sigma)
         if L is not None:
-            _, rho0 = lay.g_all(pl)
-            res = _sqp(
-                p_hat, L, lay, g0, rho0, hints, tol_m, max_iter, _dense_qp_backend(lay, tol_m), 1e-3 * tol_m
-            )
+            res = _sqp(p_hat, L, lay, hints, tol_m, max_iter, _dense_qp_backend(lay, tol_m), 1e-3 * tol_m)
             if res is not None and res[4]:
                 p_s, _, duals, its, _ = res
                 ps_l = p_s.tolist()
                 # λ_k = ±dual (OSQP sign: > 0 at an upper bound, i.e. for max/fixed rows)
-                Ws = [k for k in range(lay.m) if lay.code[k] == 2 or (-duals[k] if lay.code[k] == 1 else duals[k]) > 0.0]
+                Ws = [k for k in range(lay.m) if lay.code[k] == 2 or lay.dual_sign[k] * duals[k] > 0.0]
                 dirs = {k: _direction(lay.r(ps_l, k), hints, k) for k in Ws}
                 try:
                     p, Ws, lam_full, mu, G = _finish(p_hat, sigma, lay, Ws, dirs)
@@ -1179,11 +1382,7 @@ def solve_projection(
         raise ValueError(f"scheme must be 'newton' or 'fixed_point', got {scheme!r}")
     p, s = _check_inputs(p_hat, sigma)
     lay = _layout(p.shape[0] // 3, constraints)
-    hints = None
-    if hint_directions is not None:
-        h = np.asarray(hint_directions, dtype=float).reshape(lay.m, -1)
-        hints = {k: h[k].tolist() for k in range(lay.m)}
-    sol, _ = _projection(p, s, lay, hints, tol_m, max_iter, scheme)
+    sol, _ = _projection(p, s, lay, _hint_array(lay, hint_directions), tol_m, max_iter, scheme)
     return sol
 
 
@@ -1213,12 +1412,12 @@ class ProjectionSolver:
         if scheme not in ("newton", "fixed_point"):
             raise ValueError(f"scheme must be 'newton' or 'fixed_point', got {scheme!r}")
         self.scheme = scheme
-        self._hints: dict[int, list[float]] = {}
+        self._hints = _hint_array(self._lay)
 
     def solve(self, p_hat: Any, sigma: Any) -> ConstraintSolution:
         p, s = _check_inputs(p_hat, sigma, self.n_systems)
         sol, dirs = _projection(p, s, self._lay, self._hints, self.tol_m, self.max_iter, self.scheme)
-        self._hints.update(dirs)
+        _remember(self._hints, dirs)
         return sol
 
 
@@ -1228,47 +1427,73 @@ def _certify(
     lay: _Layout,
     p: np.ndarray,
     g: list[float],
-    hints: dict[int, list[float]] | None,
+    hints: np.ndarray,
     tol_act: float,
 ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, dict[int, list[float]]]:
     """Active set, multipliers and μ at a solution ``p`` (with g = g(p)) found by an
     external solver: candidates are the fixed constraints and those within
     ``tol_act`` of their bound; λ from the stationarity condition at p (least
     squares), inequality constraints with λ ≤ 0 leave one by one."""
-    pl = p.tolist()
     W = [k for k in range(lay.m) if lay.code[k] == 2 or g[k] >= -tol_act]
-    dirs = {k: _direction(lay.r(pl, k), hints, k) for k in W}
     while True:
-        _, W2, lam_full, mu, G = _finish(p_hat, sigma, lay, W, dirs, p_given=p)
+        W2, lam_full, mu, G, dirs = _multipliers_at(p_hat, sigma, lay, W, p, hints)
         wrong = [(lam_full[k], k) for k in W2 if lay.code[k] != 2 and lam_full[k] <= 0.0]
         if not wrong:
-            return W2, lam_full, mu, G, {k: dirs[k] for k in W2}
+            return W2, lam_full, mu, G, dirs
         W = [k for k in W if k != min(wrong)[1]]
+
+
+def _multipliers_at(
+    p_hat: np.ndarray, sigma: np.ndarray, lay: _Layout, W: list[int], p: np.ndarray, hints: np.ndarray
+) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, dict[int, list[float]]]:
+    """(active, multipliers (m,), μ, jacobian, directions) with the constraints W
+    linearised at p and λ from the stationarity condition there (eqs. 58–60)."""
+    if len(W) == 1:  # the usual case: one kernel call
+        k, n3 = W[0], p.shape[0]
+        mu = np.empty((n3, n3))
+        G = np.empty((1, n3))
+        ok, lam, u0, u1, u2 = _certify_pair(p_hat, sigma, lay.idx, lay.geo, k, hints, p, mu, G)
+        if not ok:
+            raise np.linalg.LinAlgError("constraint direction has zero variance")
+        lam_full = np.zeros(lay.m)
+        lam_full[k] = lam
+        return W, lam_full, mu, G, {k: [u0, u1, u2][: lay.dims[k]]}
+    pl = p.tolist()
+    dirs = {k: _direction(lay.r(pl, k), hints, k) for k in W}
+    _, W2, lam_full, mu, G = _finish(p_hat, sigma, lay, W, dirs, p_given=p)
+    return W2, lam_full, mu, G, dirs
 
 
 # ---------------------------------------------------------------------------
 # OSQP
 # ---------------------------------------------------------------------------
 
+_OSQP_SOLVED = 1  # OSQP's status value
+
 
 class QpSolver:
     """Linearised QP of all constraints at once, solved by OSQP (see module docstring).
 
-    Set up once with fixed sparsity; each solve updates P (dense upper triangle),
-    q, A (dense), l, u and warm-starts. ``osqp_settings`` override the defaults
-    (eps_abs = eps_rel = 1e-10, polishing on). ``fast_calls`` uses OSQP's
-    compiled solver object directly for update/solve/solution when available
-    (same operations as ``OSQP.update``/``OSQP.solve`` without their Python
-    bookkeeping, which costs ≈ 25 µs per call); the public API is used otherwise.
+    Set up once with fixed sparsity; each QP updates P (dense upper triangle), q,
+    A (dense), l, u and is warm-started (primal and dual) at the SQP's
+    linearisation point. ``osqp_settings`` override the defaults. ``fast_calls``
+    uses OSQP's compiled solver object directly (the operations of
+    ``OSQP.update``/``warm_start``/``solve`` without their Python bookkeeping);
+    the public API is used otherwise.
 
-    Tolerances: polishing solves the reduced KKT system of the identified active
-    set exactly, so eps 1e-8 gives the same answers as 1e-10 (checked: 5e-8 m
-    from the projection either way) with ~30 % fewer ADMM iterations.
+    Settings: eps_abs = eps_rel = 1e-8 on the whitened QP (y in units of Σ's
+    square root); no scaling (whitening already makes P = I + H); the
+    termination test at every ADMM iteration (warm-started at its solution, a QP
+    stops after one); no polishing (a reduced KKT factorisation per solve, ≈ 10 µs,
+    for accuracy nothing downstream uses: the nonlinear constraints are checked
+    to tol_m at the QP's point and λ, μ are recomputed there by eq. 58).
 
-    ``start="p_hat"`` (default): the SQP starts at p̂, independent of the
-    projection. ``start="projection"``: it starts from the projection's point
-    and multipliers, so OSQP certifies that point (one QP when it is the KKT
-    point, further SQP steps when it is not, e.g. a wrong active set).
+    ``start="projection"`` (default): the SQP starts from the projection's point
+    and multipliers, so one QP certifies that point when it is the KKT point
+    (further SQP steps when it is not, e.g. a wrong active set). With a single
+    constraint that is two kernel calls around one OSQP solve.
+    ``start="p_hat"``: the SQP starts at p̂, independent of the projection
+    (typically 3–4 QPs).
     """
 
     method = "qp"
@@ -1282,7 +1507,7 @@ class QpSolver:
         max_iter: int = 20,
         osqp_settings: dict[str, Any] | None = None,
         fast_calls: bool = True,
-        start: str = "p_hat",
+        start: str = "projection",
     ) -> None:
         import osqp
         import scipy.sparse as sp
@@ -1296,58 +1521,60 @@ class QpSolver:
         self._lay = _Layout(self.n_systems, self.constraints)
         self.tol_m = float(tol_m)
         self.max_iter = int(max_iter)
-        self._hints: dict[int, list[float]] = {}
+        self._hints = _hint_array(self._lay)
         self.fallbacks = 0
         n3 = 3 * self.n_systems
         m = self._lay.m
-        self._n3 = n3
         # CSC of the upper triangle stores column by column: rows 0..j of column j
         cols = np.concatenate([np.full(j + 1, j) for j in range(n3)])
         rows = np.concatenate([np.arange(j + 1) for j in range(n3)])
-        self._p_rows, self._p_cols = rows, cols
-        pdata = (rows == cols).astype(float)
-        P = sp.csc_matrix((pdata, rows, np.concatenate([[0], np.cumsum(np.arange(1, n3 + 1))])), shape=(n3, n3))
+        P = sp.csc_matrix(((rows == cols).astype(float), rows, np.concatenate([[0], np.cumsum(np.arange(1, n3 + 1))])),
+                          shape=(n3, n3))
+        self._p_flat = rows * n3 + cols  # positions of the CSC triangle in a row-major n3×n3
         # A dense m × n3, CSC column-major: entries (0..m-1, j) per column
         a_indptr = np.arange(0, m * n3 + 1, m) if m else np.zeros(n3 + 1, dtype=int)
         a_indices = np.tile(np.arange(m), n3)
         A = sp.csc_matrix((np.ones(m * n3), a_indices, a_indptr), shape=(m, n3))
         settings = dict(
-            eps_abs=1e-8, eps_rel=1e-8, eps_prim_inf=1e-12, eps_dual_inf=1e-12,
-            polishing=True, polish_refine_iter=5, warm_starting=True, verbose=False,
-            max_iter=4000, check_termination=5,
+            eps_abs=1e-8, eps_rel=1e-8, eps_prim_inf=1e-12, eps_dual_inf=1e-12, scaling=0,
+            polishing=False, warm_starting=True, verbose=False, max_iter=4000, check_termination=1,
         )
         if osqp_settings:
             settings.update(osqp_settings)
         self._osqp = osqp.OSQP()
-        self._m = m
         if m:
             self._osqp.setup(P, np.zeros(n3), A, np.full(m, -np.inf), np.full(m, np.inf), **settings)
         ext = getattr(self._osqp, "_solver", None)
         self._fast = bool(
             fast_calls and ext is not None and hasattr(ext, "update_data_mat")
-            and hasattr(ext, "update_data_vec") and hasattr(ext, "solution")
+            and hasattr(ext, "update_data_vec") and hasattr(ext, "warm_start") and hasattr(ext, "solution")
         )
-        self._solved_status = 1  # OSQP_SOLVED
-        self._eye = np.eye(n3)
-        self._zeros = np.zeros(n3)
-        self._p_flat = rows * n3 + cols  # positions of the CSC triangle in a row-major n3×n3
-        self._eye_tri = (rows == cols).astype(float)
+        # QP buffers, reused (OSQP copies the data in); the single-constraint path's
+        # L, projection p0, its multiplier and whitened point y0
+        self._work = _sqp_work(n3, m)
+        self._pair_work = np.empty((n3, n3)), np.empty(n3), np.empty(m), np.empty(n3)
 
     # -- OSQP calls -------------------------------------------------------
-    def _qp(self, Px: np.ndarray, q: np.ndarray, Ax: np.ndarray, l: np.ndarray, u: np.ndarray):
-        l = np.array(l, dtype=float)
-        u = np.array(u, dtype=float)
+    def _qp(self, Px: np.ndarray, q: np.ndarray, Ax: np.ndarray, l: np.ndarray, u: np.ndarray,
+            x0: np.ndarray, y0: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """Update every vector and matrix, warm-start at (x0, y0), solve: (status, x, y)."""
         if self._fast:
             ext = self._osqp._solver
-            ext.update_data_vec(q=q, l=l, u=u)
-            ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            ext.update_data_vec(q, l, u)
+            ext.update_data_mat(Px, None, Ax, None)
+            ext.warm_start(x0, y0)
             ext.solve()
-            status = int(ext.info.status_val)
             sol = ext.solution
-            return status, np.array(sol.x), np.array(sol.y)
+            return ext.info.status_val, sol.x, sol.y
         self._osqp.update(Px=Px, q=q, Ax=Ax, l=l, u=u)
+        self._osqp.warm_start(x=x0, y=y0)
         res = self._osqp.solve(raise_error=False)
-        return int(res.info.status_val), np.array(res.x), np.array(res.y)
+        return res.info.status_val, res.x, res.y
+
+    def _backend(self, P, q, A, lo, hi, y_warm, duals_warm):
+        """One QP of :func:`_sqp` through OSQP."""
+        status, y, duals = self._qp(P.take(self._p_flat), q, A.ravel(order="F"), lo, hi, y_warm, duals_warm)
+        return status == _OSQP_SOLVED, y, duals
 
     def solve(self, p_hat: Any, sigma: Any) -> ConstraintSolution:
         p_hat, sigma = _check_inputs(p_hat, sigma, self.n_systems)
@@ -1362,50 +1589,81 @@ class QpSolver:
     def _fallback(self, p_hat: np.ndarray, sigma: np.ndarray) -> ConstraintSolution:
         self.fallbacks += 1
         sol, dirs = _projection(p_hat, sigma, self._lay, self._hints, self.tol_m, max(self.max_iter, 1))
-        self._hints.update(dirs)
+        _remember(self._hints, dirs)
         sol.fallback = True
         return sol
 
-    def _backend(self, H, q, A, lo, hi):
-        """One QP through OSQP (fixed sparsity: dense triangle of P, dense A)."""
-        if H is None:
-            Px, q = self._eye_tri, self._zeros
-        else:
-            Px = (self._eye + H).take(self._p_flat)
-        Ax = A[0] if self._m == 1 else A.T.reshape(-1)
-        status, y, yd = self._qp(Px, q, Ax, lo, hi)
-        return status == self._solved_status, y, yd.tolist()
-
     def _solve(self, p_hat: np.ndarray, sigma: np.ndarray) -> ConstraintSolution | None:
+        if self.start == "projection" and self._lay.m == 1 and self.max_iter > 0:
+            sol = self._solve_pair(p_hat, sigma)
+            if sol is not None:
+                return sol
+        return self._solve_sqp(p_hat, sigma)
+
+    def _solve_pair(self, p_hat: np.ndarray, sigma: np.ndarray) -> ConstraintSolution | None:
+        """The usual case, one constraint: its projection certified by one QP, with
+        a kernel call either side of OSQP (:func:`_qp_start_pair`,
+        :func:`_qp_finish_pair`). None when that QP does not settle it, as judged by
+        :func:`_sqp` and :func:`_certify`, or fails: then the general SQP runs."""
         lay = self._lay
-        g0, rho0 = lay.g_all(p_hat.tolist())
-        viol0 = _max_violation(lay, g0)
-        if not lay.has_fixed and all(x <= 0.0 for x in g0):
+        n3 = p_hat.shape[0]
+        A, lo, hi, P, q, _ = self._work
+        L, p0, duals, y0 = self._pair_work
+        tol, its = _secular_limits(self.tol_m, self.max_iter)
+        status, viol0 = _qp_start_pair(p_hat, sigma, lay.idx, lay.geo, 0, self._hints, tol, its,
+                                       L, p0, duals, y0, A, lo, hi, P, q)
+        if status == _INACTIVE:
+            return _unconstrained_solution(p_hat, lay, "qp", viol0)
+        if status != _SOLVED:
+            return None
+        ok, y, _ = self._backend(P, q, A, lo, hi, y0, duals)
+        if not ok:
+            return None
+        p = np.empty(n3)
+        mu = np.empty((n3, n3))
+        G = np.empty((1, n3))
+        step, g, ok, lam, u0, u1, u2 = _qp_finish_pair(p_hat, sigma, L, y, p0, lay.idx, lay.geo, 0, self._hints,
+                                                        p, mu, G)
+        viol1 = _max_violation(lay, [g])
+        if not (ok and _settled(viol1, step, math.inf, self.tol_m, self.tol_m)
+                and (lay.has_fixed or (g >= -10.0 * self.tol_m and lam > 0.0))):
+            return None
+        _remember(self._hints, {0: [u0, u1, u2][: lay.dims[0]]})
+        return ConstraintSolution(
+            p=p, active=[0], multipliers=np.array([lam]), gain=mu,
+            violation_before_m=viol0, violation_after_m=viol1,
+            iterations=1, converged=True, method="qp", jacobian=G,
+        )
+
+    def _solve_sqp(self, p_hat: np.ndarray, sigma: np.ndarray) -> ConstraintSolution | None:
+        """The general case: SQP from the projection or from p̂, then :func:`_certify`."""
+        lay = self._lay
+        ref = None
+        if self.start == "projection":
+            ref, _ = _projection(p_hat, sigma, lay, self._hints, self.tol_m, self.max_iter)
+            viol0 = ref.violation_before_m
+        else:
+            viol0 = _max_violation(lay, lay.g_all(p_hat.tolist())[0])
+        if viol0 == 0.0 and not lay.has_fixed:
             return _unconstrained_solution(p_hat, lay, "qp", viol0)
         if self.max_iter <= 0:
             return None
         L = _sqrt_cov(sigma)
         if L is None:
             return None
-        start = None
-        if self.start == "projection":
-            ref, _ = _projection(p_hat, sigma, lay, self._hints, self.tol_m, self.max_iter)
-            # p_ref − p̂ = −Σ Jᵀλ = −L Lᵀ Jᵀλ, so y0 = −Lᵀ Jᵀλ; OSQP's multiplier sign is
-            # > 0 at an upper bound (max, fixed) and < 0 for min
-            y0 = -(L.T @ (ref.jacobian.T @ ref.multipliers[ref.active])) if ref.active else np.zeros(p_hat.shape[0])
-            duals0 = [(-x if lay.code[k] == 1 else x) for k, x in enumerate(ref.multipliers.tolist())]
-            start = (ref.p, y0, duals0)
-        res = _sqp(p_hat, L, lay, g0, rho0, self._hints, self.tol_m, self.max_iter, self._backend, start=start)
+        start = None if ref is None else (ref.p, lay.dual_sign * ref.multipliers)
+        res = _sqp(p_hat, L, lay, self._hints, self.tol_m, self.max_iter, self._backend, start=start, work=self._work)
         if res is None or not res[4]:
             return None
         p, g, _, it, _ = res
         W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, g, self._hints, 10.0 * self.tol_m)
-        self._hints.update(dirs)
+        _remember(self._hints, dirs)
         return ConstraintSolution(
             p=p, active=W, multipliers=lam_full, gain=mu,
             violation_before_m=viol0, violation_after_m=_max_violation(lay, g),
             iterations=it, converged=True, method="qp", jacobian=G,
         )
+
 
 
 def _kkt_polish(
@@ -1414,7 +1672,7 @@ def _kkt_polish(
     lay: _Layout,
     W: list[int],
     p: np.ndarray,
-    hints: dict[int, list[float]] | None,
+    hints: np.ndarray,
     tol_m: float,
     max_steps: int = 6,
 ) -> np.ndarray | None:
@@ -1517,7 +1775,7 @@ class SocpSolver:
         self._lay = lay = _Layout(self.n_systems, self.constraints)
         self.tol_m = float(tol_m)
         self.max_iter = int(max_iter)
-        self._hints: dict[int, list[float]] = {}
+        self._hints = _hint_array(lay)
         self.fallbacks = 0
         n3 = 3 * self.n_systems
         self._n3 = n3
@@ -1564,7 +1822,7 @@ class SocpSolver:
         if sol is None:
             self.fallbacks += 1
             sol, dirs = _projection(p_hat, sigma, self._lay, self._hints, self.tol_m, max(self.max_iter, 1))
-            self._hints.update(dirs)
+            _remember(self._hints, dirs)
             sol.fallback = True
         return sol
 
@@ -1638,7 +1896,7 @@ class SocpSolver:
         if not converged:
             return None
         W, lam_full, mu, G, dirs = _certify(p_hat, sigma, lay, p, g, self._hints, 10.0 * self.tol_m)
-        self._hints.update(dirs)
+        _remember(self._hints, dirs)
         return ConstraintSolution(
             p=p, active=W, multipliers=lam_full, gain=mu,
             violation_before_m=viol0, violation_after_m=_max_violation(lay, g),
