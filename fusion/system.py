@@ -56,14 +56,14 @@ class SensorSystem(ABC):
 
     # --- time -----------------------------------------------------------------
     @property
-    @abstractmethod
     def t_start(self) -> float:
-        """Time of the first state (s)."""
+        """Time of the first state (s): the first sample."""
+        return float(self.sample_times()[0])
 
     @property
-    @abstractmethod
     def t_end(self) -> float:
         """Time of the last sample (s)."""
+        return float(self.sample_times()[-1])
 
     @property
     @abstractmethod

@@ -142,14 +142,6 @@ class FootIns(SensorSystem):
 
     # --- time ---------------------------------------------------------------------
     @property
-    def t_start(self) -> float:
-        return float(self.stream.t[0])
-
-    @property
-    def t_end(self) -> float:
-        return float(self.stream.t[-1])
-
-    @property
     def t_now(self) -> float:
         return float(self.stream.t[self._i])
 

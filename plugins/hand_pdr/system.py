@@ -250,14 +250,6 @@ class HandPdr(SensorSystem):
 
     # --- time -------------------------------------------------------------------
     @property
-    def t_start(self) -> float:
-        return float(self.t[0])
-
-    @property
-    def t_end(self) -> float:
-        return float(self.t[-1])
-
-    @property
     def t_now(self) -> float:
         return self._tc
 

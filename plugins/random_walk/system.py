@@ -64,14 +64,6 @@ class RandomWalk(SensorSystem):
         self._i = 0
 
     @property
-    def t_start(self) -> float:
-        return float(self.t[0])
-
-    @property
-    def t_end(self) -> float:
-        return float(self.t[-1])
-
-    @property
     def t_now(self) -> float:
         return float(self.t[self._i])
 
