@@ -23,9 +23,7 @@ CONFIGS = ROOT / "configs"
 FOOT = read_yaml(CONFIGS / "dual_foot_vicon.yaml")["systems"]["left_foot"]
 WALK = {"duration_s": 10.0, "start_m": [1.3, 2.7, 0.1], "increment_variance_m2": 0.01}
 
-# Parameters the built-ins document nowhere (no description, no attribute docstring, not
-# named in their model's docstring). A ratchet: documenting one makes its entry stale and
-# the check fails until it is removed here. Core fix: give each a Field(description=...).
+
 # --------------------------------------------------------------------------- built-ins
 
 

@@ -14,6 +14,7 @@ class GnssSourceConfig(StrictModel):
     GNSS lines of the phone log (``phone_log``: the system's own ``phone_log`` file)."""
 
     format: Literal["csv", "nmea", "phone_log"] = "csv"
+    """csv, nmea or phone_log."""
     path: DataPath | None = None
     """File of fixes (csv, nmea); relative to the layout file."""
     time_column: str = "t"
@@ -94,8 +95,11 @@ class PdrInitialConfig(StrictModel):
     heading_deg: float | Literal["gnss_track", "auto"] = "gnss_track"
     align_distance_m: float = Field(default=15.0, gt=0)
     position_sd_m: float = Field(default=5.0, gt=0)
+    """Initial horizontal position one-sigma, m."""
     heading_sd_deg: float = Field(default=10.0, gt=0)
+    """Initial heading one-sigma, degrees."""
     height_sd_m: float = Field(default=5.0, gt=0)
+    """Initial height one-sigma, m."""
 
 
 class HandPdrConfig(StrictModel):

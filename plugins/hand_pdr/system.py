@@ -246,6 +246,7 @@ class HandPdr(SensorSystem):
             self.gnss_counts["heading_accepted" if okh else "heading_rejected"] += 1
 
     def _record(self) -> None:
+        """History row: time, position (m), position one-sigma (m)."""
         self._hist.append((self._tc, *self.x[:3], *np.sqrt(np.maximum(np.diag(self.P)[:3], 0.0))))
 
     # --- time -------------------------------------------------------------------
@@ -263,7 +264,11 @@ class HandPdr(SensorSystem):
                 self._gnss(idx)
             self._record()
             self._next += 1
-        self._propagate_to(min(t, self.t_end))
+        i = int(np.searchsorted(self.t, t, side="right")) - 1
+        if i >= 0:
+            self._propagate_to(float(self.t[i]))  # the state refers to the last sample at or before t
+        if t >= self.t_end and self._hist[-1][0] < self._tc:
+            self._record()  # the trajectory covers the whole data span
 
     # --- heading ------------------------------------------------------------------
     @property
@@ -287,9 +292,14 @@ class HandPdr(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        changed = bool(np.any(dx)) or not np.array_equal(P, self.P)
         self.x += dx[NOMINAL]
         self.P = 0.5 * (P + P.T)
-        self._record()
+        if self._hist[-1][0] == self._tc:  # corrected at an event: that record shows it
+            self._hist.pop()
+            self._record()
+        elif changed:
+            self._record()
 
     def track_transition(self) -> None:
         self.phi = np.eye(8)
