@@ -43,16 +43,31 @@ def detect_steps(t: np.ndarray, acc_b: np.ndarray, cfg: StepConfig, gravity: flo
     return peaks
 
 
-def step_lengths(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:
-    """Length (m) of each step: Weinberg's K·(a_max − a_min)^(1/4) of the low-passed ‖f‖ over the
-    samples since the previous step (the first step: the same span before it), or constant."""
-    if cfg.length == "constant" or len(steps) == 0:
-        return np.full(len(steps), cfg.constant_m)
+def weinberg_features(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:
+    """(a_max − a_min)^(1/4) of the low-passed ‖f‖ (m/s^2) over the samples since the previous
+    step (the first step: the same span before it), one per step."""
     rate = 1.0 / np.median(np.diff(t))
     a = lowpass(np.linalg.norm(acc_b, axis=1), rate, cfg.lowpass_hz)
     bounds = np.concatenate([[max(0, steps[0] - (steps[1] - steps[0] if len(steps) > 1 else int(rate)))], steps])
     out = np.empty(len(steps))
     for k in range(len(steps)):
         span = a[bounds[k]:bounds[k + 1] + 1]
-        out[k] = cfg.weinberg_k * max(span.max() - span.min(), 0.0) ** 0.25
+        out[k] = max(span.max() - span.min(), 0.0) ** 0.25
     return out
+
+
+def step_lengths(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:
+    """Length (m) of each step: Weinberg's K·(a_max − a_min)^(1/4), or constant."""
+    if cfg.length == "constant" or len(steps) == 0:
+        return np.full(len(steps), cfg.constant_m)
+    return cfg.weinberg_k * weinberg_features(t, acc_b, steps, cfg)
+
+
+def calibrate_weinberg_k(t: np.ndarray, acc_b: np.ndarray, distance_m: float, cfg: StepConfig,
+                         gravity: float) -> float:
+    """K such that the steps of a walk of known length ``distance_m`` (m) add up to it."""
+    steps = detect_steps(t, acc_b, cfg, gravity)
+    features = weinberg_features(t, acc_b, steps, cfg)
+    if features.sum() <= 0:
+        raise ValueError("no steps to calibrate on")
+    return float(distance_m / features.sum())
