@@ -103,7 +103,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         csv = folder / "foot.csv"
-        n = synthetic_stream(csv, args.hours, args.rate)
+        synthetic_stream(csv, args.hours, args.rate)
         layout = write_layout(folder, csv)
         env = dict(os.environ, NUMBA_CACHE_DIR=str(folder / "numba_cache"))
         cold = []

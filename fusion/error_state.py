@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fusion.quaternion import quat_from_rotvec, quat_multiply, quat_normalise
 
@@ -190,3 +191,14 @@ def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: 
         for c in range(3):
             nis += y[r] * Si[r, c] * y[c]
     return nis
+
+
+def error_between(x_true: np.ndarray, x_est: np.ndarray) -> np.ndarray:
+    """The error state (15,) of nominal ``x_est`` against ``x_true`` (both (16,)): true minus
+    estimated, δθ = rotvec(q_true ⊗ q_est⁻¹) in the navigation frame (the inverse of :func:`inject`)."""
+    dx = np.empty(ERROR_SIZE)
+    dx[0:6] = x_true[0:6] - x_est[0:6]
+    r = Rotation.from_quat(x_true[6:10], scalar_first=True) * Rotation.from_quat(x_est[6:10], scalar_first=True).inv()
+    dx[6:9] = r.as_rotvec()
+    dx[9:15] = x_true[10:16] - x_est[10:16]
+    return dx

@@ -432,7 +432,7 @@ def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float,
     """
     from scipy.spatial.transform import Rotation
 
-    from fusion.error_state import ERROR_SIZE, accumulate_propagation, inject
+    from fusion.error_state import ERROR_SIZE, accumulate_propagation, error_between, inject
     from fusion.strapdown import NOMINAL_SIZE, mechanise
 
     rng = np.random.default_rng(seed)
@@ -449,13 +449,7 @@ def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float,
         inject(out, np.ascontiguousarray(dx, dtype=np.float64))
         return out
 
-    def difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        dx = np.empty(ERROR_SIZE)
-        dx[0:6] = a[0:6] - b[0:6]
-        r = Rotation.from_quat(a[6:10], scalar_first=True) * Rotation.from_quat(b[6:10], scalar_first=True).inv()
-        dx[6:9] = r.as_rotvec()
-        dx[9:15] = a[10:16] - b[10:16]
-        return dx
+    difference = error_between
 
     cases = []
     for k, (acc, gyro) in enumerate(zip(np.asarray(acc_b, dtype=float), np.asarray(gyro_b, dtype=float))):

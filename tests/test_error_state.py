@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fusion.error_state import ERROR_SIZE, inject, inv3_sym, propagate_covariance, update_selected
+from fusion.error_state import ERROR_SIZE, error_between, inject, inv3_sym, propagate_covariance, update_selected
 from fusion.strapdown import NOMINAL_SIZE, mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
 
@@ -38,14 +38,6 @@ def random_spd(rng: np.random.Generator, n: int = ERROR_SIZE, scale: float = 1.0
     return scale * (A @ A.T / n + 0.1 * np.eye(n))
 
 
-def error_between(x_true: np.ndarray, x_est: np.ndarray) -> np.ndarray:
-    """δx = true − estimated with δθ = rotvec(q_true ⊗ q_est⁻¹) (nav frame, left)."""
-    dx = np.empty(ERROR_SIZE)
-    dx[0:6] = x_true[0:6] - x_est[0:6]
-    r = Rotation.from_quat(x_true[6:10], scalar_first=True) * Rotation.from_quat(x_est[6:10], scalar_first=True).inv()
-    dx[6:9] = r.as_rotvec()
-    dx[9:15] = x_true[10:16] - x_est[10:16]
-    return dx
 
 
 def step(x: np.ndarray, acc: np.ndarray, gyro: np.ndarray, dt: float):

@@ -178,21 +178,28 @@ def _write_imu_csv(path: Path, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                comments="")
 
 
-def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemOutput:
+def measured_imu(motion, name: str, imu: ImuErrorConfig, ctx: SimContext) -> tuple[np.ndarray, np.ndarray]:
+    """What the IMU of system ``name`` riding ``motion`` reports: ideal specific force and
+    rate at the scenario's samples, corrupted by its error model from its own random streams."""
     sc = ctx.scenario
+    acc, gyro = ideal_imu(motion, ctx.t, sc.gravity_mps2)
+    errors = imu.resolve()
+    rngs = error_generators(ctx.seed, name)
+    return (corrupt(acc, sc.rate_hz, errors.acc, rngs, "acc"),
+            corrupt(gyro, sc.rate_hz, errors.gyro, rngs, "gyro"))
+
+
+def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemOutput:
     motion = ctx.plan.feet[cfg.foot].mounted(cfg.mount_yaw_deg)
     t = ctx.t
-    acc, gyro = ideal_imu(motion, t, sc.gravity_mps2)
-    errors = cfg.imu.resolve()
-    rngs = error_generators(ctx.seed, name)
-    acc = corrupt(acc, sc.rate_hz, errors.acc, rngs, "acc")
-    gyro = corrupt(gyro, sc.rate_hz, errors.gyro, rngs, "gyro")
+    acc, gyro = measured_imu(motion, name, cfg.imu, ctx)
     stance = motion.stance_flags(t.size)
     csv_path = ctx.out_dir / f"{name}_imu.csv"
     _write_imu_csv(csv_path, t, acc, gyro, stance)
 
     pos = motion.evaluate(t).pos
     azimuth = math.degrees(float(motion.footprint_az[0])) + cfg.mount_yaw_deg
+    errors = cfg.imu.resolve()
     filt: dict[str, Any] = {"kind": "ekf", "earth_rate": False}
     for key, value in (("acc_noise_density", errors.acc.noise_density),
                        ("gyro_noise_density", errors.gyro.noise_density),
@@ -254,11 +261,7 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
                          mount_yaw_deg=cfg.mount_yaw_deg, sway=cfg.sway,
                          heading_smoothing_m=cfg.heading_smoothing_m)
     t = ctx.t
-    acc, gyro = ideal_imu(motion, t, sc.gravity_mps2)
-    errors = cfg.imu.resolve()
-    rngs = error_generators(ctx.seed, name)
-    acc = corrupt(acc, sc.rate_hz, errors.acc, rngs, "acc")
-    gyro = corrupt(gyro, sc.rate_hz, errors.gyro, rngs, "gyro")
+    acc, gyro = measured_imu(motion, name, cfg.imu, ctx)
     steps = np.zeros(t.size, dtype=bool)
     steps[heel_strikes(ctx.plan)] = True
     imu_path = ctx.out_dir / f"{name}_imu.csv"
