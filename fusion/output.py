@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fusion.errors import FusionError
 from fusion.metrics import loop_closure_m, path_length_m
-from fusion.run import RunResult, samples_total
+
+if TYPE_CHECKING:
+    from fusion.run import RunResult
 
 TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
 
@@ -79,7 +82,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     inp = result.input_report
     doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
                     "notes": inp.notes}
-    samples = samples_total(result)
+    samples = result.samples
     nav_s = result.timings_s["navigation_s"]
     doc["runtime"] = {"wall_s": total_wall_s, "samples": samples,
                       "samples_per_s": samples / nav_s if nav_s > 0 else 0.0,

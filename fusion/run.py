@@ -15,6 +15,7 @@ from fusion.errors import ConfigError
 from fusion.fuser import Fuser, FuserReport
 from fusion.heading import align_headings
 from fusion.metrics import PlanarTransform, SystemScore, score_systems
+from fusion.output import write_outputs
 from fusion.phone_log import read_getsensordata
 from fusion.plugins import get_registry
 from fusion.readers import read_truth_csv, read_truth_long_csv
@@ -37,6 +38,11 @@ class RunResult:
     heading_rotations_rad: dict[str, float]
     geodetic_origin: tuple[float, float, float] | None
     timings_s: dict[str, float]
+
+    @property
+    def samples(self) -> int:
+        """Input samples of every system together."""
+        return int(np.sum([s.samples for s in self.systems.values()]))
 
     @property
     def input_report(self) -> InputReport:
@@ -135,15 +141,9 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
         seed: int = 0) -> tuple[RunResult, Path]:
     """Load, run, and write outputs; returns the result and the output folder."""
-    from fusion.output import write_outputs
-
     t0 = time.perf_counter()
     loaded = load_layout(config_path, overrides)
     result = run_layout(loaded, seed)
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
     write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0)
     return result, out
-
-
-def samples_total(result: RunResult) -> int:
-    return int(np.sum([s.samples for s in result.systems.values()]))
