@@ -22,40 +22,44 @@ Kinds (DESIGN.md "Smoothing"; Shen et al. 2025, Technologies 13(7) 296, §3):
   block's forward covariances rebuilt from a checkpoint) or each segment on its own.
   The filter's error estimate is zero after every injection, so the recursion runs on
   the injected corrections: δx_{k|N} = K_k (δx_{k+1|N} + dx_{k+1}).
-* ``fb``: per segment, the forward filter's states and covariances; a backward
-  navigation (mechanisation backward in time: negated angular rates, Earth rate and
-  velocity, same specific force) with its own error filter and ZUPTs, started from the
-  forward filter's state at the segment end; the two fused by covariance over p, v, θ
-  (paper eqs. of §3.3), and position re-integrated (trapezoid) from the fused velocity.
+* ``fb``: per segment, a forward pass — the filter re-run over the segment
+  (:func:`~fusion.smoothing_kernels.forward_rerun_block`) from the previous segment's
+  fused end state (attitude, velocity, position, biases and the 15×15 covariance as
+  fused; the first segment from the filter's initial state, so it is the filter) — and a
+  backward navigation (mechanisation backward in time: negated angular rates, Earth rate
+  and velocity, same specific force) with its own error filter and ZUPTs, started from
+  the forward pass's state and covariance at the segment end; the two fused by
+  covariance (paper eqs. of §3.3). The fused end state seeds the next segment.
 * ``fb-rts``: as ``fb`` with both passes RTS-smoothed over the segment first (the paper's
-  scheme). The re-integrated position chain carries from segment to segment: a segment
-  starts at the previous one's smoothed end position.
+  scheme).
 
 Choices where the paper is vague (documented here, stated in the report):
 
-* The backward pass starts from the forward *filter* state and covariance at the segment
+* The backward pass starts from the forward pass's state and covariance at the segment
   end (velocity and gyro bias negated). The paper does not say how the backward pass is
   initialised; at a stance midpoint the ZUPTs have pinned the velocity and the level, so
   this costs little and keeps one estimate of heading and position.
-* The paper seeds the next segment's forward navigation with the fused end state. Here the
-  forward filter is *not* re-seeded: at a stance midpoint the fused attitude and velocity
-  equal the forward filter's to within the ZUPT noise (the backward pass starts there),
-  and keeping the forward filter causal leaves the fuser's constraint corrections in
-  the forward pass and avoids counting the backward pass twice. What carries over is the
-  position: the smoothed chain starts each segment at the previous segment's end.
-* Biases are not fused (the forward pass's are kept); only p, v, θ are (the paper fuses
-  attitude, velocity and position). The reported position sd is that of the fused
-  position, before re-integration (the re-integrated position's own covariance is not
-  propagated).
+* Fusion: the backward pass's p, v, θ are a measurement of the forward pass's (the
+  paper fuses attitude, velocity and position); the biases move with their forward
+  cross-covariances. The two passes share the data (and the backward pass starts from
+  the forward end state), so the fused covariance is optimistic — the paper's scheme
+  counts it so too, and it is what seeds the next segment.
+* Corrections made outside the filter's compiled loop (fuser constraints, position
+  fixes) are carried into the forward re-run: the original filter's correction at that
+  sample is injected into the re-run state and its covariance replaced by the one the
+  correction left. The record does not hold the other feet or the fixes, so they are
+  not recomputed for the re-run state.
 * Constraints: the fuser applies them in the forward pass (``fuser.method``); with
   ``smoother.constrain_smoothed`` they are applied again, in position space with the
   smoothed position variances, at every sample where the smoothed tracks violate them.
 
 Streaming. FB and FB-RTS run segment by segment in time order and need only the
-segment's samples and the forward filter up to its end: a segment's smoothed output is
-available as soon as the forward filter has reached the segment's end (one stride after
-its start). The compute time of each segment (the latency after the segment's last
-sample) is measured and reported (``latency_ms``: mean, p95, max).
+segment's samples, the previous segment's fused end state and the filter's corrections
+made outside its loop: a segment's smoothed output is available as soon as its last
+sample has arrived (one stride after its start). The compute time of each segment (the
+latency after the segment's last sample) is measured and reported (``latency_ms``: mean,
+p95, max; every segment's in :attr:`SmoothingResult.segment_latency_ms`;
+``benchmarks/smoothing_latency.py``).
 
 Smoothing never fails a run: a run too short, without stance or where anything
 raises, keeps the filter's result and counts a warning (``warnings`` in the system's
@@ -73,7 +77,8 @@ import numpy as np
 
 from fusion import detectors
 from fusion.config import ConstraintConfig, FuserConfig, SmootherConfig
-from fusion.smoothing_kernels import apply_smoothed, backward_block, forward_block, fuse_block, rts_block
+from fusion.smoothing_kernels import (apply_smoothed, backward_block, forward_block, forward_rerun_block, fuse_block,
+                                     rts_block)
 
 log = logging.getLogger(__name__)
 
@@ -84,11 +89,13 @@ MIN_SAMPLES = 10
 @dataclass
 class SmoothingResult:
     """Smoothed nominal states (n, 16) and position variances (n, 3), or None (the filter's
-    result stands), with the run's diagnostics."""
+    result stands), with the run's diagnostics; for FB and FB-RTS also the compute time
+    of every segment in time order (ms; the diagnostics keep only its summary)."""
 
     x: np.ndarray | None
     pos_var: np.ndarray | None
     diagnostics: dict = field(default_factory=dict)
+    segment_latency_ms: np.ndarray | None = None
 
 
 def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_segment_s: float) -> np.ndarray:
@@ -170,6 +177,7 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
     gain_failures = 0
     fusion_failures = 0
     P_last = None
+    latencies = None
     if cfg.kind == "rts":
         # checkpoints: the filter's posterior covariance at every boundary
         ckpt = np.empty((bounds.size, 15, 15))
@@ -197,28 +205,31 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
         bw = _Buffers(size)
         counters = np.zeros(1)
         latencies = []
-        P_a = np.ascontiguousarray(rec["P0"], dtype=np.float64)
-        seed = hist_x[0, 0:3].copy()
+        P_a = np.ascontiguousarray(rec["P0"], dtype=np.float64)  # the original filter's, at a
+        P_b = np.empty((15, 15))
+        x_seed = hist_x[0].copy()  # the forward pass's seed: the filter's initial state, then
+        P_seed = P_a.copy()        # the previous segment's fused end state
+        P_fused = np.empty((15, 15))
         for k in range(bounds.size - 1):
             a, b = int(bounds[k]), int(bounds[k + 1])
             L = b - a
             t0 = time.perf_counter_ns()
-            P_b = forward_block(hist_x, t, acc, gyro, stance, params, a, b, P_a, ov_idx, ov_P, True,
-                                fw.Ppost, fw.Pprior, fw.Phi, fw.dx)
-            backward_block(hist_x[b], P_b, t, acc, gyro, stance, params, a, b, bw.x, bw.Ppost, bw.Pprior,
+            forward_rerun_block(x_seed, P_seed, hist_x, t, acc, gyro, stance, params, a, b, P_a, ov_idx, ov_P,
+                                fw.x, fw.Ppost, fw.Pprior, fw.Phi, fw.dx, P_b)
+            backward_block(fw.x[L], fw.Ppost[L], t, acc, gyro, stance, params, a, b, bw.x, bw.Ppost, bw.Pprior,
                            bw.Phi, bw.dx, counters)
             if use_rts:
                 gain_failures += rts_block(fw.Ppost, fw.Pprior, fw.Phi, fw.dx, L, empty, fw.Ppost[L], fw.dxs, fw.Ps)
                 gain_failures += rts_block(bw.Ppost, bw.Pprior, bw.Phi, bw.dx, L, empty, bw.Ppost[L], bw.dxs, bw.Ps)
-                apply_smoothed(hist_x, a, L, fw.dxs, fw.Ps, fw.xs, fw.var, 0)
+                apply_smoothed(fw.x, 0, L, fw.dxs, fw.Ps, fw.xs, fw.var, 0)
                 apply_smoothed(bw.x, 0, L, bw.dxs, bw.Ps, bw.xs, bw.var, 0)
-                fusion_failures += fuse_block(fw.xs, fw.Ps, bw.xs, bw.Ps, L, a, t, seed, out_x, out_var)
+                fusion_failures += fuse_block(fw.xs, fw.Ps, bw.xs, bw.Ps, L, a, out_x, out_var, P_fused)
             else:
-                fusion_failures += fuse_block(hist_x[a:b + 1], fw.Ppost, bw.x, bw.Ppost, L, a, t, seed, out_x,
-                                              out_var)
+                fusion_failures += fuse_block(fw.x, fw.Ppost, bw.x, bw.Ppost, L, a, out_x, out_var, P_fused)
             latencies.append((time.perf_counter_ns() - t0) / 1e6)
-            seed = out_x[b, 0:3].copy()
-            P_a = P_b
+            x_seed = out_x[b].copy()
+            P_seed = P_fused.copy()
+            P_a = P_b.copy()
         P_last = P_a
         diag["backward_zupts"] = int(counters[0])
         diag["latency_ms"] = _latency(latencies)
@@ -228,7 +239,7 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
     diag["covariance_rebuild_rel_error"] = float(np.max(np.abs(P_last - P_end)) / max(np.max(np.abs(P_end)), 1e-300))
     if not np.all(np.isfinite(out_x)) or not np.all(np.isfinite(out_var)):
         return warn("smoother produced non-finite states")
-    return SmoothingResult(out_x, out_var, diag)
+    return SmoothingResult(out_x, out_var, diag, None if latencies is None else np.asarray(latencies))
 
 
 def smooth_system(system, cfg: SmootherConfig) -> SmoothingResult:

@@ -173,6 +173,92 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
 
 
 @numba.njit(cache=True)
+def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray,
+                        gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, a: int, b: int,
+                        Porig_a: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, xf: np.ndarray,
+                        Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray,
+                        Porig_b: np.ndarray) -> None:
+    """Forward filter re-run over a ≤ i ≤ b from the seed x_a / P_a (FB, FB-RTS: the previous
+    segment's fused end state), j = i − a.
+
+    The filter's steps: mechanisation (two-sample memory started from sample a with the
+    seed's biases), covariance propagation, ZUPT/ZARU (state and covariance) at stance
+    samples. Corrections made outside the compiled loop (fuser constraints, position fixes;
+    sample indices ``ov_idx``) are carried over: the original filter's correction there,
+    recorded posterior ⊖ (recorded prior after its own ZUPT/ZARU), is injected into the
+    re-run state and the covariance becomes the one the correction left (``ov_P``). For
+    that, the original filter's covariance is rebuilt alongside from ``Porig_a`` (as in
+    :func:`forward_block`); its value at b goes to ``Porig_b``.
+
+    Fills ``xf`` (nominal states), ``Ppost``, ``Pprior``, ``Phi``, ``dx`` (0 … L)."""
+    q_diag = process_noise_diag(params)
+    g = params[P_GRAVITY]
+    w_ie = params[7:10].copy()
+    zs = params[P_ZUPT_SIGMA]
+    zr = params[P_ZARU_SIGMA]
+    x = x_a.copy()
+    P = P_a.copy()
+    Po = Porig_a.copy()
+    work = np.empty((2, 15, 15))
+    f_n = np.empty(3)
+    fo = np.empty(3)
+    xprior = np.empty(16)
+    xo = np.empty(16)
+    tmp = np.empty(15)
+    dext = np.empty(15)
+    empty = np.empty((0, 0))
+    prev = np.zeros(6)
+    if a >= 1:
+        dtp = t[a] - t[a - 1]
+        for k in range(3):
+            prev[k] = (gyro[a, k] - x[13 + k]) * dtp
+            prev[3 + k] = (acc[a, k] - x[10 + k]) * dtp
+    ptr = np.searchsorted(ov_idx, a + 1)
+    for k in range(16):
+        xf[0, k] = x[k]
+    for r in range(15):
+        for c in range(15):
+            Ppost[0, r, c] = P[r, c]
+    for i in range(a + 1, b + 1):
+        j = i - a
+        dt = t[i] - t[i - 1]
+        C = mechanise(x, acc[i], gyro[i], dt, g, w_ie, f_n, prev)
+        transition(C, f_n, dt, Phi[j], work[0])
+        propagate_covariance(P, C, f_n, dt, q_diag, work)
+        for r in range(15):
+            for c in range(15):
+                Pprior[j, r, c] = P[r, c]
+        for k in range(16):
+            xprior[k] = x[k]
+        Co = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xo, fo)
+        propagate_covariance(Po, Co, fo, dt, q_diag, work)
+        if stance[i]:
+            zero_velocity_update(x, P, zs, tmp, empty)
+            zero_velocity_update(xo, Po, zs, tmp, empty)
+            if zr > 0:
+                zero_angular_rate_update(x, P, gyro[i], zr, tmp, empty)
+                zero_angular_rate_update(xo, Po, gyro[i], zr, tmp, empty)
+        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+            boxminus(hist_x[i], xo, dext)
+            inject(x, dext)
+            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+                ptr += 1
+            for r in range(15):
+                for c in range(15):
+                    P[r, c] = ov_P[ptr - 1, r, c]
+                    Po[r, c] = ov_P[ptr - 1, r, c]
+        boxminus(x, xprior, dx[j])
+        for k in range(16):
+            xf[j, k] = x[k]
+        for r in range(15):
+            for c in range(15):
+                Ppost[j, r, c] = P[r, c]
+    for r in range(15):
+        for c in range(15):
+            Porig_b[r, c] = Po[r, c]
+
+
+@numba.njit(cache=True)
 def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                    stance: np.ndarray, params: np.ndarray, a: int, b: int, xb: np.ndarray, Ppost: np.ndarray,
                    Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, counters: np.ndarray) -> None:
@@ -331,21 +417,23 @@ def apply_smoothed(hist_x: np.ndarray, a: int, L: int, dxs: np.ndarray, Ps: np.n
 
 @numba.njit(cache=True)
 def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L: int, a: int,
-               t: np.ndarray, seed_pos: np.ndarray, out_x: np.ndarray, out_var: np.ndarray) -> int:
+               out_x: np.ndarray, out_var: np.ndarray, P_end: np.ndarray) -> int:
     """Covariance-weighted fusion of the forward (j = i − a) and backward (j = b − i)
-    estimates over the navigation states δp, δv, δθ (paper §3.3):
+    estimates (paper §3.3), the backward pass's δp, δv, δθ taken as a measurement of the
+    forward state's:
 
-        P_g = (P_f⁻¹ + P_b⁻¹)⁻¹,  x_g = P_g (P_f⁻¹ x_f + P_b⁻¹ x_b)
+        P_g = (P_f⁻¹ + P_b⁻¹)⁻¹,  x_g = P_g (P_f⁻¹ x_f + P_b⁻¹ x_b)   (over p, v, θ)
 
-    computed as x_g = x_f ⊞ P_f (P_f + P_b)⁻¹ (x_b ⊖ x_f), P_g = P_f − P_f (P_f + P_b)⁻¹ P_f.
-    Biases are the forward pass's. Position is then re-integrated from the fused velocity
-    (trapezoid) starting at ``seed_pos`` at i = a. Writes out_x[a:a+L+1] and the fused
-    position variances; returns the number of samples where the fusion failed (the
-    forward estimate is kept there)."""
+    computed as x_g = x_f ⊞ P_f[:, nav] S⁻¹ (x_b ⊖ x_f)_nav, P_g = P_f − P_f[:, nav] S⁻¹
+    P_f[nav, :] with S = P_f + P_b over the nine navigation states; the biases move with
+    their forward cross-covariances. Writes the fused states out_x[a:a+L+1], their
+    position variances, and the fused 15×15 covariance at the end (j = L, the next
+    segment's seed) to ``P_end``. Returns the number of samples where the fusion failed
+    (the forward estimate is kept there)."""
     S = np.empty((9, 9))
     Lw = np.empty((9, 9))
-    Z = np.empty((9, 10))
-    B = np.empty((9, 10))
+    Z = np.empty((9, 16))
+    B = np.empty((9, 16))
     xbf = np.empty(16)
     d = np.empty(15)
     x = np.empty(16)
@@ -364,18 +452,18 @@ def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L
             for c in range(9):
                 sc = -1.0 if 3 <= c < 6 else 1.0
                 S[r, c] = Pf[j, r, c] + sr * sc * Pb[jb, r, c]
-            for c in range(9):
-                B[r, c] = Pf[j, c, r]
-            B[r, 9] = d[r]
-        ok = chol_solve(S, B, Z, 9, 10, Lw)
+            for c in range(15):
+                B[r, c] = Pf[j, r, c]
+            B[r, 15] = d[r]
+        ok = chol_solve(S, B, Z, 9, 16, Lw)
         for k in range(15):
             d[k] = 0.0
         if ok:
-            # δ = P_f Z[:, 9];  P_g = P_f − P_f Z[:, :9]
-            for r in range(9):
+            # δ = P_f[:, nav] Z[:, 15];  P_g = P_f − P_f[:, nav] Z[:, :15]
+            for r in range(15):
                 s = 0.0
                 for k in range(9):
-                    s += Pf[j, r, k] * Z[k, 9]
+                    s += Pf[j, r, k] * Z[k, 15]
                 d[r] = s
             for r in range(3):
                 s = 0.0
@@ -386,14 +474,20 @@ def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L
             failed += 1
             for r in range(3):
                 out_var[a + j, r] = Pf[j, r, r]
+        if j == L:
+            for r in range(15):
+                for c in range(15):
+                    s = 0.0
+                    if ok:
+                        for k in range(9):
+                            s += Pf[j, r, k] * Z[k, c]
+                    P_end[r, c] = Pf[j, r, c] - s
+            for r in range(15):
+                for c in range(r + 1, 15):
+                    v = 0.5 * (P_end[r, c] + P_end[c, r])
+                    P_end[r, c] = v
+                    P_end[c, r] = v
         inject(x, d)
-        if j == 0:
-            for k in range(3):
-                x[k] = seed_pos[k]
-        else:
-            dt = t[a + j] - t[a + j - 1]
-            for k in range(3):
-                x[k] = out_x[a + j - 1, k] + 0.5 * (out_x[a + j - 1, 3 + k] + x[3 + k]) * dt
         for k in range(16):
             out_x[a + j, k] = x[k]
     return failed
