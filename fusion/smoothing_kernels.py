@@ -29,6 +29,14 @@ from fusion.strapdown import mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
 
 @numba.njit(cache=True)
+def _copy15(dst: np.ndarray, src: np.ndarray) -> None:
+    """dst[:, :] = src for 15×15 matrices (element loops: no slice assignment in kernels)."""
+    for r in range(15):
+        for c in range(15):
+            dst[r, c] = src[r, c]
+
+
+@numba.njit(cache=True)
 def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
     """out (15,) = xa ⊖ xb: the error state with inject(xb, out) = xa (attitude exact:
     the rotation vector of q_a ⊗ q_b⁻¹, navigation frame)."""
@@ -142,9 +150,7 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
     empty = np.empty((0, 0))
     ptr = np.searchsorted(ov_idx, a + 1)
     if store:
-        for r in range(15):
-            for c in range(15):
-                Ppost[0, r, c] = P[r, c]
+        _copy15(Ppost[0], P)
     for i in range(a + 1, b + 1):
         dt = t[i] - t[i - 1]
         C = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xprior, f_n)
@@ -152,9 +158,7 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
         j = i - a
         if store:
             transition(C, f_n, dt, Phi[j], work[0])
-            for r in range(15):
-                for c in range(15):
-                    Pprior[j, r, c] = P[r, c]
+            _copy15(Pprior[j], P)
         if stance[i]:
             update_selected(P, np.int64(3), y, zs * zs, tmp, empty)
             if zr > 0:
@@ -166,9 +170,7 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
             ptr += 1
         if store:
             boxminus(hist_x[i], xprior, dx[j])
-            for r in range(15):
-                for c in range(15):
-                    Ppost[j, r, c] = P[r, c]
+            _copy15(Ppost[j], P)
     return P
 
 
@@ -216,18 +218,14 @@ def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t:
     ptr = np.searchsorted(ov_idx, a + 1)
     for k in range(16):
         xf[0, k] = x[k]
-    for r in range(15):
-        for c in range(15):
-            Ppost[0, r, c] = P[r, c]
+    _copy15(Ppost[0], P)
     for i in range(a + 1, b + 1):
         j = i - a
         dt = t[i] - t[i - 1]
         C = mechanise(x, acc[i], gyro[i], dt, g, w_ie, f_n, prev)
         transition(C, f_n, dt, Phi[j], work[0])
         propagate_covariance(P, C, f_n, dt, q_diag, work)
-        for r in range(15):
-            for c in range(15):
-                Pprior[j, r, c] = P[r, c]
+        _copy15(Pprior[j], P)
         for k in range(16):
             xprior[k] = x[k]
         Co = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xo, fo)
@@ -250,12 +248,8 @@ def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t:
         boxminus(x, xprior, dx[j])
         for k in range(16):
             xf[j, k] = x[k]
-        for r in range(15):
-            for c in range(15):
-                Ppost[j, r, c] = P[r, c]
-    for r in range(15):
-        for c in range(15):
-            Porig_b[r, c] = Po[r, c]
+        _copy15(Ppost[j], P)
+    _copy15(Porig_b, Po)
 
 
 @numba.njit(cache=True)
@@ -297,9 +291,7 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
     xprior = np.empty(16)
     for k in range(16):
         xb[0, k] = x[k]
-    for r in range(15):
-        for c in range(15):
-            Ppost[0, r, c] = P[r, c]
+    _copy15(Ppost[0], P)
     for i in range(b, a, -1):
         j = b - i + 1
         dt = t[i] - t[i - 1]
@@ -308,9 +300,7 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
         C = mechanise(x, acc[i], gneg, dt, g, w_neg, f_n, prev)
         transition(C, f_n, dt, Phi[j], work[0])
         propagate_covariance(P, C, f_n, dt, q_diag, work)
-        for r in range(15):
-            for c in range(15):
-                Pprior[j, r, c] = P[r, c]
+        _copy15(Pprior[j], P)
         for k in range(16):
             xprior[k] = x[k]
         if stance[i - 1]:
@@ -323,9 +313,7 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
         boxminus(x, xprior, dx[j])
         for k in range(16):
             xb[j, k] = x[k]
-        for r in range(15):
-            for c in range(15):
-                Ppost[j, r, c] = P[r, c]
+        _copy15(Ppost[j], P)
 
 
 @numba.njit(cache=True)
