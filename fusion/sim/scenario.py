@@ -178,6 +178,12 @@ def _write_imu_csv(path: Path, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                comments="")
 
 
+def imu_data_section(csv_path: Path, columns: tuple[str, ...]) -> dict[str, Any]:
+    """The layout's reading of an IMU CSV written here (``t``, then acc x y z, gyro x y z)."""
+    return {"path": csv_path.name, "time_column": "t", "acc_columns": list(columns[1:4]),
+            "gyro_columns": list(columns[4:7])}
+
+
 def measured_imu(motion, name: str, imu: ImuErrorConfig, ctx: SimContext) -> tuple[np.ndarray, np.ndarray]:
     """What the IMU of system ``name`` riding ``motion`` reports: ideal specific force and
     rate at the scenario's samples, corrupted by its error model from its own random streams."""
@@ -209,13 +215,7 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
             filt[key] = float(value)
     section = {
         "plugin": "foot_ins",
-        "data": {
-            "path": csv_path.name,
-            "time_column": "t",
-            "acc_columns": list(IMU_COLUMNS[1:4]),
-            "gyro_columns": list(IMU_COLUMNS[4:7]),
-            "stance_column": "stance",
-        },
+        "data": {**imu_data_section(csv_path, IMU_COLUMNS), "stance_column": "stance"},
         "filter": filt,
         "detector": {"kind": "shoe"},
         "initial": {
@@ -274,12 +274,7 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
     _, az0 = ctx.plan.path.start
     section: dict[str, Any] = {
         "plugin": "hand_pdr",
-        "imu": {
-            "path": imu_path.name,
-            "time_column": "t",
-            "acc_columns": list(HAND_IMU_COLUMNS[1:4]),
-            "gyro_columns": list(HAND_IMU_COLUMNS[4:7]),
-        },
+        "imu": imu_data_section(imu_path, HAND_IMU_COLUMNS),
     }
     outages: list[dict[str, Any]] = []
     if cfg.gnss is not None:
