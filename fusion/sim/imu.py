@@ -176,6 +176,17 @@ class SensorErrors:
         gm = self.bias_instability * math.sqrt(2.0 / self.bias_tau_s) if self.bias_instability else 0.0
         return math.hypot(gm, self.bias_random_walk)
 
+    def initial_bias_sd(self, averaged_s: float = 0.0) -> float:
+        """One-sigma bias (per axis) a filter starts with: the turn-on bias (the fixed
+        vector's RMS and the drawn σ) and the Gauss–Markov σ, added in quadrature; when
+        the bias is estimated by averaging a still window of ``averaged_s`` seconds, the
+        turn-on terms are replaced by that average's white-noise error N/√T."""
+        gm = self.bias_instability
+        if averaged_s > 0:
+            return math.hypot(self.noise_density / math.sqrt(averaged_s), gm)
+        fixed = math.sqrt(sum(b * b for b in self.bias) / 3.0)
+        return math.sqrt(fixed**2 + self.bias_sd**2 + gm**2)
+
 
 @dataclass(frozen=True)
 class ImuErrorModel:

@@ -224,6 +224,12 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
             "stationary_s": ctx.plan.start_still_s,
         },
     }
+    # the filter starts with the bias uncertainty the simulated sensor has: the gyro bias
+    # after the still window's average, the accelerometer's turn-on and drift σ
+    for key, value in (("gyro_bias_sd_radps", errors.gyro.initial_bias_sd(ctx.plan.start_still_s)),
+                       ("acc_bias_sd_mps2", errors.acc.initial_bias_sd())):
+        if value > 0:
+            section["initial"][key] = float(value)
     return SystemOutput(t, pos, section, int(t.size), [csv_path])
 
 
