@@ -75,7 +75,24 @@ def test_cross_covariance_transition_forgets_the_previous_step_length(walk):
     hand.advance(hand.t[hand.step_index[3]])
     phi = hand.transition_since_sync()
     assert np.all(phi[:, 4] == 0.0)  # δS of earlier steps does not carry over
-    np.testing.assert_array_equal(hand.transition_since_sync(), np.eye(8))
+    np.testing.assert_array_equal(hand.transition_since_sync(), np.eye(9))
+
+
+def test_gnss_calibrates_the_step_scale_of_an_uncalibrated_step_model(tmp_path):
+    """The default K (0.48) overestimates this walker's steps (~0.43): with the scale state
+    on, 80 s of GNSS (1.5 m white, 3 m Gauss–Markov) remove most of the scale error and
+    the estimate is consistent with its own σ."""
+    res = simulate(CONFIGS / "foot_hand_gnss_outage.yaml", tmp_path, seed=2,
+                   overrides=[*SHORT, "systems.hand_phone.gnss.outages=[]"])
+    loaded = load_layout(res.config_path, ["systems.hand_phone.filter.step_scale_sd=0.1"])
+    hand = HandPdr("hand_phone", loaded.system_configs["hand_phone"], default_context(tmp_path))
+    hand.advance(hand.t_end)
+    true_scale = res.distance_m / hand.step_length_m.sum()
+    assert abs(true_scale - 1.0) > 0.05  # the model is off
+    scale, sd = hand.x[7], np.sqrt(hand.P[8, 8])
+    assert abs(scale - true_scale) < 0.5 * abs(1.0 - true_scale)
+    assert abs(scale - true_scale) < 2 * sd
+    assert hand.diagnostics()["step_scale"] == scale
 
 
 def test_weinberg_k_calibrated_on_one_walk_measures_another_to_three_percent(tmp_path):

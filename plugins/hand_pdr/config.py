@@ -68,7 +68,12 @@ class PdrFilterConfig(StrictModel):
     (multipath, atmosphere): a horizontal first-order Gauss–Markov bias with σ
     ``gnss_bias_sd_m`` and correlation time ``gnss_bias_time_s`` is estimated beside the
     white noise (two more states; σ 0 switches it off), so that a minute of fixes is not
-    taken for a minute of independent evidence.
+    taken for a minute of independent evidence. A wrong step model (Weinberg K) is a scale
+    error common to every step: estimated as the state δc with initial σ ``step_scale_sd``
+    (relative, 0.1 = 10 %) and random walk ``step_scale_random_walk`` (1/√s); σ 0 (the
+    default, the paper's white step errors only) leaves the scale at 1. Off by default:
+    on the IPIN 2023 logs the phone's GNSS track is shorter than the walk (corners cut)
+    and the state takes that for a 10–25 % step-scale error.
     """
 
     step_length_sd_m: float = Field(default=0.1, gt=0)
@@ -83,6 +88,8 @@ class PdrFilterConfig(StrictModel):
     gate_probability: float = Field(default=0.999, gt=0, lt=1)
     gnss_bias_sd_m: float = Field(default=3.0, ge=0)
     gnss_bias_time_s: float = Field(default=60.0, gt=0)
+    step_scale_sd: float = Field(default=0.0, ge=0)
+    step_scale_random_walk: float = Field(default=1e-4, ge=0)
 
 
 class PdrInitialConfig(StrictModel):

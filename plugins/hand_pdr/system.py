@@ -2,11 +2,14 @@
 
 Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
 clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s), horizontal GNSS
-error β (m, first-order Gauss–Markov). Error state (8):
-[δE, δN, δU, δψ, δS, δb, δβE, δβN], δS the current step's length error (white, σ_S).
+error β (m, first-order Gauss–Markov), step-length scale c (1: the step model as
+configured). Error state (9):
+[δE, δN, δU, δψ, δS, δb, δβE, δβN, δc], δS the current step's length error (white, σ_S),
+δc the scale error common to every step (a wrong Weinberg K: random walk, initial σ
+``step_scale_sd``; σ 0 gives the paper's model, where step errors are white only).
 
-At each step k (eq. 37):  E += S_k sin ψ_k,  N += S_k cos ψ_k, and (eqs. 38–40)
-    δE' = δE + S cos ψ δψ + sin ψ δS,   δN' = δN − S sin ψ δψ + cos ψ δS.
+At each step k (eq. 37, S_k = c s_k):  E += S_k sin ψ_k,  N += S_k cos ψ_k, and (eqs. 38–40)
+    δE' = δE + S cos ψ δψ + sin ψ (δS + s δc),   δN' = δN − S sin ψ δψ + cos ψ (δS + s δc).
 Between events, over Δt:  ψ += Δψ_gyro − b Δt;  δψ' = δψ − Δt δb + w_ψ;
 δb' = e^{−Δt/τ} δb + w_b (first-order Gauss–Markov, τ = 1/α);  δU' = δU + w_U.
 (The paper writes δψ' = δψ + Δt δb for a bias error of the opposite sign; here b is
@@ -32,13 +35,14 @@ from fusion.types import InputReport, Trajectory
 from fusion_plugins.hand_pdr.config import HandPdrConfig
 from fusion_plugins.hand_pdr.pdr import azimuth_increments, detect_steps, step_lengths, up_in_body
 
-E, N, U, PSI, S, B, BE, BN = range(8)
-NOMINAL = [E, N, U, PSI, B, BE, BN]
-"""Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN)."""
+E, N, U, PSI, S, B, BE, BN, C = range(9)
+NOMINAL = [E, N, U, PSI, B, BE, BN, C]
+"""Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN, c)."""
+N_ERR = 9
 
 
 class HandPdr(SensorSystem):
-    """PDR from a phone's IMU with a 6-state error Kalman filter corrected by GNSS.
+    """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS.
 
     Results: :meth:`trajectory` (one epoch per step and per GNSS update), ``step_index``
     (IMU sample of each detected step), ``step_length_m``, ``gnss_counts`` (accepted,
@@ -155,10 +159,10 @@ class HandPdr(SensorSystem):
 
     def restart(self) -> None:
         ini, f = self.config.initial, self.config.filter
-        self.x = np.array([*self._p0, self._psi0, 0.0, 0.0, 0.0])  # E, N, U, ψ, b, βE, βN
+        self.x = np.array([*self._p0, self._psi0, 0.0, 0.0, 0.0, 1.0])  # E, N, U, ψ, b, βE, βN, c
         self.P = np.diag([ini.position_sd_m**2, ini.position_sd_m**2, ini.height_sd_m**2,
                           np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2,
-                          f.gnss_bias_sd_m**2, f.gnss_bias_sd_m**2])
+                          f.gnss_bias_sd_m**2, f.gnss_bias_sd_m**2, f.step_scale_sd**2])
         self._tc = float(self.t[0])  # time the heading and covariance are propagated to
         self._next = 0
         self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "heading_accepted": 0, "heading_rejected": 0}
@@ -174,18 +178,19 @@ class HandPdr(SensorSystem):
         f = self.config.filter
         i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
         self.x[3] += self._azimuth[i1] - self._azimuth[i0] - self.x[4] * dt
-        F = np.eye(8)
+        F = np.eye(N_ERR)
         F[PSI, B] = -dt
         decay = np.exp(-dt / f.correlation_time_s)
         F[B, B] = decay
         beta_decay = np.exp(-dt / f.gnss_bias_time_s)
         F[BE, BE] = F[BN, BN] = beta_decay
         self.x[5:7] *= beta_decay
-        Q = np.zeros(8)
+        Q = np.zeros(N_ERR)
         Q[PSI] = f.heading_noise_density**2 * dt
         Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
         Q[U] = f.height_noise_density**2 * dt
         Q[BE] = Q[BN] = f.gnss_bias_sd_m**2 * (1.0 - beta_decay**2)
+        Q[C] = f.step_scale_random_walk**2 * dt
         self._transition(F, Q)
         self._tc = t
 
@@ -198,13 +203,14 @@ class HandPdr(SensorSystem):
 
     def _step(self, k: int) -> None:
         """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
-        s, psi = self.step_length_m[k], self.x[3]
-        F = np.eye(8)
-        F[E, PSI], F[E, S] = s * np.cos(psi), np.sin(psi)
-        F[N, PSI], F[N, S] = -s * np.sin(psi), np.cos(psi)
-        fresh = np.eye(8)
+        s_model, psi = self.step_length_m[k], self.x[3]
+        s = self.x[7] * s_model
+        F = np.eye(N_ERR)
+        F[E, PSI], F[E, S], F[E, C] = s * np.cos(psi), np.sin(psi), s_model * np.sin(psi)
+        F[N, PSI], F[N, S], F[N, C] = -s * np.sin(psi), np.cos(psi), s_model * np.cos(psi)
+        fresh = np.eye(N_ERR)
         fresh[S, S] = 0.0  # the previous step's δS does not carry over
-        Q = np.zeros(8)
+        Q = np.zeros(N_ERR)
         Q[S] = self.config.filter.step_length_sd_m**2
         self.x[0] += s * np.sin(psi)
         self.x[1] += s * np.cos(psi)
@@ -218,7 +224,7 @@ class HandPdr(SensorSystem):
         K = self.P @ H.T @ np.linalg.inv(S_)
         dx = K @ y
         self.x += dx[NOMINAL]  # δS is white: nothing to feed back
-        IKH = np.eye(8) - K @ H
+        IKH = np.eye(N_ERR) - K @ H
         self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
         self.P = 0.5 * (self.P + self.P.T)
         if self.phi is not None:
@@ -230,7 +236,7 @@ class HandPdr(SensorSystem):
             self.gnss_counts["masked"] += 1
             return
         f = self.config.filter
-        H = np.zeros((3, 8))
+        H = np.zeros((3, N_ERR))
         H[0, E] = H[1, N] = H[2, U] = 1.0
         H[0, BE] = H[1, BN] = 1.0
         sd = self._fix_sd[j]
@@ -239,7 +245,7 @@ class HandPdr(SensorSystem):
         ok = self._update(H, self._fix_pos[j] - predicted, R, self._gate_pos)
         self.gnss_counts["accepted" if ok else "rejected"] += 1
         if ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps:
-            Hp = np.zeros((1, 8))
+            Hp = np.zeros((1, N_ERR))
             Hp[0, PSI] = 1.0
             y = np.array([wrap_angle(self._fix_course[j] - self.x[3])])
             okh = self._update(Hp, y, np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi)
@@ -302,10 +308,10 @@ class HandPdr(SensorSystem):
             self._record()
 
     def track_transition(self) -> None:
-        self.phi = np.eye(8)
+        self.phi = np.eye(N_ERR)
 
     def transition_since_sync(self) -> np.ndarray:
-        phi, self.phi = self.phi, np.eye(8)
+        phi, self.phi = self.phi, np.eye(N_ERR)
         return phi
 
     def sync_times(self) -> np.ndarray:
@@ -332,7 +338,8 @@ class HandPdr(SensorSystem):
 
     def diagnostics(self) -> dict:
         return {"steps": int(len(self.step_index)),
-                "mean_step_length_m": float(self.step_length_m.mean()) if len(self.step_length_m) else None,
+                "mean_step_length_m": float(self.x[7] * self.step_length_m.mean()) if len(self.step_length_m) else None,
+                "step_scale": float(self.x[7]),
                 "gnss": dict(self.gnss_counts)}
 
 
