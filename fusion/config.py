@@ -410,7 +410,38 @@ def load_layout(path: str | Path, overrides: list[str] | None = None, registry: 
     for name, section in raw["systems"].items():
         system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
         system_configs[name] = validate_section(system_cls.Config, section, key=f"systems.{name}", path=path, base_dir=base_dir)
+        check_layout = getattr(system_cls, "check_layout", None)  # optional: refuse unsupported layout settings
+        if check_layout is not None:
+            try:
+                check_layout(name, system_configs[name], layout)
+            except KeyedError as err:
+                raise ConfigError(err.key, str(err), path) from None
+    _check_aiding_references(layout, system_configs, registry, path)
     return LoadedLayout(path, layout, system_configs, raw)
+
+
+def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel], registry: Any, path: Path) -> None:
+    """Aiding sources (:class:`fusion.system.AidingSource`) name navigation systems, and
+    constraints and the heading reference name navigation systems, not aiding sources."""
+    from fusion.system import AidingSource
+
+    classes = {name: registry.system_class(cfg.plugin) for name, cfg in system_configs.items()}
+    aiding = {name for name, cls in classes.items() if issubclass(cls, AidingSource)}
+    navigators = sorted(set(system_configs) - aiding)
+    if not navigators:
+        raise ConfigError("systems", "no navigation system: aiding sources need a host", path)
+    for name in sorted(aiding):
+        for key, ref in classes[name].system_references(system_configs[name]):
+            if ref not in navigators:
+                raise ConfigError(f"systems.{name}.{key}", f"{ref!r} is not a navigation system of this layout "
+                                                           f"(have {navigators})", path)
+    for k, c in enumerate(layout.constraints):
+        for side in c.between:
+            if side in aiding:
+                raise ConfigError(f"constraints.{k}.between", f"{side!r} is an aiding source, not a navigation system",
+                                  path)
+    if layout.heading_alignment.reference in aiding:
+        raise ConfigError("heading_alignment.reference", "an aiding source has no heading", path)
 
 
 class ImuCsvConfig(StrictModel):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ from fusion.phone_log import read_getsensordata
 from fusion.plugins import get_registry
 from fusion.readers import read_truth_csv, read_truth_long_csv
 from fusion.smoothing import smooth_systems
-from fusion.system import LayoutContext, SensorSystem
+from fusion.system import AidingSource, LayoutContext, SensorSystem
 from fusion.types import InputReport, Trajectory, TruthTrack
 
 
@@ -38,16 +38,18 @@ class RunResult:
     heading_rotations_rad: dict[str, float]
     geodetic_origin: tuple[float, float, float] | None
     timings_s: dict[str, float]
+    aiding: dict[str, AidingSource] = field(default_factory=dict)
+    """Aiding sources (UWB tags...): no trajectory; diagnostics in metrics.json ``aiding``."""
 
     @property
     def samples(self) -> int:
-        """Input samples of every system together."""
-        return int(np.sum([s.samples for s in self.systems.values()]))
+        """Input samples of every system and aiding source together."""
+        return int(np.sum([s.samples for s in (*self.systems.values(), *self.aiding.values())]))
 
     @property
     def input_report(self) -> InputReport:
         report = InputReport()
-        for s in self.systems.values():
+        for s in (*self.systems.values(), *self.aiding.values()):
             report = report.merge(s.input_report)
         return report
 
@@ -62,8 +64,9 @@ def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
                          seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages)
 
 
-def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem]:
-    """One system per layout entry; a plugin's config error is reported against the layout file."""
+def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem | AidingSource]:
+    """One system (or aiding source) per layout entry; a plugin's config error is reported
+    against the layout file."""
     registry = get_registry()
     systems = {}
     for name, cfg in loaded.system_configs.items():
@@ -111,14 +114,16 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     context = layout_context(loaded, seed)
-    systems = build_systems(loaded, context)
+    built = build_systems(loaded, context)
+    aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}
+    systems = {name: s for name, s in built.items() if name not in aiding}
     origin = geodetic_origin(loaded, systems)
     truths = load_truth(loaded, origin)
     timings["load_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     rotations = align_headings(systems, loaded.layout.heading_alignment)
-    report = Fuser(systems, loaded.layout.fuser, loaded.layout.constraints).run()
+    report = Fuser(systems, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
     timings["navigation_s"] = time.perf_counter() - t0
 
     if loaded.layout.smoother.kind != "none":
@@ -135,7 +140,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     else:
         transform, scores = PlanarTransform.identity(), {}
     timings["scoring_s"] = time.perf_counter() - t0
-    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings)
+    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
+                     aiding)
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,

@@ -4,6 +4,10 @@ A system owns its data stream, its nominal navigation state and error-state filt
 its own aiding, and its history. The fuser drives it forward in time with
 :meth:`SensorSystem.advance` and, at sync epochs, reads its position and covariance
 and hands back a correction with :meth:`SensorSystem.apply_correction`.
+
+An :class:`AidingSource` (a UWB tag) navigates nothing: it gives the fuser scalar
+measurements of one or two systems' positions, which the fuser applies to them through
+the same interface.
 """
 
 from __future__ import annotations
@@ -34,25 +38,45 @@ class LayoutContext:
     outages: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
 
 
-class SensorSystem(ABC):
-    """Base class of a body-worn navigation system.
-
-    Class attributes: ``plugin_name`` (the layout's ``systems.<name>.plugin``), ``Config``
-    (pydantic model of the system's section) and ``position_indices`` (indices of δp
-    in the error state). Frames: positions in the ENU navigation frame, metres.
-    """
+class Plugin(ABC):
+    """What every layout entry's class has: ``plugin_name`` (the layout's
+    ``systems.<name>.plugin``), ``Config`` (pydantic model of its section), its name,
+    validated config and the layout context, and what its readers used and dropped."""
 
     plugin_name: ClassVar[str]
     Config: ClassVar[type[BaseModel]]
-    position_indices: ClassVar[slice] = slice(0, 3)
-    error_model: ClassVar[str | None] = None
-    """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
-    :func:`fusion.testing.check_system` can check its Jacobians."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         self.name = name
         self.config = config
         self.context = context
+
+    @property
+    @abstractmethod
+    def samples(self) -> int:
+        """Number of input samples (or measurements) used."""
+
+    @property
+    @abstractmethod
+    def input_report(self) -> InputReport:
+        """What the readers dropped or reordered."""
+
+    def diagnostics(self) -> dict:
+        """Plugin-specific figures for metrics.json (stance fraction, updates, rejections...)."""
+        return {}
+
+
+class SensorSystem(Plugin):
+    """Base class of a body-worn navigation system.
+
+    Class attribute ``position_indices``: indices of δp in the error state. Frames:
+    positions in the ENU navigation frame, metres.
+    """
+
+    position_indices: ClassVar[slice] = slice(0, 3)
+    error_model: ClassVar[str | None] = None
+    """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
+    :func:`fusion.testing.check_system` can check its Jacobians."""
 
     # --- time -----------------------------------------------------------------
     @property
@@ -128,16 +152,64 @@ class SensorSystem(ABC):
     def trajectory(self) -> Trajectory:
         """History of positions and their one-sigma uncertainty."""
 
-    @property
+
+@dataclass(frozen=True)
+class ScalarMeasurement:
+    """One scalar measurement of the positions of the systems an aiding source measures.
+
+    ``z``: the measured value; ``predicted``: h(p̂) at the current position estimates;
+    ``H_p``: (m, 3) ∂h/∂p, one row per measured system (in the order of
+    :meth:`AidingSource.measured_systems`), in the unit of z per metre; ``r_var``: noise
+    variance (unit of z squared). The fuser forms the innovation y = z − h(p̂).
+    """
+
+    z: float
+    predicted: float
+    H_p: np.ndarray
+    r_var: float
+
+
+class AidingSource(Plugin):
+    """Base class of a body-worn sensor that aids navigation systems without navigating
+    itself: a UWB tag ranging to anchors and to other tags, for example.
+
+    It owns its data and the measurement model; the fuser owns the update. At each of
+    :meth:`measurement_times` the fuser advances the measured systems to that time, asks
+    :meth:`measure` for z, h(p̂) and ∂h/∂p at their positions, and applies a gated scalar
+    EKF update (Joseph form) on their stacked error states through the generic
+    :class:`SensorSystem` interface (``position_n``, ``covariance``, ``position_indices``,
+    ``apply_correction``), so any host works. It has no trajectory: its figures go to
+    metrics.json ``aiding.<name>`` through :meth:`diagnostics`.
+
+    Frames and units: positions ENU, metres; time s. ``samples`` counts the
+    measurements read, ``diagnostics`` goes to metrics.json ``aiding.<name>``.
+    """
+
+    @classmethod
     @abstractmethod
-    def samples(self) -> int:
-        """Number of input samples used."""
+    def system_references(cls, config: BaseModel) -> list[tuple[str, str]]:
+        """(dotted key within the section, system name) of every system the config names;
+        the layout checks that each is a navigation system."""
+
+    @abstractmethod
+    def measurement_times(self) -> np.ndarray:
+        """(K,) times (s) of the measurements, non-decreasing."""
+
+    @abstractmethod
+    def measured_systems(self, k: int) -> tuple[str, ...]:
+        """Names of the systems measurement k relates (one: a range to an anchor; two: a
+        range between two systems)."""
+
+    @abstractmethod
+    def measure(self, k: int, positions_n: list[np.ndarray]) -> ScalarMeasurement:
+        """Measurement k at the measured systems' current positions (ENU m, each (3,))."""
 
     @property
     @abstractmethod
-    def input_report(self) -> InputReport:
-        """What the readers dropped or reordered."""
+    def gate_nis(self) -> float:
+        """Normalised innovation squared above which a measurement is rejected."""
 
-    def diagnostics(self) -> dict:
-        """Plugin-specific figures for metrics.json (stance fraction, updates...)."""
-        return {}
+    @abstractmethod
+    def record(self, k: int, nis: float | None, accepted: bool) -> None:
+        """The fuser's verdict on measurement k (nis None: not applied, e.g. outside the
+        measured systems' data)."""

@@ -82,11 +82,11 @@ from pydantic import BaseModel
 
 from fusion.config import validate_section
 from fusion.errors import ConfigError, FusionError
-from fusion.system import LayoutContext, SensorSystem
+from fusion.system import AidingSource, LayoutContext, ScalarMeasurement, SensorSystem
 from fusion.types import ImuStream, InputReport, Trajectory
 
 __all__ = [
-    "CHECKS", "CheckResult", "ConformanceError", "ConformanceReport", "JacobianCase", "STRAPDOWN15",
+    "AIDING_CHECKS", "CHECKS", "CheckResult", "ConformanceError", "ConformanceReport", "JacobianCase", "STRAPDOWN15",
     "check_jacobian", "check_system", "default_context", "numerical_jacobian", "strapdown15_jacobian_cases",
     "undocumented_fields", "with_value",
 ]
@@ -94,6 +94,18 @@ __all__ = [
 CHECKS = ("interface", "documented", "bad_config", "build", "advance", "position_indices", "covariance",
           "chunking", "seed", "correction", "trajectory", "cross_covariance", "jacobians")
 """Names of the checks, in the order they run."""
+
+AIDING_CHECKS = ("interface", "documented", "bad_config", "build", "measurements", "seed", "jacobians", "gating")
+"""Names of the checks of an :class:`~fusion.system.AidingSource` (a UWB tag...), in order:
+``interface``, ``documented``, ``bad_config`` and ``build`` as for a system;
+``measurements``: times finite and non-decreasing, each measurement relates one or two of
+the systems the config names and gives a finite z, h(p̂), ∂h/∂p (m, 3) and r > 0;
+``samples``, ``input_report``, JSON-serialisable ``diagnostics()`` before and after the
+fuser's verdicts; ``seed``: two builds give the same bits (and, with ``stochastic``,
+another seed differs or not); ``jacobians``: the ``jacobian_cases()`` against central
+differences; ``gating``: through the fuser's update (:func:`fusion.fuser.scalar_update`)
+with position variances of 0.01 m², a measurement equal to its prediction is accepted and
+one 10 innovation sigmas beyond the gate is rejected."""
 
 STRAPDOWN15 = "strapdown15"
 """``error_model`` value of systems built on :mod:`fusion.strapdown` + :mod:`fusion.error_state`."""
@@ -549,10 +561,15 @@ class _Checker:
         return s
 
     # checks -------------------------------------------------------------------------
-    def check_interface(self) -> str:
-        cls = self.cls
-        if not (isinstance(cls, type) and issubclass(cls, SensorSystem)):
-            _fail("interface", f"{cls!r} is not a subclass of fusion.system.SensorSystem")
+    base: type = SensorSystem
+    """The interface class the plugin class must implement."""
+
+    def _check_plugin_class(self) -> str:
+        """The class implements :attr:`base`, names itself, and has a strict Config with
+        a ``plugin`` field; returns the plugin name."""
+        cls, base = self.cls, self.base
+        if not (isinstance(cls, type) and issubclass(cls, base)):
+            _fail("interface", f"{cls!r} is not a subclass of fusion.system.{base.__name__}")
         if inspect.isabstract(cls):
             _fail("interface", f"{cls.__name__} leaves abstract methods unimplemented: "
                                f"{', '.join(sorted(cls.__abstractmethods__))}")
@@ -566,6 +583,11 @@ class _Checker:
             _fail("interface", "Config must refuse unknown keys (derive from fusion.config.StrictModel)")
         if "plugin" not in model.model_fields:
             _fail("interface", f"Config has no 'plugin' field: the layout section carries 'plugin: {name}'")
+        return name
+
+    def check_interface(self) -> str:
+        cls = self.cls
+        name = self._check_plugin_class()
         pi = getattr(cls, "position_indices", None)
         if not isinstance(pi, slice) or pi.step not in (None, 1) or pi.start is None or pi.stop - pi.start != 3:
             _fail("interface", f"position_indices must be a slice of 3 consecutive states, got {pi!r}")
@@ -842,12 +864,103 @@ class _Checker:
         return "; ".join(notes)
 
 
+class _AidingChecker(_Checker):
+    """The checks of an aiding source (:data:`AIDING_CHECKS`); the shared ones from :class:`_Checker`."""
+
+    base = AidingSource
+
+    def check_interface(self) -> str:
+        return f"{self.cls.__name__} as {self._check_plugin_class()!r} (aiding source)"
+
+    def check_build(self) -> str:
+        s = self.build()
+        refs = self.cls.system_references(s.config)
+        return f"{s.samples} measurements of {sorted({r for _, r in refs})}"
+
+    @staticmethod
+    def _positions(count: int) -> list[np.ndarray]:
+        return [np.array([1.5, -2.0, 0.25]) * (i + 1) for i in range(count)]
+
+    def _measurements(self, s: AidingSource) -> list[ScalarMeasurement]:
+        return [s.measure(k, self._positions(len(s.measured_systems(k)))) for k in range(len(s.measurement_times()))]
+
+    def check_measurements(self) -> str:
+        s = self.build()
+        t = np.asarray(s.measurement_times(), dtype=float)
+        if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+            _fail("measurements", "measurement_times() must be (K,) finite, non-decreasing, K ≥ 1")
+        if not isinstance(s.samples, (int, np.integer)) or s.samples != t.size:
+            _fail("measurements", f"samples ({s.samples!r}) is not the number of measurements ({t.size})")
+        if not isinstance(s.input_report, InputReport):
+            _fail("measurements", "input_report must be a fusion.types.InputReport")
+        named = {r for _, r in self.cls.system_references(s.config)}
+        for k in range(t.size):
+            systems = s.measured_systems(k)
+            if not (1 <= len(systems) <= 2 and set(systems) <= named):
+                _fail("measurements", f"measurement {k} relates {systems!r}; want one or two of {sorted(named)}")
+        for k, m in enumerate(self._measurements(s)):
+            H = np.asarray(m.H_p, dtype=float)
+            if H.shape != (len(s.measured_systems(k)), 3) or not np.all(np.isfinite(H)):
+                _fail("measurements", f"measurement {k}: H_p has shape {H.shape} or non-finite values")
+            if not (math.isfinite(m.z) and math.isfinite(m.predicted) and m.r_var > 0):
+                _fail("measurements", f"measurement {k}: z {m.z!r}, h {m.predicted!r}, r {m.r_var!r}")
+        if not s.gate_nis > 0:
+            _fail("measurements", f"gate_nis must be positive, got {s.gate_nis!r}")
+        for k in range(t.size):
+            s.record(k, 1.0 if k % 2 else 1e6, bool(k % 2))
+        for diag in (self.build().diagnostics(), s.diagnostics()):
+            try:
+                json.dumps(diag, default=float)
+            except (TypeError, ValueError) as err:
+                _fail("measurements", f"diagnostics() is not JSON-serialisable: {err}")
+        return f"{t.size} measurements"
+
+    def check_seed(self) -> str:
+        def bits(seed: int) -> tuple:
+            s = self.build(seed)
+            ms = self._measurements(s)
+            return (_bits(s.measurement_times()), _bits([m.z for m in ms]), _bits([m.r_var for m in ms]))
+
+        seed = self.context.seed
+        if bits(seed) != bits(seed):
+            _fail("seed", f"two builds with seed {seed} give different measurements")
+        if self.stochastic is None:
+            return "same seed, same bits"
+        differs = bits(seed) != bits(seed + 1)
+        if differs != self.stochastic:
+            _fail("seed", f"seeds {seed} and {seed + 1} give {'different' if differs else 'the same'} measurements, "
+                          f"but the source is declared {'stochastic' if self.stochastic else 'deterministic'}")
+        return "same seed, same bits; " + ("another seed differs" if self.stochastic else "seed-independent")
+
+    def check_gating(self) -> str:
+        from fusion.fuser import scalar_update
+
+        s = self.build()
+        kinds = {}
+        for k in range(len(s.measurement_times())):
+            kinds.setdefault(len(s.measured_systems(k)), k)
+        for count, k in sorted(kinds.items()):
+            m = s.measure(k, self._positions(count))
+            H = np.asarray(m.H_p, dtype=float).ravel()
+            P = 0.01 * np.eye(H.size)
+            sd = math.sqrt(float(H @ P @ H) + m.r_var)
+            nis, dx, P_new = scalar_update(P, H, 0.0, m.r_var, s.gate_nis)
+            if dx is None or np.linalg.eigvalsh(P_new).min() < -1e-12:
+                _fail("gating", f"measurement {k} equal to its prediction was rejected (NIS {nis:.3g})")
+            nis, dx, _ = scalar_update(P, H, 10.0 * sd * (1.0 + math.sqrt(s.gate_nis)), m.r_var, s.gate_nis)
+            if dx is not None:
+                _fail("gating", f"measurement {k} far beyond the gate was accepted (NIS {nis:.3g}, gate "
+                                f"{s.gate_nis:.3g})")
+        return f"gate NIS {s.gate_nis:.3g}: {len(kinds)} measurement kinds accepted at 0, rejected far out"
+
+
 def check_system(system_cls: type, config: Mapping[str, Any], *, name: str = "system",
                  context: LayoutContext | None = None, chunks: int = 5,
                  bad_configs: Sequence[tuple[Mapping[str, Any], str]] = (), stochastic: bool | None = None,
                  error_model: str | None = None, allow_undocumented: Iterable[str] = (),
                  checks: Iterable[str] | None = None, raise_on_failure: bool = True) -> ConformanceReport:
-    """Run every conformance check (:data:`CHECKS`) on a sensor-system plugin class.
+    """Run every conformance check (:data:`CHECKS`) on a sensor-system plugin class, or
+    those of :data:`AIDING_CHECKS` on an aiding-source class.
 
     Parameters
     ----------
@@ -872,14 +985,17 @@ def check_system(system_cls: type, config: Mapping[str, Any], *, name: str = "sy
     """
     ctx = context if context is not None else default_context()
     plugin = getattr(system_cls, "plugin_name", getattr(system_cls, "__name__", repr(system_cls)))
-    chk = _Checker(system_cls, config, name, ctx, chunks, bad_configs, stochastic, error_model, allow_undocumented)
-    wanted = set(CHECKS if checks is None else checks)
-    unknown = wanted - set(CHECKS)
+    aiding = isinstance(system_cls, type) and issubclass(system_cls, AidingSource)
+    names = AIDING_CHECKS if aiding else CHECKS
+    chk = (_AidingChecker if aiding else _Checker)(system_cls, config, name, ctx, chunks, bad_configs, stochastic,
+                                                    error_model, allow_undocumented)
+    wanted = set(names if checks is None else checks)
+    unknown = wanted - set(names)
     if unknown:
-        raise ValueError(f"unknown checks {sorted(unknown)}; known: {', '.join(CHECKS)}")
+        raise ValueError(f"unknown checks {sorted(unknown)}; known: {', '.join(names)}")
     report = ConformanceReport(str(plugin))
     needs = {"interface": (), "documented": ("interface",), "bad_config": ("interface",), "build": ("interface",)}
-    for check in CHECKS:
+    for check in names:
         if check not in wanted and not (check in ("interface", "build") and wanted - {"interface", "documented"}):
             continue
         blockers = [r.name for r in report.results
