@@ -49,7 +49,8 @@ from fusion.errors import ConfigError
 from fusion.sim.imu import MotionState, quat_multiply
 from fusion.sim.paths import BodyPath, left_normal
 
-__all__ = ["FootMotion", "FootTrack", "GaitConfig", "GaitPlan", "plan_gait"]
+__all__ = ["FootMotion", "FootTrack", "GaitConfig", "GaitPlan", "StanceDrift", "StanceNoiseConfig", "plan_gait",
+           "stance_drift"]
 
 Foot = Literal["left", "right"]
 
@@ -186,6 +187,70 @@ class FootMotion:
         # ω_n = yaw rate about Up + (−toe rate) about the yawed y axis [−sin yaw, cos yaw, 0].
         omega = np.stack([dtoe * np.sin(yaw), -dtoe * np.cos(yaw), -daz], axis=-1)
         return MotionState(pos=pos, vel=vel, acc=acc, q_nb=q, omega_n=omega)
+
+
+class StanceNoiseConfig(StrictModel):
+    """A foot that is not perfectly still in stance (the coloured measurement noise of the
+    MDC-cKF and DC-EnEKF papers): inside each stance run its velocity (ENU, every axis)
+    follows v_k = colour_factor · v_{k−1} + ξ_k, ξ_k ~ N(0, sigma_mps²), zero at both ends
+    of the run (heel strike and toe-off) and in swing (:func:`stance_drift`)."""
+
+    colour_factor: float = Field(default=0.9, ge=0, lt=1)
+    sigma_mps: float = Field(default=0.005, ge=0)
+
+
+@dataclass
+class StanceDrift:
+    """A foot motion plus a small drift during stance, consistent in position, velocity and
+    acceleration, so the IMU synthesised from it and the truth both follow the moved foot.
+
+    The drift velocity is ``vel`` (N, 3) m/s at the sample instants and linear in between
+    (acceleration constant on each sample interval, so the IMU's interval means are exact);
+    its displacement ``disp`` (N, 3) m is the integral, carried into the swing that follows.
+    """
+
+    base: FootMotion
+    rate_hz: float
+    vel: np.ndarray
+    disp: np.ndarray
+
+    @property
+    def footprint_az(self) -> np.ndarray:
+        return self.base.footprint_az
+
+    def stance_flags(self, n_samples: int) -> np.ndarray:
+        """The base motion's stance flags (the drift keeps the foot on the ground)."""
+        return self.base.stance_flags(n_samples)
+
+    def evaluate(self, t: np.ndarray) -> MotionState:
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        state = self.base.evaluate(t)
+        n = self.vel.shape[0]
+        dt = 1.0 / self.rate_hz
+        k = np.clip(np.ceil(t * self.rate_hz - 1e-9).astype(np.int64), 1, n - 1)  # t in (t_{k−1}, t_k]
+        u = np.clip(t - (k - 1) * dt, 0.0, dt)[:, None]
+        c0, c1 = self.vel[k - 1], self.vel[k]
+        a = (c1 - c0) / dt
+        state.acc = state.acc + a
+        state.vel = state.vel + c0 + a * u
+        state.pos = state.pos + self.disp[k - 1] + c0 * u + 0.5 * a * u * u
+        return state
+
+
+def stance_drift(motion: FootMotion, n_samples: int, cfg: StanceNoiseConfig,
+                 rng: np.random.Generator) -> StanceDrift:
+    """``motion`` with the AR(1) stance velocity of ``cfg`` on its first ``n_samples`` samples
+    (draws from ``rng``; see :class:`StanceNoiseConfig`)."""
+    stance = motion.stance_flags(n_samples)
+    inner = np.zeros(n_samples, dtype=bool)
+    inner[1:-1] = stance[:-2] & stance[1:-1] & stance[2:]
+    xi = cfg.sigma_mps * rng.standard_normal((n_samples, 3))
+    vel = np.zeros((n_samples, 3))
+    for k in np.flatnonzero(inner):
+        vel[k] = cfg.colour_factor * vel[k - 1] + xi[k]
+    disp = np.zeros((n_samples, 3))
+    disp[1:] = np.cumsum(0.5 * (vel[1:] + vel[:-1]) / motion.rate_hz, axis=0)
+    return StanceDrift(motion, motion.rate_hz, vel, disp)
 
 
 @dataclass

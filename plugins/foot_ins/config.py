@@ -9,12 +9,23 @@ from pydantic import Field, model_validator
 from fusion.config import AxisSigns, DataPath, ImuCsvConfig, KeyedError, StrictModel
 
 
+ENSEMBLE_KINDS = ("enekf", "cenekf")
+COLOURED_KINDS = ("ckf", "cenekf")
+
+
 class FootFilterConfig(StrictModel):
     """Error-state filter settings. Noise densities: accelerometer m/s^2/√Hz, gyroscope
     rad/s/√Hz; bias random walks m/s^3/√Hz and rad/s^2/√Hz; ZUPT σ in m/s, ZARU σ in rad/s."""
 
-    kind: Literal["ekf"] = "ekf"
-    """Error-state filter: ekf (15-state extended Kalman filter)."""
+    kind: Literal["ekf", "ckf", "enekf", "cenekf"] = "ekf"
+    """Estimator: ``ekf`` (15-state error-state EKF); ``ckf`` (the EKF with the zero-velocity
+    update under coloured measurement noise, MDC-cKF paper eqs. 5–18); ``enekf`` (ensemble EKF
+    whose members carry the attitude quaternion, DC-EnEKF paper eqs. 1–19); ``cenekf`` (the
+    ensemble filter with the coloured noise in an augmented state, eqs. 5–7)."""
+    colour_factor: float = Field(default=0.0, ge=0, lt=1)
+    """Colour factor α of the stance noise v_k = α v_{k−1} + ξ_k, in [0, 1) (ckf, cenekf)."""
+    members: int = Field(default=100, ge=2)
+    """Ensemble size M, at least 2 (enekf, cenekf)."""
     acc_noise_density: float = Field(default=0.02, gt=0)
     """Accelerometer white noise, m/s^2/√Hz."""
     gyro_noise_density: float = Field(default=0.002, gt=0)
@@ -24,7 +35,8 @@ class FootFilterConfig(StrictModel):
     gyro_bias_random_walk: float = Field(default=1e-5, ge=0)
     """Gyroscope bias random walk, rad/s^2/√Hz."""
     zupt_sigma_mps: float = Field(default=0.01, gt=0)
-    """Zero-velocity pseudo-measurement noise, m/s."""
+    """Zero-velocity pseudo-measurement noise, m/s; for ckf and cenekf the σ of the white
+    driving noise ξ of the coloured noise."""
     zaru_sigma_radps: float | None = Field(default=None, gt=0)
     """Zero-angular-rate update noise, rad/s; unset: no ZARU."""
     earth_rate: bool = False
@@ -120,4 +132,11 @@ class FootInsConfig(StrictModel):
     def _labels_need_a_stance_column(self) -> "FootInsConfig":
         if self.detector.kind == "labels" and self.data.stance_column is None:
             raise KeyedError("detector.kind", "labels need data.stance_column")
+        return self
+
+    @model_validator(mode="after")
+    def _colour_needs_a_coloured_kind(self) -> "FootInsConfig":
+        f = self.filter
+        if f.colour_factor != 0.0 and f.kind not in COLOURED_KINDS:
+            raise KeyedError("filter.colour_factor", f"applies to filter.kind ckf or cenekf, not {f.kind}")
         return self

@@ -1,4 +1,10 @@
-"""Compiled per-sample loop of the foot-mounted INS: strapdown, covariance propagation, ZUPT/ZARU."""
+"""Compiled per-sample loop of the foot-mounted INS: strapdown, covariance propagation, ZUPT/ZARU.
+
+One loop serves the ``ekf`` and the ``ckf`` (``alpha`` ≥ 0): the ckf replaces the ZUPT at
+every stance sample whose previous sample was also a stance update by the coloured-noise
+update of :mod:`fusion_plugins.foot_ins.coloured`. The first stance sample of a stance
+phase has no previous measurement to difference with and takes the ordinary ZUPT.
+"""
 
 from __future__ import annotations
 
@@ -9,23 +15,37 @@ from fusion.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_SIGMA, accumulat
                                 process_noise_diag, propagate_covariance)
 from fusion.strapdown import mechanise
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
+from fusion_plugins.foot_ins.coloured import coloured_zero_velocity_update
 
 # Layout of the ``counters`` vector.
-C_ZUPTS, C_ZARUS, C_NIS_SUM = range(3)
+C_ZUPTS, C_ZARUS, C_NIS_SUM, C_COLOURED = range(4)
+COUNTERS_SIZE = 4
+
+
+def differenced_samples(stance: np.ndarray, i0: int, i1: int) -> np.ndarray:
+    """Indices i0 ≤ i < i1 (i0 ≥ 1) where the ckf applies the differenced (coloured) update:
+    stance at i and at i − 1, and i − 1 ≥ 1 (sample 0 is the initial state, not an update)."""
+    i = np.arange(max(i0, 2), i1)
+    return i[stance[i] & stance[i - 1]]
 
 
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
-                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float, mech_memory: np.ndarray,
+                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray,
+                 post_P: np.ndarray) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i], propagate P,
     and at stance samples apply the ZUPT (and the ZARU when its σ > 0).
 
     x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
     increments, see :func:`fusion.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
     ``hist_pos_var`` receives the state and the position variances (m^2) after sample i.
-    ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS]. ``phi`` (15, 15) accumulates
-    the error-state transition for the fuser's cross-covariances (empty (0, 0): off).
+    ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS, coloured updates]. ``phi`` (15, 15)
+    accumulates the error-state transition for the fuser's cross-covariances (empty (0, 0): off).
+
+    ``alpha`` < 0: ekf. ``alpha`` ≥ 0: ckf with colour factor α; the posterior covariance
+    after each coloured update is written, in order, to ``post_P`` (K, 15, 15), K the number of
+    :func:`differenced_samples` in the chunk (the smoother's record).
     """
     q_diag = process_noise_diag(params)
     g = params[P_GRAVITY]
@@ -35,18 +55,33 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
+    v_prev = np.empty(3)
+    n_post = 0
     for i in range(i0, i1):
         dt = t[i] - t[i - 1]
+        for k in range(3):
+            v_prev[k] = x[3 + k]
         C = mechanise(x, acc_b[i], gyro_b[i], dt, g, w_ie, f_n, mech_memory)
         if phi.shape[0] > 0:
             accumulate_propagation(phi, C, f_n, dt, work[0])
         propagate_covariance(P, C, f_n, dt, q_diag, work)
         if stance[i]:
-            counters[C_NIS_SUM] += zero_velocity_update(x, P, zupt_sigma, dx, phi)
+            coloured = alpha >= 0.0 and stance[i - 1] and i >= 2
+            if coloured:
+                counters[C_NIS_SUM] += coloured_zero_velocity_update(x, P, v_prev, C, f_n, dt, q_diag, alpha,
+                                                                     zupt_sigma, dx, phi)
+                counters[C_COLOURED] += 1
+            else:
+                counters[C_NIS_SUM] += zero_velocity_update(x, P, zupt_sigma, dx, phi)
             counters[C_ZUPTS] += 1
             if zaru_sigma > 0:
                 zero_angular_rate_update(x, P, gyro_b[i], zaru_sigma, dx, phi)
                 counters[C_ZARUS] += 1
+            if coloured:
+                for r in range(15):
+                    for c in range(15):
+                        post_P[n_post, r, c] = P[r, c]
+                n_post += 1
         for k in range(16):
             hist_x[i, k] = x[k]
         for k in range(3):

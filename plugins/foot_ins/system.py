@@ -1,20 +1,25 @@
-"""Foot-mounted INS: strapdown navigation, zero-velocity detection, 15-state error EKF."""
+"""Foot-mounted INS: strapdown navigation, zero-velocity detection, and the estimator the
+layout's ``filter.kind`` selects: the 15-state error-state EKF (``ekf``), the EKF with the
+coloured-noise zero-velocity update (``ckf``), or the ensemble filters (``enekf``, ``cenekf``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from fusion import detectors
-from fusion.errors import ConfigError
+from fusion.config import KeyedError, Layout
+from fusion.errors import ConfigError, FusionError
 from fusion.quaternion import levelling, quat_from_azimuth_pitch_roll
 from fusion.measurements import GateCounts, chi2_gate, position_fix_update
 from fusion.readers import read_imu_csv, read_truth_csv
 from fusion.strapdown import NOMINAL_SIZE
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import ImuStream, InputReport, Trajectory
-from fusion_plugins.foot_ins.config import DetectorConfig, FootInsConfig
-from fusion.error_state import PARAMS_SIZE
-from fusion_plugins.foot_ins.kernels import C_NIS_SUM, C_ZARUS, C_ZUPTS, run_foot_ins
+from fusion_plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, DetectorConfig, FootInsConfig
+from fusion.error_state import PARAMS_SIZE, inv3_sym
+from fusion_plugins.foot_ins.ensemble import Ensemble
+from fusion_plugins.foot_ins.kernels import (C_COLOURED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
+                                             differenced_samples, run_foot_ins)
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
 
@@ -43,13 +48,25 @@ def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: s
 
 
 class FootIns(SensorSystem):
-    """Foot-mounted IMU navigated by strapdown + ZUPT in a closed-loop error-state EKF.
+    """Foot-mounted IMU navigated by strapdown + ZUPT, closed loop.
 
     Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`fusion.error_state`.
-    The per-sample loop runs compiled (:func:`fusion_plugins.foot_ins.kernels.run_foot_ins`)
-    in chunks between the fuser's sync epochs.
+    ``filter.kind`` selects the estimator:
 
-    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal states,
+    * ``ekf``, ``ckf``: the per-sample loop runs compiled
+      (:func:`fusion_plugins.foot_ins.kernels.run_foot_ins`) in chunks between the fuser's
+      sync epochs; the ckf's stance update is :mod:`fusion_plugins.foot_ins.coloured`. The
+      smoothers rebuild the EKF's covariances with ordinary ZUPTs, so the ckf keeps its
+      covariance after every coloured update for them (15×15 floats, 1.8 kB, per stance sample).
+    * ``enekf``, ``cenekf``: M members (:class:`fusion_plugins.foot_ins.ensemble.Ensemble`);
+      ``x`` is their mean, ``P`` the sample covariance of their error-state deviations (15,
+      or 18 with the cenekf's coloured noise δV), and a correction moves the mean and maps
+      the deviations so that their sample covariance is the one given. Position fixes are
+      applied the same way: a gated Kalman update of the mean and covariance, carried to the
+      members by that correction. Not smoothable, no cross-covariance tracking (refused at
+      validation, :meth:`check_layout`).
+
+    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal (mean) states,
     ``stance`` (N,) detector output.
     """
 
@@ -74,6 +91,27 @@ class FootIns(SensorSystem):
         self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
         self._x0, self._P0 = self._initial_state()
         self.restart()
+
+    @classmethod
+    def check_layout(cls, name: str, config: FootInsConfig, layout: Layout) -> None:
+        """Refuse layout settings this system's estimator cannot serve (KeyedError naming the
+        layout key): the ensemble kinds with a smoother (the smoothers rebuild the 15-state
+        EKF's covariances) or with tracked cross-covariances (no error-state transition Φ)."""
+        kind = config.filter.kind
+        if kind not in ENSEMBLE_KINDS:
+            return
+        if layout.smoother.kind != "none":
+            raise KeyedError("smoother.kind", f"systems.{name}.filter.kind {kind} cannot be smoothed "
+                                              "(the smoothers rebuild the 15-state EKF); use none")
+        constrained = {n for c in layout.constraints for n in c.between}
+        if layout.fuser.cross_covariance and name in constrained and layout.fuser.method != "none":
+            raise KeyedError("fuser.cross_covariance", f"systems.{name}.filter.kind {kind} has no error-state "
+                                                       "transition to carry cross-covariances; use false")
+
+    @property
+    def is_ensemble(self) -> bool:
+        """True for the ensemble estimators (enekf, cenekf)."""
+        return self.config.filter.kind in ENSEMBLE_KINDS
 
     # --- set-up -------------------------------------------------------------------
     def _read_position_fixes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -118,15 +156,25 @@ class FootIns(SensorSystem):
         return x, np.diag(sd**2)
 
     def restart(self) -> None:
-        """Back to the initial state at the first sample; history cleared."""
+        """Back to the initial state at the first sample; history cleared (the ensemble
+        redrawn from the same seed)."""
         n = len(self.stream)
-        self.x = self._x0.copy()
-        self.P = self._P0.copy()
+        f = self.config.filter
+        self.ensemble: Ensemble | None = None
+        if self.is_ensemble:
+            self.ensemble = Ensemble(f.members, self._x0, self._P0,
+                                     f.colour_factor if f.kind in COLOURED_KINDS else None, f.zupt_sigma_mps,
+                                     self.context.seed, self.name)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = self.ensemble.covariance()
+        else:
+            self.x = self._x0.copy()
+            self.P = self._P0.copy()
         self.hist_x = np.empty((n, NOMINAL_SIZE))
         self.hist_pos_var = np.empty((n, 3))
         self.hist_x[0] = self.x
         self.hist_pos_var[0] = np.diag(self.P)[:3]
-        self.counters = np.zeros(3)
+        self.counters = np.zeros(COUNTERS_SIZE)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.mech_memory = np.zeros(6)
         self.fix_counts = GateCounts()
@@ -134,7 +182,7 @@ class FootIns(SensorSystem):
         self._i = 0  # index of the sample the state refers to
         # for the smoother (fusion.smoothing): covariances left by corrections outside the
         # compiled loop (fuser constraints, position fixes), and the smoothed result
-        self._override_idx: list[int] = []
+        self._override_idx: list[np.ndarray] = []
         self._override_P: list[np.ndarray] = []
         self.smoothed_x: np.ndarray | None = None
         self.smoothed_pos_var: np.ndarray | None = None
@@ -150,11 +198,14 @@ class FootIns(SensorSystem):
         while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
             k = self._fix_index[self._next_fix]
             self._run_to(k + 1)
-            position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
-                                self._fix_gate, self.fix_counts, self.phi)
-            self.hist_x[k] = self.x
-            self.hist_pos_var[k] = np.diag(self.P)[:3]
-            self._record_override(k)
+            if self.ensemble is not None:
+                self._ensemble_position_fix(self._fix_pos_n[self._next_fix])
+            else:
+                position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
+                                    self._fix_gate, self.fix_counts, self.phi)
+                self.hist_x[k] = self.x
+                self.hist_pos_var[k] = np.diag(self.P)[:3]
+                self._record_override(k)
             self._next_fix += 1
         self._run_to(i1)
 
@@ -162,9 +213,24 @@ class FootIns(SensorSystem):
         """Process samples up to (excluding) index i1 in one compiled chunk."""
         if i1 <= self._i + 1:
             return
-        run_foot_ins(self.x, self.P, self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance,
-                     self._i + 1, i1, self._params, self.mech_memory, self.phi, self.hist_x,
-                     self.hist_pos_var, self.counters)
+        i0 = self._i + 1
+        st = self.stream
+        if self.ensemble is not None:
+            self.ensemble.run(st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params, self.hist_x,
+                              self.hist_pos_var, self.counters)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = self.ensemble.covariance()
+        else:
+            f = self.config.filter
+            coloured = f.kind == "ckf"
+            idx = differenced_samples(self.stance, i0, i1) if coloured else np.empty(0, dtype=np.int64)
+            post_P = np.empty((idx.size, 15, 15))
+            run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
+                         f.colour_factor if coloured else -1.0, self.mech_memory, self.phi, self.hist_x,
+                         self.hist_pos_var, self.counters, post_P)
+            if idx.size:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+                self._override_idx.append(idx.astype(np.int64))
+                self._override_P.append(post_P)
         self._i = i1 - 1
 
     # --- heading ------------------------------------------------------------------
@@ -205,13 +271,41 @@ class FootIns(SensorSystem):
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         from fusion.error_state import inject
 
+        P = 0.5 * (P + P.T)
+        if self.ensemble is not None:
+            self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = P
+            self.hist_x[self._i] = self.x
+            self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+            return
         inject(self.x, np.ascontiguousarray(dx, dtype=np.float64))
-        self.P = 0.5 * (P + P.T)
+        self.P = P
         self.hist_x[self._i] = self.x
         self.hist_pos_var[self._i] = np.diag(self.P)[:3]
         self._record_override(self._i)
 
+    def _ensemble_position_fix(self, z_n: np.ndarray) -> None:
+        """Gated position fix on the ensemble: the Kalman update of the mean and the sample
+        covariance (H selects δp, σ per axis, chi-square gate), applied to the members by
+        :meth:`apply_correction`."""
+        y = z_n - self.x[0:3]
+        r_var = self._fix_sigma**2
+        P = self.P
+        S = P[0:3, 0:3] + r_var * np.eye(3)
+        if float(y @ inv3_sym(np.ascontiguousarray(S)) @ y) > self._fix_gate:
+            self.fix_counts.rejected += 1
+            return
+        K = np.linalg.solve(S, P[0:3, :]).T
+        IKH = np.eye(P.shape[0])
+        IKH[:, 0:3] -= K
+        self.apply_correction(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
+        self.fix_counts.accepted += 1
+
     def track_transition(self) -> None:
+        if self.ensemble is not None:
+            raise FusionError(f"system {self.name!r} (foot_ins, filter.kind {self.config.filter.kind}) cannot "
+                              "track cross-covariances: set fuser.cross_covariance false")
         self._tracking = True
         self.phi = np.eye(15)
 
@@ -229,17 +323,20 @@ class FootIns(SensorSystem):
 
     # --- smoothing (fusion.smoothing) --------------------------------------------------
     def _record_override(self, i: int) -> None:
-        self._override_idx.append(int(i))
-        self._override_P.append(self.P.copy())
+        self._override_idx.append(np.array([i], dtype=np.int64))
+        self._override_P.append(self.P[None].copy())
 
     def smoothing_record(self) -> dict:
         """What the smoother needs to rebuild this filter's run (nothing is copied but the
         few covariances set outside the compiled loop): IMU samples, stance flags, filter
         parameters, the recorded nominal history, the initial covariance, and the sample
-        indices (sorted) with the covariance left there by a fuser correction or a fix."""
+        indices (sorted) with the covariance left there by a fuser correction or a fix (and,
+        for the ckf, after every coloured update). Ensemble kinds have no such record."""
+        if self.ensemble is not None:
+            raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
-        idx = np.asarray(self._override_idx, dtype=np.int64)
-        Ps = np.asarray(self._override_P, dtype=np.float64).reshape(-1, 15, 15)
+        idx = np.concatenate([np.empty(0, dtype=np.int64), *self._override_idx])
+        Ps = np.concatenate([np.empty((0, 15, 15)), *self._override_P])
         order = np.argsort(idx, kind="stable")
         return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
@@ -276,6 +373,9 @@ class FootIns(SensorSystem):
             "zupt_updates": zupts,
             "zaru_updates": int(self.counters[C_ZARUS]),
             "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
+            "filter_kind": self.config.filter.kind,
+            **({"coloured_updates": int(self.counters[C_COLOURED])} if self.config.filter.kind == "ckf" else {}),
+            **({"members": self.config.filter.members} if self.ensemble is not None else {}),
             **({"position_fixes_accepted": self.fix_counts.accepted,
                 "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
             **({"smoothing": self.smoothing_diagnostics} if self.smoothing_diagnostics is not None else {}),
