@@ -24,11 +24,17 @@ systems generate).
 
 ``kind: hand_phone`` (:class:`HandPhoneSystem`, motion in :mod:`fusion.sim.hand`, receiver
 in :mod:`fusion.sim.gnss`): a phone held in front of the body with a GNSS receiver; it
-writes ``<system>_imu.csv`` (with a ``step`` column: 1 at each true heel strike) and
+writes ``<system>_imu.csv`` (with a ``step`` column: 1 at each true heel strike, and
+``mag_x, mag_y, mag_z`` in µT with a ``magnetometer``) and
 ``<system>_gnss.csv``, a ``plugin: hand_pdr`` section, and its GNSS ``outages`` into the
 layout's ``outages`` list (fixes are not removed from the file). ``geodetic_origin``
 (default :data:`DEFAULT_GEODETIC_ORIGIN`) goes into the layout when a system uses GNSS
 or the scenario sets it.
+
+``kind: uwb_tag`` (:class:`fusion.sim.uwb.UwbTagSystem`): a UWB tag on another simulated
+system (``host``) ranging to anchors and to tags on other systems, with NLOS bursts and
+dropouts; it writes ``<system>_ranges.csv`` and a ``plugin: uwb`` section, and no truth
+rows. Aiding kinds are simulated after the systems they ride on.
 
 :func:`simulate` writes into ``out_dir``: ``<system>_imu.csv`` per IMU, ``truth.csv``
 (``system,t,east_m,north_m,up_m``, one row per system per sample) and ``config.yaml``,
@@ -50,16 +56,20 @@ from pydantic import Field, field_validator
 
 from fusion.config import Layout, StrictModel, apply_overrides, read_yaml, validate_section
 from fusion.errors import ConfigError
-from fusion.sim.gait import GaitConfig, GaitPlan, plan_gait
+from fusion.seeding import system_seed
+from fusion.sim.gait import GaitConfig, GaitPlan, StanceNoiseConfig, plan_gait, stance_drift
 from fusion.sim.gnss import GnssReceiverConfig, simulate_fixes, write_gnss_csv
 from fusion.sim.hand import HandSwayConfig, hand_motion, heel_strikes
 from fusion.sim.imu import ImuErrorConfig, corrupt, error_generators, ideal_imu
+from fusion.sim.magnetometer import MagnetometerSimConfig, simulate_magnetometer
 from fusion.sim.paths import PATH_KINDS, PathConfig
+from fusion.sim.uwb import UwbTagSystem, simulate_uwb_tag
 
 __all__ = [
     "DEFAULT_GEODETIC_ORIGIN",
     "FootImuSystem",
     "HAND_IMU_COLUMNS",
+    "HAND_MAG_COLUMNS",
     "HandPhoneSystem",
     "IMU_COLUMNS",
     "LoadedScenario",
@@ -76,6 +86,8 @@ __all__ = [
 
 IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "stance")
 HAND_IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "step")
+HAND_MAG_COLUMNS = ("mag_x", "mag_y", "mag_z")
+"""Magnetometer columns (µT) of a hand phone's IMU CSV, before ``step``, when it has one."""
 TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
 DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
 """Latitude (deg), longitude (deg), ellipsoidal height (m) of the ENU frame when a scenario gives none."""
@@ -108,12 +120,15 @@ class Scenario(StrictModel):
 
 class FootImuSystem(StrictModel):
     """An IMU strapped to one foot (``kind: foot_imu``); ``mount_yaw_deg`` turns it on the
-    foot clockwise seen from above (its x axis then points that far right of the toe)."""
+    foot clockwise seen from above (its x axis then points that far right of the toe);
+    ``stance_noise`` (default none) lets the foot drift with an AR(1) velocity in stance
+    (:class:`fusion.sim.gait.StanceNoiseConfig`; draws from ``system_seed(seed, name + "#stance")``)."""
 
     kind: Literal["foot_imu"]
     foot: Literal["left", "right"]
     imu: ImuErrorConfig = Field(default_factory=ImuErrorConfig)
     mount_yaw_deg: float = Field(default=0.0, ge=-180, le=180)
+    stance_noise: StanceNoiseConfig | None = None
 
 
 @dataclass
@@ -125,6 +140,8 @@ class SimContext:
     t: np.ndarray
     seed: int
     out_dir: Path
+    outputs: dict[str, SystemOutput] = field(default_factory=dict)
+    """Systems simulated so far (aiding kinds such as ``uwb_tag`` read their hosts' truth)."""
 
     @property
     def geodetic_origin(self) -> tuple[float, float, float]:
@@ -154,6 +171,8 @@ class SystemKind:
 
     config: type[StrictModel]
     simulate: Callable[[str, Any, SimContext], SystemOutput]
+    aids: bool = False
+    """An aiding kind (a UWB tag): simulated after the systems, whose truth it needs."""
 
 
 @dataclass
@@ -198,6 +217,9 @@ def measured_imu(motion, name: str, imu: ImuErrorConfig, ctx: SimContext) -> tup
 def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemOutput:
     motion = ctx.plan.feet[cfg.foot].mounted(cfg.mount_yaw_deg)
     t = ctx.t
+    if cfg.stance_noise is not None:
+        rng = np.random.Generator(np.random.PCG64(system_seed(ctx.seed, f"{name}#stance")))
+        motion = stance_drift(motion, t.size, cfg.stance_noise, rng)
     acc, gyro = measured_imu(motion, name, cfg.imu, ctx)
     stance = motion.stance_flags(t.size)
     csv_path = ctx.out_dir / f"{name}_imu.csv"
@@ -245,7 +267,11 @@ class HandPhoneSystem(StrictModel):
     ``sway``: the hand's own smooth random wobble; ``heading_smoothing_m``: arc length over
     which the body frame's heading is smoothed at the path's corners; ``mount_yaw_deg``: the phone's x axis
     turned clockwise (from above) from the walking direction; ``gnss``: the receiver
-    (``null`` for none). Motion in :mod:`fusion.sim.hand`, receiver in :mod:`fusion.sim.gnss`.
+    (``null`` for none); ``magnetometer``: the phone's magnetometer (default none; its
+    columns go into the IMU CSV and an enabled ``magnetometer`` section, with the field
+    check set to the simulated Earth field, into the layout). Motion in
+    :mod:`fusion.sim.hand`, receiver in :mod:`fusion.sim.gnss`, magnetometer in
+    :mod:`fusion.sim.magnetometer`.
     """
 
     kind: Literal["hand_phone"]
@@ -257,6 +283,7 @@ class HandPhoneSystem(StrictModel):
     sway: HandSwayConfig = Field(default_factory=HandSwayConfig)
     heading_smoothing_m: float = Field(default=1.0, gt=0)
     gnss: GnssReceiverConfig | None = Field(default_factory=GnssReceiverConfig)
+    magnetometer: MagnetometerSimConfig | None = None
 
 
 def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> SystemOutput:
@@ -270,18 +297,26 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
     acc, gyro = measured_imu(motion, name, cfg.imu, ctx)
     steps = np.zeros(t.size, dtype=bool)
     steps[heel_strikes(ctx.plan)] = True
+    state = motion.evaluate(t)
+    mag = cfg.magnetometer
+    m_b = np.empty((t.size, 0)) if mag is None else simulate_magnetometer(state, mag, seed=ctx.seed, name=name)
+    columns = HAND_IMU_COLUMNS[:7] + (HAND_MAG_COLUMNS if mag is not None else ()) + HAND_IMU_COLUMNS[7:]
     imu_path = ctx.out_dir / f"{name}_imu.csv"
-    table = np.column_stack([t, acc, gyro, steps.astype(float)])
-    np.savetxt(imu_path, table, fmt=[_FLOAT] * 7 + ["%d"], delimiter=",", header=",".join(HAND_IMU_COLUMNS),
-               comments="")
+    table = np.column_stack([t, acc, gyro, m_b, steps.astype(float)])
+    np.savetxt(imu_path, table, fmt=[_FLOAT] * (len(columns) - 1) + ["%d"], delimiter=",",
+               header=",".join(columns), comments="")
     files = [imu_path]
 
-    pos = motion.evaluate(t).pos
+    pos = state.pos
     _, az0 = ctx.plan.path.start
     section: dict[str, Any] = {
         "plugin": "hand_pdr",
         "imu": imu_data_section(imu_path, HAND_IMU_COLUMNS),
     }
+    if mag is not None:
+        intensity, inclination, declination = mag.field_summary
+        section["magnetometer"] = {"enabled": True, "columns": list(HAND_MAG_COLUMNS), "declination_deg": declination,
+                                   "field_check": {"expected_uT": intensity, "inclination_deg": inclination}}
     outages: list[dict[str, Any]] = []
     if cfg.gnss is not None:
         fixes, _ = simulate_fixes(motion, float(t[-1]), ctx.geodetic_origin, cfg.gnss, seed=ctx.seed, name=name)
@@ -302,6 +337,7 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
 SYSTEM_KINDS: dict[str, SystemKind] = {
     "foot_imu": SystemKind(FootImuSystem, _simulate_foot_imu),
     "hand_phone": SystemKind(HandPhoneSystem, _simulate_hand_phone),
+    "uwb_tag": SystemKind(UwbTagSystem, simulate_uwb_tag, aids=True),
 }
 """``systems.<name>.kind`` → how to validate and simulate it."""
 
@@ -376,7 +412,9 @@ def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
     out_dir.mkdir(parents=True, exist_ok=True)
     ctx = SimContext(scenario, plan, plan.t, int(seed), out_dir)
 
-    outputs = {name: SYSTEM_KINDS[cfg.kind].simulate(name, cfg, ctx) for name, cfg in systems.items()}
+    for name in sorted(systems, key=lambda n: SYSTEM_KINDS[systems[n].kind].aids):  # aiding kinds last
+        ctx.outputs[name] = SYSTEM_KINDS[systems[name].kind].simulate(name, systems[name], ctx)
+    outputs = {name: ctx.outputs[name] for name in systems}
 
     truth_path = out_dir / TRUTH_FILE
     with truth_path.open("w", newline="") as fh:

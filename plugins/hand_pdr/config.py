@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from fusion.config import DataPath, ImuCsvConfig, KeyedError, StrictModel
 
@@ -109,14 +110,73 @@ class PdrInitialConfig(StrictModel):
     """Initial height one-sigma, m."""
 
 
+class FieldCheckConfig(StrictModel):
+    """Rejects magnetometer samples that do not look like the undisturbed Earth field (steel,
+    motors and electronics indoors bend it): the magnitude ‖m‖ outside ``expected_uT`` ±
+    ``tolerance_uT``, or the dip (the field's angle below the horizontal, degrees, positive
+    pointing down as in the northern hemisphere) outside ``inclination_deg`` ±
+    ``inclination_tolerance_deg`` (``inclination_deg`` unset: the magnitude only). Take the
+    site's values from a geomagnetic model (WMM, IGRF)."""
+
+    expected_uT: float = Field(default=48.0, gt=0)
+    """Intensity of the Earth field at the site, µT."""
+    tolerance_uT: float = Field(default=8.0, gt=0)
+    """Accepted |‖m‖ − expected_uT|, µT."""
+    inclination_deg: float | None = Field(default=None, ge=-90, le=90)
+    """Dip of the Earth field at the site, degrees below the horizontal (none: not checked)."""
+    inclination_tolerance_deg: float = Field(default=10.0, gt=0)
+    """Accepted |dip − inclination_deg|, degrees."""
+
+
+class MagnetometerConfig(StrictModel):
+    """Heading aiding by the magnetometer (off unless ``enabled``).
+
+    Measurement: the tilt-compensated azimuth of the phone axis ``axis_b`` (the field's
+    horizontal part, levelled with the accelerometer's gravity direction), plus the
+    ``declination_deg`` (east of true North positive) → device azimuth ψ_d, degrees
+    clockwise from true North. The phone is held at a nearly constant yaw offset o to the
+    walking direction, ψ = ψ_d + o: o is an error state (random walk ``offset_random_walk``,
+    degrees/√s). ``offset_deg``: its prior (degrees, with σ ``offset_sd_deg``) or ``auto``:
+    set from the first accepted sample, o = ψ̂ − ψ_d, with the heading's uncertainty plus
+    the measurement's. Updates at most ``rate_hz`` per second (a decimation of the samples),
+    σ ``sigma_deg``, chi-square gated with ``gate_probability``, after the ``field_check``
+    (null: none). Data: the ``columns`` of the ``imu`` CSV (in ``unit``), or the MAGN lines
+    of the ``phone_log`` (µT).
+    """
+
+    enabled: bool = False
+    sigma_deg: float = Field(default=10.0, gt=0)
+    declination_deg: float = Field(default=0.0, ge=-180, le=180)
+    axis_b: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    """Phone-frame axis whose azimuth is the device azimuth (best one that stays horizontal)."""
+    offset_deg: float | Literal["auto"] = "auto"
+    offset_sd_deg: float = Field(default=30.0, gt=0)
+    offset_random_walk: float = Field(default=0.2, ge=0)
+    gate_probability: float = Field(default=0.99, gt=0, lt=1)
+    rate_hz: float = Field(default=1.0, gt=0)
+    field_check: FieldCheckConfig | None = Field(default_factory=FieldCheckConfig)
+    columns: tuple[str, str, str] | None = None
+    """Header names of the magnetometer x, y, z columns of the ``imu`` CSV (phone frame);
+    cells may be empty where the magnetometer has no sample."""
+    unit: Literal["uT", "nT", "G"] = "uT"
+    """Unit of the CSV columns: µT, nT or gauss (100 µT)."""
+
+    @field_validator("axis_b")
+    @classmethod
+    def _unit_axis(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not 0.5 < math.hypot(*v) < 2.0:
+            raise ValueError("give a unit vector of the phone frame, e.g. [1, 0, 0]")
+        return v
+
+
 class HandPdrConfig(StrictModel):
     """A phone held in the hand: PDR from its IMU, corrected by GNSS.
 
     Data: either ``imu`` (a CSV, see :class:`fusion.config.ImuCsvConfig`) or ``phone_log``
-    (a GetSensorData log: its ACCE/GYRO lines, and its GNSS lines with
-    ``gnss.format: phone_log``). ``geodetic_origin``: (lat deg, lon deg, height m) of the
-    ENU frame; default the layout's origin, else the first fix. ``outages``: GNSS masked
-    windows (start s, duration s).
+    (a GetSensorData log: its ACCE/GYRO lines, its GNSS lines with ``gnss.format:
+    phone_log`` and its MAGN lines for the ``magnetometer``). ``geodetic_origin``: (lat
+    deg, lon deg, height m) of the ENU frame; default the layout's origin, else the first
+    fix. ``outages``: GNSS masked windows (start s, duration s).
     """
 
     plugin: Literal["hand_pdr"] = "hand_pdr"
@@ -126,6 +186,7 @@ class HandPdrConfig(StrictModel):
     step: StepConfig = Field(default_factory=StepConfig)
     filter: PdrFilterConfig = Field(default_factory=PdrFilterConfig)
     initial: PdrInitialConfig = Field(default_factory=PdrInitialConfig)
+    magnetometer: MagnetometerConfig = Field(default_factory=MagnetometerConfig)
 
     @model_validator(mode="after")
     def _one_imu_source(self) -> "HandPdrConfig":
@@ -135,4 +196,6 @@ class HandPdrConfig(StrictModel):
             raise KeyedError("gnss.format", "phone_log GNSS needs the system's phone_log")
         if self.gnss is None and ("gnss" in (self.initial.position_m, ) or self.initial.heading_deg == "gnss_track"):
             raise KeyedError("initial", "without gnss, give initial.position_m and a numeric or auto heading_deg")
+        if self.magnetometer.enabled and self.imu is not None and self.magnetometer.columns is None:
+            raise KeyedError("magnetometer.columns", "a magnetometer read from the imu CSV needs its three columns")
         return self

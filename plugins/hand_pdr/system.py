@@ -3,7 +3,8 @@
 Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
 clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s), horizontal GNSS
 error β (m, first-order Gauss–Markov), step-length scale c (1: the step model as
-configured). Error state (9):
+configured) and, with the magnetometer, the holding offset o (rad, walking azimuth minus
+the phone's device azimuth). Error state (9):
 [δE, δN, δU, δψ, δS, δb, δβE, δβN, δc], δS the current step's length error (white, σ_S),
 δc the scale error common to every step (a wrong Weinberg K: random walk, initial σ
 ``step_scale_sd``; σ 0 gives the paper's model, where step errors are white only).
@@ -18,6 +19,14 @@ GNSS (eqs. 41–44, with the correlated error): position z = p_gnss − (p̂ + �
 H = [I3 0 0 0 I2]; δβ' = e^{−Δt/τ_β} δβ + w_β; heading from the GNSS
 course when the speed is above a threshold, z = wrap(ψ_gnss − ψ̂). Each update is gated
 by the chi-square test on its innovation; fixes inside a layout outage are skipped.
+
+Magnetometer (``magnetometer.enabled``; :mod:`fusion_plugins.hand_pdr.magnetometer`): the
+device azimuth ψ_d (tilt-compensated, declination applied) and the walking heading differ
+by the holding offset o, ψ = ψ_d + o; o is a tenth error state δo (random walk), appended
+last. Update: z = wrap(ψ_d − (ψ̂ − ô)), H = [0 0 0 1 0 0 0 0 0 −1], chi-square gated, after
+the Earth-field check. With ``offset_deg: auto`` the first accepted sample sets
+ô = ψ̂ − ψ_d instead: δo ← δψ + v (the state's row of the error transition becomes that
+of δψ, plus the measurement's variance), so the fuser's cross-covariances stay exact.
 """
 
 from __future__ import annotations
@@ -33,21 +42,27 @@ from fusion.readers import read_imu_csv
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import InputReport, Trajectory
 from fusion_plugins.hand_pdr.config import HandPdrConfig
+from fusion_plugins.hand_pdr.magnetometer import MagneticHeading, read_magnetometer_csv
 from fusion_plugins.hand_pdr.pdr import azimuth_increments, detect_steps, step_lengths, up_in_body
 
-E, N, U, PSI, S, B, BE, BN, C = range(9)
+E, N, U, PSI, S, B, BE, BN, C, O = range(10)
 NOMINAL = [E, N, U, PSI, B, BE, BN, C]
 """Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN, c)."""
 N_ERR = 9
+"""Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
+STEP, GNSS, MAGNETOMETER = range(3)
+"""Event kinds, in the order they are processed at one time."""
 
 
 class HandPdr(SensorSystem):
-    """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS.
+    """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
+    with the magnetometer's holding offset).
 
-    Results: :meth:`trajectory` (one epoch per step and per GNSS update), ``step_index``
+    Results: :meth:`trajectory` (one epoch per step, GNSS and magnetometer update), ``step_index``
     (IMU sample of each detected step), ``step_length_m``, ``gnss_counts`` (accepted,
-    rejected, masked), ``geodetic_origin`` (lat, lon, h of the ENU frame),
-    ``heading_alignment_end_s`` (time of the last fix used by ``gnss_track``).
+    rejected, masked), ``mag_counts`` (accepted, rejected by the gate, rejected by the field
+    check), ``geodetic_origin`` (lat, lon, h of the ENU frame), ``heading_alignment_end_s``
+    (time of the last fix used by ``gnss_track``).
     """
 
     plugin_name = "hand_pdr"
@@ -58,6 +73,8 @@ class HandPdr(SensorSystem):
         key = f"systems.{name}"
         report = InputReport()
         fixes: GnssFixes | None = None
+        mag = config.magnetometer
+        magn: tuple[np.ndarray, np.ndarray] | None = None
         if config.phone_log is not None:
             log = read_getsensordata(config.phone_log)
             report = log.report
@@ -66,6 +83,10 @@ class HandPdr(SensorSystem):
             gyro = np.column_stack([np.interp(self.t, log.gyro.t, log.gyro.xyz[:, k]) for k in range(3)])
             if config.gnss is not None and config.gnss.format == "phone_log":
                 fixes = log.gnss
+            if mag.enabled:
+                if log.magn is None:
+                    raise ConfigError(f"{key}.magnetometer.enabled", f"{config.phone_log} has no MAGN lines")
+                magn = (log.magn.t, log.magn.xyz)  # GetSensorData logs µT
         else:
             d = config.imu
             stream = read_imu_csv(d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns,
@@ -74,6 +95,8 @@ class HandPdr(SensorSystem):
                                   delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
             report = stream.report
             self.t, acc, gyro = stream.t, stream.acc_b, stream.gyro_b
+            if mag.enabled:
+                magn = read_magnetometer_csv(d, mag.columns, mag.unit)
         g = config.gnss
         if g is not None and g.format == "csv":
             fixes = read_gnss_csv(g.path, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
@@ -86,7 +109,11 @@ class HandPdr(SensorSystem):
         self._report = report
         self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
         self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
-        self._azimuth = azimuth_increments(self.t, gyro, up_in_body(self.t, acc))
+        up_b = up_in_body(self.t, acc)
+        self._azimuth = azimuth_increments(self.t, gyro, up_b)
+        self.n_err = N_ERR + mag.enabled
+        self._nominal = NOMINAL + [O] * mag.enabled
+        self._mag = MagneticHeading.of(*magn, self.t, up_b, mag) if magn is not None else None
         self.geodetic_origin = context.geodetic_origin
         if fixes is not None and len(fixes):
             if self.geodetic_origin is None:
@@ -122,13 +149,16 @@ class HandPdr(SensorSystem):
             self._psi0 = float(np.deg2rad(ini.heading_deg))
         self._gate_pos = chi2_gate(config.filter.gate_probability, 3)
         self._gate_psi = chi2_gate(config.filter.gate_probability, 1)
+        self._gate_mag = chi2_gate(mag.gate_probability, 1)
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
     def _event_list(self) -> list[tuple[float, int, int]]:
-        """(time, kind, index) of steps (kind 0) and GNSS fixes (kind 1), in time order."""
-        ev = [(float(self.t[i]), 0, k) for k, i in enumerate(self.step_index)]
-        ev += [(float(tf), 1, j) for j, tf in enumerate(self._fix_t) if self.t[0] < tf <= self.t[-1]]
+        """(time, kind, index) of steps, GNSS fixes and magnetometer updates, in time order."""
+        ev = [(float(self.t[i]), STEP, k) for k, i in enumerate(self.step_index)]
+        ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fix_t) if self.t[0] < tf <= self.t[-1]]
+        if self._mag is not None:
+            ev += [(float(tm), MAGNETOMETER, k) for k, tm in enumerate(self._mag.t) if self.t[0] < tm <= self.t[-1]]
         return sorted(ev)
 
     def _pdr_track(self, psi0: float) -> tuple[np.ndarray, np.ndarray]:
@@ -158,11 +188,17 @@ class HandPdr(SensorSystem):
         return float(np.arctan2(d_gnss[0], d_gnss[1]) - np.arctan2(d_pdr[0], d_pdr[1]))
 
     def restart(self) -> None:
-        ini, f = self.config.initial, self.config.filter
+        ini, f, mag = self.config.initial, self.config.filter, self.config.magnetometer
         self.x = np.array([*self._p0, self._psi0, 0.0, 0.0, 0.0, 1.0])  # E, N, U, ψ, b, βE, βN, c
-        self.P = np.diag([ini.position_sd_m**2, ini.position_sd_m**2, ini.height_sd_m**2,
-                          np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2,
-                          f.gnss_bias_sd_m**2, f.gnss_bias_sd_m**2, f.step_scale_sd**2])
+        variances = [ini.position_sd_m**2, ini.position_sd_m**2, ini.height_sd_m**2,
+                     np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2, f.gyro_bias_sd**2,
+                     f.gnss_bias_sd_m**2, f.gnss_bias_sd_m**2, f.step_scale_sd**2]
+        self._offset_known = mag.offset_deg != "auto"
+        if mag.enabled:  # the holding offset o, rad (auto: a placeholder until the first sample)
+            self.x = np.append(self.x, np.deg2rad(mag.offset_deg) if self._offset_known else 0.0)
+            variances.append(np.deg2rad(mag.offset_sd_deg) ** 2)
+        self.P = np.diag(variances)
+        self.mag_counts = {"accepted": 0, "rejected_gate": 0, "rejected_field": 0}
         self._tc = float(self.t[0])  # time the heading and covariance are propagated to
         self._next = 0
         self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "heading_accepted": 0, "heading_rejected": 0}
@@ -178,19 +214,21 @@ class HandPdr(SensorSystem):
         f = self.config.filter
         i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
         self.x[3] += self._azimuth[i1] - self._azimuth[i0] - self.x[4] * dt
-        F = np.eye(N_ERR)
+        F = np.eye(self.n_err)
         F[PSI, B] = -dt
         decay = np.exp(-dt / f.correlation_time_s)
         F[B, B] = decay
         beta_decay = np.exp(-dt / f.gnss_bias_time_s)
         F[BE, BE] = F[BN, BN] = beta_decay
         self.x[5:7] *= beta_decay
-        Q = np.zeros(N_ERR)
+        Q = np.zeros(self.n_err)
         Q[PSI] = f.heading_noise_density**2 * dt
         Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
         Q[U] = f.height_noise_density**2 * dt
         Q[BE] = Q[BN] = f.gnss_bias_sd_m**2 * (1.0 - beta_decay**2)
         Q[C] = f.step_scale_random_walk**2 * dt
+        if self._mag is not None:
+            Q[O] = np.deg2rad(self.config.magnetometer.offset_random_walk) ** 2 * dt
         self._transition(F, Q)
         self._tc = t
 
@@ -205,12 +243,12 @@ class HandPdr(SensorSystem):
         """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
         s_model, psi = self.step_length_m[k], self.x[3]
         s = self.x[7] * s_model
-        F = np.eye(N_ERR)
+        F = np.eye(self.n_err)
         F[E, PSI], F[E, S], F[E, C] = s * np.cos(psi), np.sin(psi), s_model * np.sin(psi)
         F[N, PSI], F[N, S], F[N, C] = -s * np.sin(psi), np.cos(psi), s_model * np.cos(psi)
-        fresh = np.eye(N_ERR)
+        fresh = np.eye(self.n_err)
         fresh[S, S] = 0.0  # the previous step's δS does not carry over
-        Q = np.zeros(N_ERR)
+        Q = np.zeros(self.n_err)
         Q[S] = self.config.filter.step_length_sd_m**2
         self.x[0] += s * np.sin(psi)
         self.x[1] += s * np.cos(psi)
@@ -223,8 +261,8 @@ class HandPdr(SensorSystem):
             return False
         K = self.P @ H.T @ np.linalg.inv(S_)
         dx = K @ y
-        self.x += dx[NOMINAL]  # δS is white: nothing to feed back
-        IKH = np.eye(N_ERR) - K @ H
+        self.x += dx[self._nominal]  # δS is white: nothing to feed back
+        IKH = np.eye(self.n_err) - K @ H
         self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
         self.P = 0.5 * (self.P + self.P.T)
         if self.phi is not None:
@@ -236,7 +274,7 @@ class HandPdr(SensorSystem):
             self.gnss_counts["masked"] += 1
             return
         f = self.config.filter
-        H = np.zeros((3, N_ERR))
+        H = np.zeros((3, self.n_err))
         H[0, E] = H[1, N] = H[2, U] = 1.0
         H[0, BE] = H[1, BN] = 1.0
         sd = self._fix_sd[j]
@@ -245,11 +283,35 @@ class HandPdr(SensorSystem):
         ok = self._update(H, self._fix_pos[j] - predicted, R, self._gate_pos)
         self.gnss_counts["accepted" if ok else "rejected"] += 1
         if ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps:
-            Hp = np.zeros((1, N_ERR))
+            Hp = np.zeros((1, self.n_err))
             Hp[0, PSI] = 1.0
             y = np.array([wrap_angle(self._fix_course[j] - self.x[3])])
             okh = self._update(Hp, y, np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi)
             self.gnss_counts["heading_accepted" if okh else "heading_rejected"] += 1
+
+    def _magnetometer(self, k: int) -> None:
+        """Heading update from the k-th decimated magnetometer sample (see the module docstring)."""
+        if not self._mag.earth_like[k]:
+            self.mag_counts["rejected_field"] += 1
+            return
+        r = np.deg2rad(self.config.magnetometer.sigma_deg) ** 2
+        psi_d = self._mag.psi_d[k]
+        if not self._offset_known:  # δo ← δψ + v
+            F = np.eye(self.n_err)
+            F[O] = 0.0
+            F[O, PSI] = 1.0
+            Q = np.zeros(self.n_err)
+            Q[O] = r
+            self.x[8] = wrap_angle(self.x[3] - psi_d)
+            self._transition(F, Q)
+            self._offset_known = True
+            self.mag_counts["accepted"] += 1
+            return
+        H = np.zeros((1, self.n_err))
+        H[0, PSI], H[0, O] = 1.0, -1.0
+        y = np.array([wrap_angle(psi_d - (self.x[3] - self.x[8]))])
+        ok = self._update(H, y, np.array([[r]]), self._gate_mag)
+        self.mag_counts["accepted" if ok else "rejected_gate"] += 1
 
     def _record(self) -> None:
         """History row: time, position (m), position one-sigma (m)."""
@@ -264,10 +326,12 @@ class HandPdr(SensorSystem):
         while self._next < len(self._events) and self._events[self._next][0] <= t:
             te, kind, idx = self._events[self._next]
             self._propagate_to(te)
-            if kind == 0:
+            if kind == STEP:
                 self._step(idx)
-            else:
+            elif kind == GNSS:
                 self._gnss(idx)
+            else:
+                self._magnetometer(idx)
             self._record()
             self._next += 1
         i = int(np.searchsorted(self.t, t, side="right")) - 1
@@ -299,7 +363,7 @@ class HandPdr(SensorSystem):
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         changed = bool(np.any(dx)) or not np.array_equal(P, self.P)
-        self.x += dx[NOMINAL]
+        self.x += dx[self._nominal]
         self.P = 0.5 * (P + P.T)
         if self._hist[-1][0] == self._tc:  # corrected at an event: that record shows it
             self._hist.pop()
@@ -308,10 +372,10 @@ class HandPdr(SensorSystem):
             self._record()
 
     def track_transition(self) -> None:
-        self.phi = np.eye(N_ERR)
+        self.phi = np.eye(self.n_err)
 
     def transition_since_sync(self) -> np.ndarray:
-        phi, self.phi = self.phi, np.eye(N_ERR)
+        phi, self.phi = self.phi, np.eye(self.n_err)
         return phi
 
     def sync_times(self) -> np.ndarray:
@@ -340,6 +404,8 @@ class HandPdr(SensorSystem):
         return {"steps": int(len(self.step_index)),
                 "mean_step_length_m": float(self.x[7] * self.step_length_m.mean()) if len(self.step_length_m) else None,
                 "step_scale": float(self.x[7]),
-                "gnss": dict(self.gnss_counts)}
+                "gnss": dict(self.gnss_counts),
+                **({"magnetometer": {**self.mag_counts, "offset_deg": float(np.rad2deg(wrap_angle(self.x[8])))}}
+                   if self._mag is not None else {})}
 
 
