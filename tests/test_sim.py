@@ -372,6 +372,25 @@ def test_overrides_apply(tmp_path):
     assert t[1] == pytest.approx(0.02)
 
 
+def test_written_filter_priors_follow_the_simulated_sensor(tmp_path):
+    """The config tells the filter the uncertainty the simulation has: heading σ (the
+    floor when the heading is true, the drawn error's σ otherwise) and bias σ."""
+    scn = _write_scenario(tmp_path, SHORT)
+    exact = yaml.safe_load(simulate(scn, tmp_path / "e", seed=3).config_path.read_text())["systems"]
+    off = yaml.safe_load(simulate(scn, tmp_path / "h", seed=3, overrides=[
+        "systems.left_foot.heading_error_sd_deg=2.0"]).config_path.read_text())["systems"]
+    ini, ini_off = exact["left_foot"]["initial"], off["left_foot"]["initial"]
+    assert ini["heading_sd_deg"] == 0.05 and ini_off["heading_sd_deg"] == 2.0
+    delta = (ini_off["heading_deg"] - ini["heading_deg"] + 180.0) % 360.0 - 180.0
+    assert 0.0 < abs(delta) < 4 * 2.0
+    assert off["right_foot"]["initial"] == exact["right_foot"]["initial"]  # its own stream
+    # icm20948: 1 s still window → gyro bias σ = sqrt((N/√1 s)² + σ_GM²); accelerometer
+    # 0.05 m/s² turn-on σ beside its 162 µg Gauss–Markov σ
+    n_g, gm_g = 0.5 * math.pi / 180 / 60, 13.0 * math.pi / 180 / 3600
+    assert ini["gyro_bias_sd_radps"] == pytest.approx(math.hypot(n_g, gm_g))
+    assert exact["right_foot"]["initial"]["acc_bias_sd_mps2"] == pytest.approx(math.hypot(0.05, 162e-6 * G))
+
+
 @pytest.mark.parametrize(("text", "key"), [
     (SHORT + "bogus: 1\n", "bogus"),
     (SHORT.replace("rate_hz: 100", "rate_hz: -5"), "rate_hz"),

@@ -122,13 +122,16 @@ class FootImuSystem(StrictModel):
     """An IMU strapped to one foot (``kind: foot_imu``); ``mount_yaw_deg`` turns it on the
     foot clockwise seen from above (its x axis then points that far right of the toe);
     ``stance_noise`` (default none) lets the foot drift with an AR(1) velocity in stance
-    (:class:`fusion.sim.gait.StanceNoiseConfig`; draws from ``system_seed(seed, name + "#stance")``)."""
+    (:class:`fusion.sim.gait.StanceNoiseConfig`; draws from ``system_seed(seed, name + "#stance")``);
+    ``heading_error_sd_deg``: σ of the error of the initial heading written into the
+    config (0: the true heading; draw from ``system_seed(seed, name + "#heading")``)."""
 
     kind: Literal["foot_imu"]
     foot: Literal["left", "right"]
     imu: ImuErrorConfig = Field(default_factory=ImuErrorConfig)
     mount_yaw_deg: float = Field(default=0.0, ge=-180, le=180)
     stance_noise: StanceNoiseConfig | None = None
+    heading_error_sd_deg: float = Field(default=0.0, ge=0, le=90)
 
 
 @dataclass
@@ -214,6 +217,10 @@ def measured_imu(motion, name: str, imu: ImuErrorConfig, ctx: SimContext) -> tup
             corrupt(gyro, sc.rate_hz, errors.gyro, rngs, "gyro"))
 
 
+HEADING_SD_FLOOR_DEG = 0.05
+"""Initial heading σ (deg) a simulated foot filter is told when it is given the true heading."""
+
+
 def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemOutput:
     motion = ctx.plan.feet[cfg.foot].mounted(cfg.mount_yaw_deg)
     t = ctx.t
@@ -227,6 +234,9 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
 
     pos = motion.evaluate(t).pos
     azimuth = math.degrees(float(motion.footprint_az[0])) + cfg.mount_yaw_deg
+    if cfg.heading_error_sd_deg > 0:
+        rng = np.random.Generator(np.random.PCG64(system_seed(ctx.seed, f"{name}#heading")))
+        azimuth += cfg.heading_error_sd_deg * float(rng.standard_normal())
     errors = cfg.imu.resolve()
     filt: dict[str, Any] = {"kind": "ekf", "earth_rate": False}
     for key, value in (("acc_noise_density", errors.acc.noise_density),
@@ -243,11 +253,12 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
         "initial": {
             "position_m": [float(v) for v in pos[0]],
             "heading_deg": float(azimuth % 360.0),
+            "heading_sd_deg": max(cfg.heading_error_sd_deg, HEADING_SD_FLOOR_DEG),
             "stationary_s": ctx.plan.start_still_s,
         },
     }
-    # the filter starts with the bias uncertainty the simulated sensor has: the gyro bias
-    # after the still window's average, the accelerometer's turn-on and drift σ
+    # the filter starts with the heading and bias uncertainty the simulated sensor has:
+    # the gyro bias after the still window's average, the accelerometer's turn-on and drift σ
     for key, value in (("gyro_bias_sd_radps", errors.gyro.initial_bias_sd(ctx.plan.start_still_s)),
                        ("acc_bias_sd_mps2", errors.acc.initial_bias_sd())):
         if value > 0:
