@@ -57,7 +57,8 @@ from pydantic import Field, field_validator
 from fusion.config import Layout, StrictModel, apply_overrides, read_yaml, validate_section
 from fusion.errors import ConfigError
 from fusion.seeding import system_seed
-from fusion.sim.gait import GaitConfig, GaitPlan, StanceNoiseConfig, plan_gait, stance_drift
+from fusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemOutput
+from fusion.sim.gait import GaitConfig, StanceNoiseConfig, plan_gait, stance_drift
 from fusion.sim.gnss import GnssReceiverConfig, simulate_fixes, write_gnss_csv
 from fusion.sim.hand import HandSwayConfig, hand_motion, heel_strikes
 from fusion.sim.imu import ImuErrorConfig, corrupt, error_generators, ideal_imu
@@ -89,8 +90,6 @@ HAND_IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z"
 HAND_MAG_COLUMNS = ("mag_x", "mag_y", "mag_z")
 """Magnetometer columns (µT) of a hand phone's IMU CSV, before ``step``, when it has one."""
 TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
-DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
-"""Latitude (deg), longitude (deg), ellipsoidal height (m) of the ENU frame when a scenario gives none."""
 TRUTH_FILE = "truth.csv"
 CONFIG_FILE = "config.yaml"
 _FLOAT = "%.10g"
@@ -132,40 +131,6 @@ class FootImuSystem(StrictModel):
     mount_yaw_deg: float = Field(default=0.0, ge=-180, le=180)
     stance_noise: StanceNoiseConfig | None = None
     heading_error_sd_deg: float = Field(default=0.0, ge=0, le=90)
-
-
-@dataclass
-class SimContext:
-    """What every system kind sees: the scenario, the walk, the seed and the output folder."""
-
-    scenario: Scenario
-    plan: GaitPlan
-    t: np.ndarray
-    seed: int
-    out_dir: Path
-    outputs: dict[str, SystemOutput] = field(default_factory=dict)
-    """Systems simulated so far (aiding kinds such as ``uwb_tag`` read their hosts' truth)."""
-
-    @property
-    def geodetic_origin(self) -> tuple[float, float, float]:
-        """The scenario's geodetic origin, or :data:`DEFAULT_GEODETIC_ORIGIN`."""
-        origin = self.scenario.geodetic_origin
-        return tuple(float(v) for v in (origin if origin is not None else DEFAULT_GEODETIC_ORIGIN))  # type: ignore[return-value]
-
-
-@dataclass
-class SystemOutput:
-    """One simulated system: its truth track, its layout section and the files it wrote."""
-
-    truth_t: np.ndarray
-    truth_pos: np.ndarray
-    layout: dict[str, Any]
-    samples: int
-    files: list[Path] = field(default_factory=list)
-    outages: list[dict[str, Any]] = field(default_factory=list)
-    """Entries for the layout's ``outages`` list (system, start_s, duration_s)."""
-    uses_geodetic_origin: bool = False
-    """The system's data is geodetic (GNSS): the layout needs the scenario's origin."""
 
 
 @dataclass(frozen=True)

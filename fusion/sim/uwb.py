@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -38,9 +38,8 @@ from pydantic import Field, model_validator
 from fusion.config import KeyedError, StrictModel
 from fusion.errors import ConfigError
 from fusion.seeding import system_seed
+from fusion.sim.context import SimContext, SystemOutput
 
-if TYPE_CHECKING:
-    from fusion.sim.scenario import SimContext, SystemOutput
 
 __all__ = ["NlosConfig", "RANGE_COLUMNS", "UwbTagSystem", "link_ranges", "nlos_states", "simulate_uwb_tag"]
 
@@ -138,7 +137,6 @@ def write_ranges_csv(path: Path, t: np.ndarray, ids: list[str], range_m: np.ndar
 
 def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOutput:
     """Ranges of tag ``name`` from the true tracks of its host and peers (already simulated)."""
-    from fusion.sim.scenario import SystemOutput
 
     key = f"systems.{name}"
     for ref_key, ref in (("host", cfg.host), *((f"peers.{p}", p) for p in cfg.peers)):
