@@ -1,10 +1,10 @@
-"""Command-line interface (CONTRACT.md): ``fusion run | simulate | validate | plugins``."""
+"""Command-line interface (CONTRACT.md): ``fusion run | simulate | study | validate | plugins``."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Literal, Optional
 
 import typer
 
@@ -62,6 +62,23 @@ def simulate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
 
 
 @app.command()
+def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Study YAML file.")],
+          out: Annotated[Path, typer.Option("--out", help="Output folder (a study there is resumed).")],
+          executor: Annotated[Literal["local", "dask"], typer.Option(
+              "--executor", help="A local process pool or a Dask cluster.")] = "local",
+          workers: Annotated[Optional[int], typer.Option("--workers", help="Processes (default: all cores).")] = None,
+          scheduler: Annotated[Optional[str], typer.Option(
+              "--scheduler", help="Dask scheduler address, tcp://host:port (default: a LocalCluster).")] = None) -> None:
+    """Run a study: layouts × overrides × GNSS outages × seeds; results.parquet, summary.csv, plots."""
+    from fusion.study import run_study
+
+    report = run_study(study_file, out, executor, workers, scheduler)
+    typer.echo(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
+               f"in {report.wall_s:.1f} s ({report.runs_per_s:.2f} runs/s, {report.executor}, "
+               f"{report.workers} workers) -> {report.out_dir}")
+
+
+@app.command()
 def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
     """Check a layout (both stages: layout and each plugin's section)."""
     from fusion.config import load_layout
@@ -89,12 +106,12 @@ def main() -> None:
     except (typer.Abort, KeyboardInterrupt):
         print("aborted", file=sys.stderr)
         sys.exit(130)
-    except Exception as err:  # click usage errors
+    except Exception as err:  # usage errors, from click or from typer's own copy of it
         import click
 
-        if isinstance(err, click.ClickException):
+        if isinstance(err, (click.ClickException, typer.TyperException)) and hasattr(err, "show"):
             err.show()
-            sys.exit(err.exit_code)
+            sys.exit(getattr(err, "exit_code", 2))
         raise
 
 

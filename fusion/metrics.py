@@ -167,6 +167,38 @@ def error_cdf(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e, np.arange(1, e.size + 1, dtype=float) / max(e.size, 1)
 
 
+def outage_errors(est: Trajectory, truth: TruthTrack, transform: PlanarTransform,
+                  start_s: float, duration_s: float) -> dict[str, float]:
+    """Horizontal error (m) of one system across a GNSS outage ``[start_s, start_s + duration_s)`` (s).
+
+    Evaluated at the ESTIMATE's epochs (truth interpolated to them, estimate mapped by
+    ``transform``), so an update at the first fix after the outage does not leak back into
+    the error before it:
+
+    - ``end_error_m``: at the estimate's last epoch strictly before ``start_s + duration_s``,
+      the error accumulated just before GNSS returns. With ``duration_s`` 0 it is the error
+      just before ``start_s`` with GNSS on: the baseline a study compares outages with.
+    - ``max_error_m``: the largest error at the epochs in ``[start_s, start_s + duration_s)``
+      and at that last epoch.
+    - ``end_t_s``: the time of that last epoch, s.
+
+    All NaN when the estimate has no epoch before the outage's end inside the truth's span.
+    """
+    end = start_s + duration_s
+    t = np.asarray(est.t, dtype=float)
+    p_truth = _interp_track(truth.t, truth.pos_n, t)
+    d = transform.apply(np.asarray(est.pos_n, dtype=float)) - p_truth
+    h_err = np.hypot(d[:, 0], d[:, 1])
+    usable = np.flatnonzero((t < end) & np.isfinite(h_err))
+    if usable.size == 0:
+        return {"end_error_m": float("nan"), "max_error_m": float("nan"), "end_t_s": float("nan")}
+    last = usable[-1]
+    window = usable[t[usable] >= start_s]
+    return {"end_error_m": float(h_err[last]),
+            "max_error_m": float(max(h_err[last], h_err[window].max(initial=0.0))),
+            "end_t_s": float(t[last])}
+
+
 # --------------------------------------------------------------------------- alignment
 
 

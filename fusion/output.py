@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fusion.errors import FusionError
-from fusion.metrics import loop_closure_m, path_length_m
+from fusion.metrics import loop_closure_m, outage_errors, path_length_m
 
 if TYPE_CHECKING:
     from fusion.run import RunResult
@@ -36,6 +36,19 @@ def _median_p99(values: list[float]) -> dict[str, float]:
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
 
 
+def _outage_block(result: RunResult, name: str) -> dict[str, float]:
+    """``outage_end_error_m`` / ``outage_max_error_m`` of a system with GNSS outages in the
+    layout and dense truth: the largest over its outages of :func:`fusion.metrics.outage_errors`'
+    end and maximum errors (m)."""
+    truth = result.truths.get(name)
+    windows = [(o.start_s, o.duration_s) for o in result.loaded.layout.outages if o.system == name]
+    if truth is None or truth.sparse or not windows:
+        return {}
+    errs = [outage_errors(result.trajectories[name], truth, result.transform, s, d) for s, d in windows]
+    return {"outage_end_error_m": float(np.max([e["end_error_m"] for e in errs])),
+            "outage_max_error_m": float(np.max([e["max_error_m"] for e in errs]))}
+
+
 def metrics_document(result: RunResult, config_label: str, total_wall_s: float) -> dict:
     """The metrics.json document (CONTRACT.md), plus per-system diagnostics."""
     layout = result.loaded.layout
@@ -51,6 +64,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
             block["distance_m"] = path_length_m(traj.pos_n)
         if loop and "loop_closure_m" not in block:
             block["loop_closure_m"] = loop_closure_m(traj)
+        block.update(_outage_block(result, name))
         block["diagnostics"] = system.diagnostics()
         systems[name] = block
     t = result.transform
@@ -79,6 +93,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
                             "max": float(lam.max()) if lam.size else 0.0},
             "solve_time_us": _median_p99(rep.solve_times_us),
         }
+    if result.aiding:  # aiding sources (UWB tags): no trajectory, their diagnostics
+        doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics()} for name, src in result.aiding.items()}
     inp = result.input_report
     doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
                     "notes": inp.notes}

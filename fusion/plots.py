@@ -1,4 +1,5 @@
-"""PNG plots of scored runs: plan view against truth, horizontal error vs time, error CDF.
+"""PNG plots of scored runs (plan view against truth, horizontal error vs time, error CDF)
+and of studies (an error against the GNSS outage duration).
 
 Positions are ENU metres (plan view: east vs north), time in seconds. Uses
 ``matplotlib.figure.Figure`` with the Agg canvas directly: no pyplot, no global state,
@@ -7,7 +8,7 @@ safe in worker processes and without a display.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -138,4 +139,39 @@ def plot_error_cdf(path: Path, scores: Mapping[str, SystemScore]) -> None:
     ax.grid(True, alpha=0.3)
     if scores:
         ax.legend(loc="lower right", fontsize="small")
+    _save(fig, path)
+
+
+def plot_against_outage_duration(path: Path, curves: Mapping[str, Mapping[float, Sequence[float]]],
+                                 title: str, ylabel: str = "horizontal error [m]") -> None:
+    """An error (m) against the GNSS outage duration (s): per curve (label → duration → one value
+    per run) the mean with its 95 % confidence band (Student t) and the 90th percentile, dashed."""
+    from scipy.stats import t as student_t
+
+    fig = _new_figure()
+    ax = fig.add_subplot(1, 1, 1)
+    colour = _colours(list(curves))
+    for label, by_duration in curves.items():
+        d = np.array(sorted(by_duration), dtype=float)
+        runs = [np.asarray(by_duration[k], dtype=float) for k in sorted(by_duration)]
+        runs = [v[np.isfinite(v)] for v in runs]
+        mean = np.array([v.mean() if v.size else np.nan for v in runs])
+        half = np.array([student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size) if v.size > 1 else np.nan
+                         for v in runs])
+        p90 = np.array([np.percentile(v, 90) if v.size else np.nan for v in runs])
+        n = min((v.size for v in runs), default=0)
+        ax.plot(d, mean, "-o", ms=4, color=colour[label], label=f"{label} (mean, n ≥ {n})")
+        ax.fill_between(d, mean - half, mean + half, color=colour[label], alpha=0.2, lw=0)
+        ax.plot(d, p90, "--", color=colour[label], lw=1.0, alpha=0.8, label=f"{label} (90th percentile)")
+    if not curves:
+        _no_data(ax, "no successful runs")
+    ax.set_title(title)
+    ax.set_xlabel("GNSS outage duration [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0)
+    ax.set_xlim(left=0)
+    ax.grid(True, alpha=0.3)
+    if curves:
+        ax.legend(loc="lower right", fontsize="small", title="band: 95 % confidence of the mean",
+                  title_fontsize="small")
     _save(fig, path)

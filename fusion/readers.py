@@ -480,7 +480,7 @@ def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, 
             values = [float(cells[i]) for i in idx[1:]]
         except ValueError:
             raise InputError(path, "non-numeric cell in t/east_m/north_m/up_m", line=k) from None
-        if not np.all(np.isfinite(values)):
+        if not all(map(math.isfinite, values)):
             raise InputError(path, "NaN or inf cell", line=k)
         rows.setdefault(name, []).append((k, values))
     out: dict[str, TruthTrack] = {}
