@@ -19,7 +19,8 @@ from fusion_plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, Detec
 from fusion.error_state import PARAMS_SIZE, inv3_sym
 from fusion_plugins.foot_ins.ensemble import Ensemble
 from fusion_plugins.foot_ins.kernels import (C_COLOURED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                             differenced_samples, run_foot_ins)
+                                             differenced_samples, run_foot_ins,
+                                             run_foot_ins_coloured)
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
 
@@ -222,15 +223,18 @@ class FootIns(SensorSystem):
             self.P = self.ensemble.covariance()
         else:
             f = self.config.filter
-            coloured = f.kind == "ckf"
-            idx = differenced_samples(self.stance, i0, i1) if coloured else np.empty(0, dtype=np.int64)
-            post_P = np.empty((idx.size, 15, 15))
-            run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
-                         f.colour_factor if coloured else -1.0, self.mech_memory, self.phi, self.hist_x,
-                         self.hist_pos_var, self.counters, post_P)
-            if idx.size:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
-                self._override_idx.append(idx.astype(np.int64))
-                self._override_P.append(post_P)
+            if f.kind == "ckf":
+                idx = differenced_samples(self.stance, i0, i1)
+                post_P = np.empty((idx.size, 15, 15))
+                run_foot_ins_coloured(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
+                                      f.colour_factor, self.mech_memory, self.phi, self.hist_x, self.hist_pos_var,
+                                      self.counters, post_P)
+                if idx.size:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+                    self._override_idx.append(idx.astype(np.int64))
+                    self._override_P.append(post_P)
+            else:
+                run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
+                             self.mech_memory, self.phi, self.hist_x, self.hist_pos_var, self.counters)
         self._i = i1 - 1
 
     # --- heading ------------------------------------------------------------------
