@@ -71,7 +71,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import yaml
-from pydantic import Field, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from fusion.config import DataPath, Layout, StrictModel, apply_overrides, load_layout, read_yaml, validate_section
 from fusion.errors import ConfigError, FusionError
@@ -329,8 +329,9 @@ def _check_scenario(study: LoadedStudy, name: str, entry: StudyLayout, overrides
                     outage: tuple[str, float, float] | None) -> None:
     """Load the scenario with ``overrides`` (and the outage's), its ``layout`` section checked
     against the layout model; the outage's system must have GNSS and the outage fit the walk."""
+    from fusion.plugins import get_registry
     from fusion.sim.gait import plan_gait
-    from fusion.sim.scenario import load_scenario
+    from fusion.sim.scenario import SYSTEM_KINDS, load_scenario
 
     try:
         loaded = load_scenario(entry.file, overrides)
@@ -357,8 +358,25 @@ def _check_scenario(study: LoadedStudy, name: str, entry: StudyLayout, overrides
         systems = lay.get("systems") or {}
         skeleton = {**lay, "systems": {n: {"plugin": "-", **(systems.get(n) or {})} for n in loaded.systems}}
         validate_section(Layout, skeleton, key="layout", path=entry.file, base_dir=entry.file.parent)
+        for system, section in systems.items():
+            plugin = SYSTEM_KINDS[loaded.systems[system].kind].plugin
+            check_partial_section(get_registry().system_class(plugin).Config, section or {},
+                                  f"layout.systems.{system}", entry.file)
     except FusionError as err:
         raise _refuse(study, blame, err) from None
+
+
+def check_partial_section(model: type[BaseModel], section: dict[str, Any], key: str, path: Path) -> None:
+    """Check the keys and values a scenario's ``layout.systems.<name>`` gives for a plugin
+    section the simulator completes: unknown keys and bad values are refused; fields the
+    simulator fills in (missing here) are not."""
+    try:
+        model.model_validate(section)
+    except ValidationError as err:
+        for e in err.errors():
+            if e["type"] != "missing" and e["loc"]:  # whole-section checks need the completed section
+                loc = ".".join(str(p) for p in e["loc"])
+                raise ConfigError(f"{key}.{loc}", e["msg"], path) from None
 
 
 def _check_layout(study: LoadedStudy, name: str, entry: StudyLayout, overrides: list[str], blame: str,

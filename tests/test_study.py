@@ -139,6 +139,11 @@ def test_run_key_changes_with_parameters_outage_and_seed(tmp_path):
     ("layouts: {walk: {scenario: walk.yaml}}\noutages: {system: left_foot, start_s: 8, durations_s: [5]}\n"
      "seeds: 1\n", "outages.system"),
     ("layouts: {walk: {scenario: walk.yaml, layout: walk.yaml}}\nseeds: 1\n", "layouts.walk"),
+    # a plugin section the simulator completes: its unknown keys and bad values, up front
+    ("layouts: {walk: {scenario: walk.yaml}}\nparameters: {layout.systems.hand_phone.filter.step_scale_sdd: [0.1]}\n"
+     "seeds: 1\n", "parameters.layout.systems.hand_phone.filter.step_scale_sdd"),
+    ("layouts: {walk: {scenario: walk.yaml}}\nparameters: {layout.systems.left_foot.filter.kind: [ukf]}\n"
+     "seeds: 1\n", "parameters.layout.systems.left_foot.filter.kind"),
 ])
 def test_bad_study_is_refused_naming_file_and_key(tmp_path, body, key):
     study = write_study(tmp_path, body)

@@ -135,10 +135,12 @@ class FootImuSystem(StrictModel):
 
 @dataclass(frozen=True)
 class SystemKind:
-    """A ``systems.<name>.kind``: its section model and its simulation function."""
+    """A ``systems.<name>.kind``: its section model, its simulation function and the
+    plugin the layout section it writes is for."""
 
     config: type[StrictModel]
     simulate: Callable[[str, Any, SimContext], SystemOutput]
+    plugin: str
     aids: bool = False
     """An aiding kind (a UWB tag): simulated after the systems, whose truth it needs."""
 
@@ -311,9 +313,9 @@ def _simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sy
 
 
 SYSTEM_KINDS: dict[str, SystemKind] = {
-    "foot_imu": SystemKind(FootImuSystem, _simulate_foot_imu),
-    "hand_phone": SystemKind(HandPhoneSystem, _simulate_hand_phone),
-    "uwb_tag": SystemKind(UwbTagSystem, simulate_uwb_tag, aids=True),
+    "foot_imu": SystemKind(FootImuSystem, _simulate_foot_imu, "foot_ins"),
+    "hand_phone": SystemKind(HandPhoneSystem, _simulate_hand_phone, "hand_pdr"),
+    "uwb_tag": SystemKind(UwbTagSystem, simulate_uwb_tag, "uwb", aids=True),
 }
 """``systems.<name>.kind`` → how to validate and simulate it."""
 
