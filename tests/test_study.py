@@ -3,7 +3,6 @@ local and Dask executors giving the same bits, the outage error metric, summary 
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
