@@ -430,6 +430,22 @@ def check_jacobian(case: JacobianCase) -> None:
                              f"analytic {J[worst]:.6g}, numerical {J_num[worst]:.6g} (|diff| {err[worst]:.3g} > tol {tol:.3g})")
 
 
+
+def random_nominal_state(rng: np.random.Generator) -> np.ndarray:
+    """A random strapdown nominal state (16,): position (σ 5 m), velocity (σ 1 m/s), a uniformly
+    random attitude quaternion (scalar first), accelerometer (σ 0.05 m/s^2) and gyro (σ 0.01 rad/s) biases."""
+    from scipy.spatial.transform import Rotation
+
+    from fusion.strapdown import NOMINAL_SIZE
+
+    x = np.zeros(NOMINAL_SIZE)
+    x[0:3] = rng.normal(0, 5, 3)
+    x[3:6] = rng.normal(0, 1, 3)
+    x[6:10] = Rotation.random(random_state=int(rng.integers(1 << 30))).as_quat(scalar_first=True)
+    x[10:13] = rng.normal(0, 0.05, 3)
+    x[13:16] = rng.normal(0, 0.01, 3)
+    return x
+
 def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, gravity: float,
                                seed: int = 0) -> list[JacobianCase]:
     """The core 15-state error model as :class:`JacobianCase` s, one per IMU sample.
@@ -442,10 +458,8 @@ def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float,
     leaves out is O(dt²), so the tolerance is 5 % of max |F − I| (a wrong sign or a missing
     block is O(dt) and fails).
     """
-    from scipy.spatial.transform import Rotation
-
     from fusion.error_state import ERROR_SIZE, accumulate_propagation, error_between, inject
-    from fusion.strapdown import NOMINAL_SIZE, mechanise
+    from fusion.strapdown import mechanise
 
     rng = np.random.default_rng(seed)
     no_earth = np.zeros(3)
@@ -467,12 +481,7 @@ def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float,
     for k, (acc, gyro) in enumerate(zip(np.asarray(acc_b, dtype=float), np.asarray(gyro_b, dtype=float))):
         acc = np.ascontiguousarray(acc)
         gyro = np.ascontiguousarray(gyro)
-        x = np.zeros(NOMINAL_SIZE)
-        x[0:3] = rng.normal(0, 5, 3)
-        x[3:6] = rng.normal(0, 1, 3)
-        x[6:10] = Rotation.random(random_state=int(rng.integers(1 << 30))).as_quat(scalar_first=True)
-        x[10:13] = rng.normal(0, 0.05, 3)
-        x[13:16] = rng.normal(0, 0.01, 3)
+        x = random_nominal_state(rng)
         _, C, f_n = step(x, acc, gyro)
         F = np.eye(ERROR_SIZE)
         accumulate_propagation(F, np.ascontiguousarray(C), f_n, float(dt), np.empty((ERROR_SIZE, ERROR_SIZE)))

@@ -12,7 +12,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fusion.error_state import ERROR_SIZE, error_between, inject, inv3_sym, propagate_covariance, update_selected
-from fusion.strapdown import NOMINAL_SIZE, mechanise
+from fusion.strapdown import mechanise
+from fusion.testing import random_nominal_state
 from fusion.zupt import zero_angular_rate_update, zero_velocity_update
 
 G = 9.8
@@ -23,14 +24,6 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def random_nominal(rng: np.random.Generator) -> np.ndarray:
-    x = np.zeros(NOMINAL_SIZE)
-    x[0:3] = rng.normal(0, 5, 3)
-    x[3:6] = rng.normal(0, 1, 3)
-    x[6:10] = Rotation.random(random_state=int(rng.integers(1 << 30))).as_quat(scalar_first=True)
-    x[10:13] = rng.normal(0, 0.05, 3)
-    x[13:16] = rng.normal(0, 0.01, 3)
-    return x
 
 
 def random_spd(rng: np.random.Generator, n: int = ERROR_SIZE, scale: float = 1.0) -> np.ndarray:
@@ -104,7 +97,7 @@ IMU_CASES = [
 def test_transition_matrix_is_the_linearisation_of_mechanise(case):
     rng = np.random.default_rng(10 + case)
     acc, gyro = IMU_CASES[case]
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     dt = 0.01
     _, C, f_n = step(x, acc, gyro, dt)
     F = F_from_propagate(C, f_n, dt)
@@ -127,7 +120,7 @@ def test_linearisation_residual_is_second_order_in_dt():
     """Halving dt divides the model's residual ‖F_num − F‖ by about 4 (first-order F is exact
     to first order), while F − I halves."""
     rng = np.random.default_rng(3)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     acc, gyro = IMU_CASES[1]
     res, lin = [], []
     for dt in (0.02, 0.01, 0.005):
@@ -143,7 +136,7 @@ def test_linearisation_residual_is_second_order_in_dt():
 
 def test_propagated_covariance_matches_finite_difference_transition():
     rng = np.random.default_rng(21)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     acc, gyro = IMU_CASES[1]
     dt = 0.005
     _, C, f_n = step(x, acc, gyro, dt)
@@ -191,7 +184,7 @@ def test_propagate_covariance_keeps_P_symmetric_psd_over_many_steps():
 
 def test_inject_rotates_attitude_on_the_left_in_the_nav_frame():
     rng = np.random.default_rng(5)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     dx = rng.normal(0, 0.1, ERROR_SIZE)
     dx[6:9] = [0.2, -0.1, 0.3]
     out = x.copy()
@@ -208,7 +201,7 @@ def test_inject_rotates_attitude_on_the_left_in_the_nav_frame():
 def test_inject_small_angle_matches_documented_first_order_dcm():
     """C_true = (I + [δθ×]) C_est to first order."""
     rng = np.random.default_rng(6)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     dth = np.array([1e-5, -2e-5, 3e-5])
     dx = np.zeros(ERROR_SIZE)
     dx[6:9] = dth
@@ -221,7 +214,7 @@ def test_inject_small_angle_matches_documented_first_order_dcm():
 
 def test_error_between_inverts_inject():
     rng = np.random.default_rng(8)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     dx = rng.normal(0, 1e-3, ERROR_SIZE)
     np.testing.assert_allclose(error_between(perturbed(x, dx), x), dx, atol=1e-14)
 
@@ -278,7 +271,7 @@ def test_update_selected_joseph_form_stays_psd_with_tiny_measurement_noise():
 
 def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
     rng = np.random.default_rng(12)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     x[3:6] = [0.3, -0.2, 0.1]
     P = random_spd(rng, scale=1e-2)
     P[3:6, 3:6] += np.eye(3)
@@ -299,7 +292,7 @@ def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
 
 def test_zaru_pulls_gyro_bias_to_the_stance_rate():
     rng = np.random.default_rng(13)
-    x = random_nominal(rng)
+    x = random_nominal_state(rng)
     P = random_spd(rng, scale=1e-4)
     P[12:15, 12:15] += 1e-2 * np.eye(3)
     gyro = np.array([0.01, -0.02, 0.005])
