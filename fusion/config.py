@@ -12,6 +12,7 @@ import hashlib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
 
@@ -40,13 +41,71 @@ def _right_handed(signs: tuple[int, int, int]) -> tuple[int, int, int]:
 
 AxisSigns = Annotated[tuple[int, int, int], AfterValidator(_right_handed)]
 """Signs (+1/−1) turning a file's x, y, z position axes into east, north, up; e.g.
-``[1, -1, -1]`` for a right-handed frame whose z points down (a rotation of 180° about x)."""
+``[1, -1, -1]`` for a right-handed frame whose z points down (a rotation of 180° about x).
+Kept for older layouts: :data:`AxisMap` (``frame:``) says the same and more."""
+
+_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+def _signed_axis_map(axes: tuple[str, str, str]) -> tuple[str, str, str]:
+    seen = []
+    for entry in axes:
+        name = entry.strip().lstrip("+-")
+        if name not in _AXIS_INDEX or entry.strip().count("-") > 1:
+            raise ValueError(f"each entry must be one of x, y, z, -x, -y, -z; got {entry!r}")
+        seen.append(name)
+    if sorted(seen) != ["x", "y", "z"]:
+        raise ValueError(f"each of x, y, z must appear once, got {list(axes)}")
+    return tuple(a.strip().lstrip("+") for a in axes)  # type: ignore[return-value]
+
+
+AxisMap = Annotated[tuple[str, str, str], AfterValidator(_signed_axis_map)]
+"""A signed axis map: entry k names the file axis (``x``, ``-y``, ...) that becomes axis k of
+the project's frame. ``[x, -y, -z]``: a frame with z down turned 180° about x; ``[y, x, -z]``:
+north-east-down to east-north-up. Any signed permutation (a map that mirrors is allowed: the
+file's frame may be left-handed)."""
+
+NAMED_FRAMES: dict[str, tuple[str, str, str]] = {"enu": ("x", "y", "z"), "ned": ("y", "x", "-z")}
+"""Position frames by name, as axis maps into east, north, up."""
+
+
+def apply_axis_map(axes: tuple[str, str, str], v_file: np.ndarray) -> np.ndarray:
+    """Vectors (N, 3) in the file's axes → (N, 3) in the project's frame by a signed axis map
+    (:data:`AxisMap`); a column that is NaN in the file (absent height) stays NaN only where
+    it is used."""
+    v_file = np.asarray(v_file, dtype=float)
+    out = np.empty_like(v_file)
+    for k, entry in enumerate(axes):
+        out[:, k] = v_file[:, _AXIS_INDEX[entry.lstrip("-")]] * (-1.0 if entry.startswith("-") else 1.0)
+    return out
 
 
 class StrictModel(BaseModel):
     """Base of every layout section: unknown keys are errors."""
 
     model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class PositionFrame(StrictModel):
+    """The frame of positions read from a file (truth, position fixes)."""
+
+    frame: Literal["enu", "ned"] | AxisMap = "enu"
+    """The file's position frame: ``enu``, ``ned`` or a signed axis map such as ``[x, -y, -z]``."""
+    axis_signs: AxisSigns | None = None
+    """Older spelling of a sign-only ``frame`` (``[1, -1, -1]`` is ``[x, -y, -z]``)."""
+
+    @property
+    def axes(self) -> tuple[str, str, str]:
+        """The file's frame as an axis map into east, north, up."""
+        if self.axis_signs is not None:
+            return tuple(("-" if s < 0 else "") + a for s, a in zip(self.axis_signs, "xyz"))  # type: ignore[return-value]
+        return NAMED_FRAMES[self.frame] if isinstance(self.frame, str) else self.frame
+
+    @model_validator(mode="after")
+    def _one_frame(self) -> "PositionFrame":
+        if self.axis_signs is not None and self.frame != "enu":
+            raise KeyedError("axis_signs", "give frame or axis_signs, not both")
+        return self
 
 
 class SystemSection(BaseModel):
@@ -131,22 +190,24 @@ class HeadingAlignmentConfig(StrictModel):
     distance_m: float = Field(default=3.0, gt=0)
 
 
-class TruthConfig(StrictModel):
+class TruthConfig(PositionFrame):
     """Reference positions (ENU, m) for scoring; ``loop`` when the walk ends where it began.
 
     ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
     ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
     ``phone_log``: the surveyed points (POSI lines) of a GetSensorData log, sparse truth
     for ``score_systems``, converted to ENU about the layout's geodetic origin.
-    ``axis_signs`` turn the file's three position axes into east, north, up.
+    ``frame`` declares the file's position axes: ``enu``, ``ned`` or a signed axis map
+    (:data:`AxisMap`) into east, north, up. A system given two columns is horizontal truth
+    (its axes are the map's first two entries' sources; vertical errors are not scored).
     """
 
     path: DataPath | None = None
     format: Literal["wide", "long", "phone_log"] = "wide"
-    systems: dict[str, tuple[str, str, str]] = Field(default_factory=dict)
+    systems: dict[str, tuple[str, str, str] | tuple[str, str]] = Field(default_factory=dict)
+    """wide format: each system's position columns, x, y[, z] of the file's frame."""
     score_systems: list[str] = Field(default_factory=list)
     """phone_log format: the systems scored at the log's surveyed points (POSI lines)."""
-    axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
     time_scale: float = Field(default=1.0, gt=0)
     rate_hz: float | None = Field(default=None, gt=0)

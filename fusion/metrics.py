@@ -222,7 +222,7 @@ def _alignment_pairs(
     n_keep = min(int(np.searchsorted(cum, distance_m, side="left")) + 1, t.size)
     t, p_truth = t[:n_keep], p_truth[:n_keep]
     p_est = _interp_track(est.t, est.pos_n, t)
-    ok = np.all(np.isfinite(p_est), axis=1) & np.all(np.isfinite(p_truth), axis=1)
+    ok = np.all(np.isfinite(p_est[:, :2]), axis=1) & np.all(np.isfinite(p_truth[:, :2]), axis=1)
     return p_est[ok], p_truth[ok]
 
 
@@ -237,7 +237,8 @@ def fit_first_distance_alignment(
     (estimate interpolated to truth epoch, truth) of ALL systems present in both mappings,
     each contributing its epochs until its truth has travelled ``distance_m`` horizontally
     (m, cumulative path length from its first epoch inside the estimate's span). The
-    vertical offset is mean(truth_up − est_up) over the same pairs. Fewer than two pairs,
+    vertical offset is mean(truth_up − est_up) over the same pairs that have a height (0 for
+    horizontal truth). Fewer than two pairs,
     or pairs with no horizontal spread, give a translation-only fit.
 
     Raises FusionError if no estimate overlaps its truth in time.
@@ -265,7 +266,9 @@ def fit_first_distance_alignment(
     c, s = np.cos(theta), np.sin(theta)
     rot = np.array([[c, -s], [s, c]])
     translation = b_mean[:2] - rot @ a_mean[:2]
-    return PlanarTransform(theta, translation, float(b_mean[2] - a_mean[2]))
+    dz = b[:, 2] - a[:, 2]
+    dz = dz[np.isfinite(dz)]  # horizontal truth has no height
+    return PlanarTransform(theta, translation, float(dz.mean()) if dz.size else 0.0)
 
 
 # --------------------------------------------------------------------------- scoring
@@ -322,7 +325,7 @@ def _score_one(
     metrics: dict = {
         "distance_m": float(distance),
         "horizontal_error_m": error_stats(h_err),
-        "vertical_error_m": error_stats(v_err),
+        **({"vertical_error_m": error_stats(v_err)} if np.isfinite(v_err).any() else {}),
         "final_error_pct_distance": 100.0 * final / distance if distance > 0 else float("nan"),
         "scored_epochs": int(finite.size),
         "distance_source": source,
@@ -354,7 +357,8 @@ def score_systems(
 
     - distance_m: horizontal path length over the scored epochs, m — of the TRUTH for dense
       truth, of the ESTIMATE for sparse truth (surveyed points); ``distance_source`` says which.
-    - horizontal_error_m, vertical_error_m: ``error_stats`` blocks, m.
+    - horizontal_error_m, vertical_error_m: ``error_stats`` blocks, m (no vertical block for
+      horizontal truth).
     - final_error_pct_distance: 100 × horizontal error at the last scored epoch / distance_m
       (NaN if distance_m is 0).
     - scored_epochs: number of epochs with a finite error.

@@ -301,9 +301,10 @@ def _check_time_args(path: Path, time_column: str | None, time_scale: float, rat
         raise InputError(path, f"time_scale must be a positive finite number, got {time_scale!r}")
 
 
-def _check_triplet(path: Path, what: str, cols: Sequence[str]) -> list[str]:
-    if isinstance(cols, str) or len(cols) != 3:
-        raise InputError(path, f"{what} must name exactly 3 columns (x, y, z), got {cols!r}")
+def _check_columns(path: Path, what: str, cols: Sequence[str], counts: tuple[int, ...] = (3,)) -> list[str]:
+    if isinstance(cols, str) or len(cols) not in counts:
+        need = " or ".join(map(str, counts))
+        raise InputError(path, f"{what} must name {need} columns (x, y, z), got {cols!r}")
     return list(cols)
 
 
@@ -354,8 +355,8 @@ def read_imu_csv(
             path, f"unknown timestamp policy {timestamp_policy!r}; allowed: " + ", ".join(TIMESTAMP_POLICIES)
         )
     _check_time_args(path, time_column, time_scale, rate_hz)
-    acc_cols = _check_triplet(path, "acc_columns", acc_columns)
-    gyro_cols = _check_triplet(path, "gyro_columns", gyro_columns)
+    acc_cols = _check_columns(path, "acc_columns", acc_columns)
+    gyro_cols = _check_columns(path, "gyro_columns", gyro_columns)
     min_samples = max(int(min_samples), 1)
 
     cols: list[str] = []
@@ -417,17 +418,19 @@ def read_truth_csv(
 ) -> dict[str, TruthTrack]:
     """Read reference positions, one :class:`TruthTrack` per system.
 
-    ``position_columns`` maps a system name to its three columns (east, north,
-    up, as given in the file, metres).  A row whose cells for one system are
-    empty or NaN (e.g. a motion-capture marker drop-out) is skipped for that
-    system only; that is not an error and is not counted.  Time rows must be
-    strictly increasing unless ``timestamp_policy`` says otherwise.
+    ``position_columns`` maps a system name to its three columns (x, y, z of the
+    file's frame, metres) or two (horizontal truth: z is returned as NaN).  A row
+    whose cells for one system are empty or NaN (e.g. a motion-capture marker
+    drop-out) is skipped for that system only; that is not an error and is not
+    counted.  Time rows must be strictly increasing unless ``timestamp_policy``
+    says otherwise.
     """
     path = Path(path)
     if not position_columns:
         raise InputError(path, "position_columns is empty: name at least one system")
     _check_time_args(path, time_column, time_scale, rate_hz)
-    systems = {name: _check_triplet(path, f"position_columns[{name!r}]", cols) for name, cols in position_columns.items()}
+    systems = {name: _check_columns(path, f"position_columns[{name!r}]", cols, (2, 3))
+               for name, cols in position_columns.items()}
 
     cols: list[str] = [time_column] if time_column is not None else []
     pos_cols: list[str] = []
@@ -447,6 +450,8 @@ def read_truth_csv(
         ok = ~np.isnan(pos).any(axis=1)
         if not ok.any():
             raise InputError(path, f"system {name!r} has no row with all of {triplet} present")
+        if pos.shape[1] == 2:
+            pos = np.column_stack([pos, np.full(len(pos), np.nan)])
         out[name] = TruthTrack(
             t=np.ascontiguousarray(t[kept][ok]), pos_n=np.ascontiguousarray(pos[ok]), sparse=sparse
         )

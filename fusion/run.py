@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pymap3d
 
-from fusion.config import LoadedLayout, load_layout
+from fusion.config import LoadedLayout, apply_axis_map, load_layout
 from fusion.earth import normal_gravity
 from fusion.errors import ConfigError
 from fusion.fuser import Fuser, FuserReport
@@ -105,8 +105,7 @@ def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None =
     tracks = read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
                             time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
                             delimiter=truth.delimiter, sparse=truth.sparse)
-    signs = np.asarray(truth.axis_signs, dtype=float)
-    return {name: TruthTrack(tr.t, tr.pos_n * signs, tr.sparse) for name, tr in tracks.items()}
+    return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n), tr.sparse) for name, tr in tracks.items()}
 
 
 def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from fusion.config import AxisSigns, DataPath, ImuCsvConfig, KeyedError, StrictModel
+from fusion.config import DataPath, ImuCsvConfig, KeyedError, PositionFrame, StrictModel
 
 
 ENSEMBLE_KINDS = ("enekf", "cenekf")
@@ -88,17 +88,16 @@ class InitialStateConfig(StrictModel):
     """Initial gyroscope bias one-sigma (after the stationary-window estimate), rad/s."""
 
 
-class PositionFixConfig(StrictModel):
+class PositionFixConfig(PositionFrame):
     """Absolute position fixes (ENU, m) from a CSV: applied at the last IMU sample at or
     before each fix time, with noise σ (m) and chi-square innovation gating
     (``gate_probability`` of a consistent fix passing; 3 degrees of freedom).
-    ``axis_signs`` turn the file's axes into east, north, up."""
+    ``frame`` declares the file's axes (``enu``, ``ned`` or a signed axis map)."""
 
     path: DataPath
     """CSV file of fixes; relative to the layout file."""
     columns: tuple[str, str, str]
     """Header names of the three position columns."""
-    axis_signs: AxisSigns = (1, 1, 1)
     time_column: str | None = None
     """Column of fix times, multiplied by time_scale to give seconds."""
     time_scale: float = Field(default=1.0, gt=0)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusion import detectors
-from fusion.config import KeyedError, Layout
+from fusion.config import KeyedError, Layout, apply_axis_map
 from fusion.errors import ConfigError, FusionError
 from fusion.quaternion import levelling, quat_from_azimuth_pitch_roll
 from fusion.measurements import GateCounts, chi2_gate, position_fix_update
@@ -124,7 +124,7 @@ class FootIns(SensorSystem):
                                time_scale=fx.time_scale, rate_hz=fx.rate_hz, delimiter=fx.delimiter)["fix"]
         index = np.searchsorted(self.stream.t, track.t, side="right") - 1
         usable = index >= 1
-        return index[usable].astype(np.int64), track.pos_n[usable] * np.asarray(fx.axis_signs, dtype=float)
+        return index[usable].astype(np.int64), apply_axis_map(fx.axes, track.pos_n[usable])
 
     def _filter_params(self) -> np.ndarray:
         f = self.config.filter
