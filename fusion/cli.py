@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 from pathlib import Path
 from typing import Annotated, Literal, Optional
@@ -96,8 +97,19 @@ def plugins() -> None:
         typer.echo(f"{', '.join(info.systems):<20} {info.module:<32} {info.package} {info.version}")
 
 
+def _console_warnings() -> None:
+    """Warnings of the ``fusion`` logger (input checks, initialisation) as one line each on stderr."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("warning: %(message)s"))
+    log = logging.getLogger("fusion")
+    log.addHandler(handler)
+    log.setLevel(logging.WARNING)
+    log.propagate = False
+
+
 def main() -> None:
     """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
+    _console_warnings()
     try:
         app(standalone_mode=False)
     except FusionError as err:

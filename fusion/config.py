@@ -525,16 +525,24 @@ class ImuCsvConfig(StrictModel):
     time_scale: float = Field(default=1.0, gt=0)
     """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
     rate_hz: float | None = Field(default=None, gt=0)
-    """Fixed sample rate (Hz) when the file has no time column."""
+    """Sample rate (Hz): the time base when the file has no time column; with one, the
+    nominal rate the timestamps are checked against."""
     skip_rows: int = Field(default=0, ge=0)
     """Lines before the header line."""
     delimiter: str = ","
     """Field separator."""
     timestamp_policy: Literal["drop", "sort", "error"] = "drop"
     """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
+    axes: AxisMap = ("x", "y", "z")
+    """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
+    whose z points down at rest into one whose z points up."""
+    max_step_samples: float = Field(default=5.0, gt=1)
+    """A time step longer than this many nominal sample periods is a gap (reported, and
+    handled by the navigation system's gap policy)."""
 
     @model_validator(mode="after")
     def _time_source(self) -> "ImuCsvConfig":
-        if (self.time_column is None) == (self.rate_hz is None):
-            raise ValueError("give exactly one of time_column or rate_hz")
+        if self.time_column is None and self.rate_hz is None:
+            raise ValueError("give time_column or rate_hz")
         return self
+

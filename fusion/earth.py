@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+STANDARD_GRAVITY = 9.80665
+"""Conventional gravity (m/s^2), the value behind the unit "g"."""
+
 EARTH_RATE = 7.2921151467e-5
 """Earth rotation rate, rad/s (WGS84)."""
 

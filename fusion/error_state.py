@@ -23,10 +23,12 @@ from fusion.quaternion import quat_from_rotvec, quat_multiply, quat_normalise
 ERROR_SIZE = 15
 
 # The filter parameter vector ``params`` of the compiled 15-state kernels (the foot INS
-# and its smoothers): noise densities, stance-update σs, gravity (m/s^2), Earth rate (ENU).
+# and its smoothers): noise densities, stance-update σs, gravity (m/s^2), Earth rate (ENU),
+# and the zero-velocity gate (chi-square threshold, 0: off; see :mod:`fusion.zupt`).
 P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY = range(7)
 P_EARTH_RATE = slice(7, 10)
-PARAMS_SIZE = 10
+P_ZUPT_GATE = 10
+PARAMS_SIZE = 11
 DPOS = slice(0, 3)
 DVEL = slice(3, 6)
 DATT = slice(6, 9)
@@ -152,6 +154,23 @@ def inv3_sym(S: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
+def nis_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float) -> float:
+    """Normalised innovation squared yᵀ S⁻¹ y of a 3-D measurement selecting states
+    first:first+3, S = P_sel + r_var I (the chi-square test statistic, 3 degrees of freedom)."""
+    S = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            S[r, c] = P[first + r, first + c]
+        S[r, r] += r_var
+    Si = inv3_sym(S)
+    nis = 0.0
+    for r in range(3):
+        for c in range(3):
+            nis += y[r] * Si[r, c] * y[c]
+    return nis
+
+
+@numba.njit(cache=True)
 def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: np.ndarray,
                     phi: np.ndarray) -> float:
     """Kalman update for a 3-D measurement that selects states first:first+3 (H = [0 I 0]),
@@ -202,3 +221,19 @@ def error_between(x_true: np.ndarray, x_est: np.ndarray) -> np.ndarray:
     dx[6:9] = r.as_rotvec()
     dx[9:15] = x_true[10:16] - x_est[10:16]
     return dx
+
+
+def rotate_about_up(x: np.ndarray, P: np.ndarray, delta_azimuth: float) -> tuple[np.ndarray, np.ndarray]:
+    """The nominal state (16,) and covariance (15, 15) turned about Up by ``delta_azimuth``
+    (rad, clockwise from North positive, as azimuth): position, velocity and attitude (and
+    their error blocks, navigation frame) rotate; the body-frame biases do not."""
+    rot = Rotation.from_euler("z", -delta_azimuth)
+    R = rot.as_matrix()
+    out = np.asarray(x, dtype=float).copy()
+    out[0:3] = R @ out[0:3]
+    out[3:6] = R @ out[3:6]
+    out[6:10] = (rot * Rotation.from_quat(out[6:10], scalar_first=True)).as_quat(scalar_first=True)
+    T = np.eye(ERROR_SIZE)
+    for block in (DPOS, DVEL, DATT):
+        T[block, block] = R
+    return out, T @ P @ T.T

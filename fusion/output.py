@@ -97,7 +97,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
         doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics()} for name, src in result.aiding.items()}
     inp = result.input_report
     doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
-                    "notes": inp.notes}
+                    "notes": inp.notes, "warnings": inp.warnings}
     samples = result.samples
     nav_s = result.timings_s["navigation_s"]
     doc["runtime"] = {"wall_s": total_wall_s, "samples": samples,

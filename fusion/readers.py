@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .types import ImuStream, InputReport, TruthTrack
-
-STANDARD_GRAVITY = 9.80665  # m/s^2, the conventional value behind the unit "g"
+from fusion.config import ImuCsvConfig, apply_axis_map
+from fusion.earth import STANDARD_GRAVITY
+from fusion.errors import InputError
+from fusion.imu_checks import check_imu
+from fusion.types import ImuStream, InputReport, TruthTrack
 
 ACC_UNITS: dict[str, float] = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
@@ -39,6 +40,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "TIMESTAMP_POLICIES",
     "apply_timestamp_policy",
+    "read_imu",
     "read_imu_csv",
     "read_table",
     "read_truth_csv",
@@ -335,6 +337,9 @@ def read_imu_csv(
     delimiter: str = ",",
     timestamp_policy: str = "drop",
     min_samples: int = 10,
+    axes: Sequence[str] = ("x", "y", "z"),
+    declared_rate_hz: float | None = None,
+    max_step_samples: float = 5.0,
 ) -> ImuStream:
     """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units.
 
@@ -342,8 +347,13 @@ def read_imu_csv(
     with ``time_scale=1/60``) or ``i / rate_hz``; exactly one must be given.
     Accelerometer units: ``ACC_UNITS`` (``"g"`` is 9.80665 m/s^2); gyroscope
     units: ``GYRO_UNITS``.  ``stance_column`` holds 0/1 labels (1 = stance).
-    Non-increasing timestamps are handled by ``timestamp_policy`` (see
-    :func:`apply_timestamp_policy`); what was changed is in ``stream.report``.
+    ``axes`` (a signed axis map, :data:`fusion.config.AxisMap`) turns the file's
+    axes into the body frame.  Non-increasing timestamps are handled by
+    ``timestamp_policy`` (see :func:`apply_timestamp_policy`); what was changed is
+    in ``stream.report``.  The stream is then checked
+    (:func:`fusion.imu_checks.check_imu`, against ``declared_rate_hz`` and with gaps
+    longer than ``max_step_samples`` periods): ``stream.checks``, and one warning
+    each in ``stream.report``.
     """
     path = Path(path)
     if acc_unit not in ACC_UNITS:
@@ -389,9 +399,9 @@ def read_imu_csv(
             f"at least {min_samples} are needed"
         )
 
-    acc = np.column_stack([arrays[c] for c in acc_cols]) * ACC_UNITS[acc_unit]
-    gyro = np.column_stack([arrays[c] for c in gyro_cols]) * GYRO_UNITS[gyro_unit]
-    return ImuStream(
+    acc = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in acc_cols]) * ACC_UNITS[acc_unit])
+    gyro = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in gyro_cols]) * GYRO_UNITS[gyro_unit])
+    stream = ImuStream(
         t=np.ascontiguousarray(t[kept]),
         acc_b=np.ascontiguousarray(acc[kept]),
         gyro_b=np.ascontiguousarray(gyro[kept]),
@@ -399,6 +409,12 @@ def read_imu_csv(
         source=str(path),
         report=report,
     )
+    stream.checks = check_imu(stream.t, stream.acc_b, stream.gyro_b, source=path.name, acc_unit=acc_unit,
+                              gyro_unit=gyro_unit, declared_rate_hz=declared_rate_hz,
+                              max_step_samples=max_step_samples)
+    for message in stream.checks.warnings:
+        report.warn(message)
+    return stream
 
 
 # --------------------------------------------------------------------------- truth
@@ -498,3 +514,17 @@ def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, 
     if not out:
         raise InputError(path, "no data rows")
     return out
+
+
+def read_imu(section: ImuCsvConfig) -> ImuStream:
+    """The stream a layout's IMU section describes, in SI units and the body frame, checked
+    (:func:`read_imu_csv`; with both a time column and ``rate_hz``, the rate is the nominal
+    one the timestamps are checked against)."""
+    timed = section.time_column is not None
+    return read_imu_csv(
+        section.path, acc_columns=section.acc_columns, gyro_columns=section.gyro_columns,
+        stance_column=section.stance_column, acc_unit=section.acc_unit, gyro_unit=section.gyro_unit,
+        time_column=section.time_column, time_scale=section.time_scale, rate_hz=None if timed else section.rate_hz,
+        skip_rows=section.skip_rows, delimiter=section.delimiter, timestamp_policy=section.timestamp_policy,
+        axes=section.axes, declared_rate_hz=section.rate_hz if timed else None,
+        max_step_samples=section.max_step_samples)

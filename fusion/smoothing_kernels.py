@@ -22,11 +22,11 @@ import math
 import numba
 import numpy as np
 
-from fusion.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_SIGMA, _apply_A_left, inject, process_noise_diag,
-                                propagate_covariance, update_selected)
+from fusion.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, _apply_A_left, inject,
+                                process_noise_diag, propagate_covariance, update_selected)
 from fusion.quaternion import quat_multiply
 from fusion.strapdown import mechanise
-from fusion.zupt import zero_angular_rate_update, zero_velocity_update
+from fusion.zupt import gated_noise_variance, stance_update
 
 @numba.njit(cache=True)
 def _copy15(dst: np.ndarray, src: np.ndarray) -> None:
@@ -147,6 +147,8 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
     xprior = np.empty(16)
     tmp = np.empty(15)
     y = np.zeros(3)
+    v = np.empty(3)
+    gate = params[P_ZUPT_GATE]
     empty = np.empty((0, 0))
     ptr = np.searchsorted(ov_idx, a + 1)
     if store:
@@ -159,9 +161,12 @@ def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.n
         if store:
             transition(C, f_n, dt, Phi[j], work[0])
             _copy15(Pprior[j], P)
-        if stance[i]:
-            update_selected(P, np.int64(3), y, zs * zs, tmp, empty)
-            if zr > 0:
+        if stance[i]:  # the filter's gated ZUPT: its noise from the prior velocity, as the filter had it
+            for k in range(3):
+                v[k] = -xprior[3 + k]
+            r_var = gated_noise_variance(P, np.int64(3), v, zs * zs, gate)
+            update_selected(P, np.int64(3), y, r_var, tmp, empty)
+            if zr > 0 and r_var == zs * zs:
                 update_selected(P, np.int64(12), y, zr * zr, tmp, empty)
         while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
             for r in range(15):
@@ -196,8 +201,6 @@ def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t:
     q_diag = process_noise_diag(params)
     g = params[P_GRAVITY]
     w_ie = params[7:10].copy()
-    zs = params[P_ZUPT_SIGMA]
-    zr = params[P_ZARU_SIGMA]
     x = x_a.copy()
     P = P_a.copy()
     Po = Porig_a.copy()
@@ -231,11 +234,8 @@ def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t:
         Co = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xo, fo)
         propagate_covariance(Po, Co, fo, dt, q_diag, work)
         if stance[i]:
-            zero_velocity_update(x, P, zs, tmp, empty)
-            zero_velocity_update(xo, Po, zs, tmp, empty)
-            if zr > 0:
-                zero_angular_rate_update(x, P, gyro[i], zr, tmp, empty)
-                zero_angular_rate_update(xo, Po, gyro[i], zr, tmp, empty)
+            stance_update(x, P, gyro[i], params, tmp, empty)
+            stance_update(xo, Po, gyro[i], params, tmp, empty)
         if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
             boxminus(hist_x[i], xo, dext)
             inject(x, dext)
@@ -270,8 +270,6 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
     w_neg = np.empty(3)
     for k in range(3):
         w_neg[k] = -params[7 + k]
-    zs = params[P_ZUPT_SIGMA]
-    zr = params[P_ZARU_SIGMA]
     x = x_end.copy()
     for k in range(3):
         x[3 + k] = -x[3 + k]
@@ -304,12 +302,10 @@ def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.
         for k in range(16):
             xprior[k] = x[k]
         if stance[i - 1]:
-            zero_velocity_update(x, P, zs, tmp, empty)
+            for k in range(3):
+                gneg[k] = -gyro[i - 1, k]
+            stance_update(x, P, gneg, params, tmp, empty)
             counters[0] += 1
-            if zr > 0:
-                for k in range(3):
-                    gneg[k] = -gyro[i - 1, k]
-                zero_angular_rate_update(x, P, gneg, zr, tmp, empty)
         boxminus(x, xprior, dx[j])
         for k in range(16):
             xb[j, k] = x[k]

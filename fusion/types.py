@@ -6,28 +6,45 @@ time in seconds (float64); specific force in m/s^2; angular rate in rad/s.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from fusion.imu_checks import ImuChecks
+
+LOG = logging.getLogger("fusion")
+"""The project's logger: warnings about the input and the run go here (and to the console)."""
 
 
 @dataclass
 class InputReport:
-    """What a reader changed in the raw input, by explicit policy.
+    """What a reader changed in the raw input, by explicit policy, and what looked wrong.
 
     dropped_samples: samples removed (duplicate or backward timestamps, per policy).
     reordered_samples: samples moved to restore time order (policy ``sort``).
+    notes: what a policy did. warnings: one line each about input that looks wrong (units,
+    rate, gaps, clipping, a missing still interval...), also logged on :data:`LOG`.
     """
 
     dropped_samples: int = 0
     reordered_samples: int = 0
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def warn(self, message: str) -> None:
+        """Record a one-line warning and log it."""
+        self.warnings.append(message)
+        LOG.warning(message)
 
     def merge(self, other: "InputReport") -> "InputReport":
         return InputReport(
             self.dropped_samples + other.dropped_samples,
             self.reordered_samples + other.reordered_samples,
             self.notes + other.notes,
+            self.warnings + other.warnings,
         )
 
 
@@ -38,6 +55,7 @@ class ImuStream:
     t: (N,) s.  acc_b: (N, 3) specific force, body frame, m/s^2.
     gyro_b: (N, 3) angular rate, body frame, rad/s.
     stance: (N,) bool stance labels given with the data, or None.
+    checks: what :func:`fusion.imu_checks.check_imu` found (None: not checked).
     """
 
     t: np.ndarray
@@ -46,6 +64,7 @@ class ImuStream:
     stance: np.ndarray | None = None
     source: str = ""
     report: InputReport = field(default_factory=InputReport)
+    checks: ImuChecks | None = None
 
     def __len__(self) -> int:
         return len(self.t)

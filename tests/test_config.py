@@ -395,7 +395,9 @@ def test_heading_north_error_names_exactly_the_config_key():
     ("systems.left_foot.filter.acc_noise_density=-1", "systems.left_foot.filter.acc_noise_density"),
     ("systems.left_foot.detector.kind=psychic", "systems.left_foot.detector.kind"),
     ("systems.left_foot.data.acc_unit=furlong", "systems.left_foot.data.acc_unit"),
-    ("systems.left_foot.data.rate_hz=60", "systems.left_foot.data"),
+    ("systems.left_foot.data.axes=[x, x, z]", "systems.left_foot.data.axes"),
+    ("systems.left_foot.data.max_step_samples=1", "systems.left_foot.data.max_step_samples"),
+    ("truth.frame=[y, x, w]", "truth.frame"),
     ("output.decimate=0", "output.decimate"),
 ])
 def test_out_of_range_values_are_refused_with_their_key(override, key):

@@ -281,7 +281,7 @@ def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
     nis_expected = float(v @ np.linalg.solve(S, v))  # y = 0 − v̂
     P_before = P.copy()
     dx = np.empty(ERROR_SIZE)
-    nis = zero_velocity_update(x, P, sigma, dx, np.empty((0, 0)))
+    nis = zero_velocity_update(x, P, sigma, 0.0, dx, np.empty((0, 0)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
     assert np.linalg.norm(x[3:6]) < 1e-5 * np.linalg.norm(v)
     np.testing.assert_allclose(dx[3:6], -v, rtol=1e-5)

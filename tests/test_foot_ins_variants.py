@@ -106,7 +106,7 @@ def test_coloured_update_matches_the_dense_equations():
     P_got = P.copy()
     dx = np.empty(15)
     phi = np.eye(15)
-    nis = coloured_zero_velocity_update(x.copy(), P_got, v_prev, C, f_n, dt, q, alpha, sigma, dx, phi)
+    nis = coloured_zero_velocity_update(x.copy(), P_got, v_prev, C, f_n, dt, q, alpha, sigma, 0.0, dx, phi)
     np.testing.assert_allclose(dx, K @ y, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(P_got, P_want, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(phi, E, rtol=1e-12, atol=1e-15)

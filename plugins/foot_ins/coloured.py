@@ -60,14 +60,15 @@ def velocity_rows_of_inverse_transition(C: np.ndarray, f_n: np.ndarray, dt: floa
 @numba.njit(cache=True)
 def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarray, C: np.ndarray,
                                   f_n: np.ndarray, dt: float, q_diag: np.ndarray, alpha: float, sigma_v: float,
-                                  dx: np.ndarray, phi: np.ndarray) -> float:
+                                  gate: float, dx: np.ndarray, phi: np.ndarray) -> float:
     """The cKF stance update (module docstring) at a stance sample whose previous sample was
     also updated. x (16,) prior nominal state and P (15, 15) prior covariance are corrected
     in place; ``v_prev`` (3,) the posterior velocity at the previous sample (m/s); ``C``, ``f_n``
     and ``dt`` the step's C_nb, mean navigation-frame specific force (m/s^2) and interval (s);
     ``q_diag`` (15,) the process noise densities² (Q = diag(q_diag) dt); α the colour factor;
     σ_v (m/s) the standard deviation of the white driving noise ξ. ``phi`` (15, 15), when not
-    empty, is left-multiplied by (I − K H̄). Writes dx (15,); returns the NIS yᵀ S⁻¹ y."""
+    empty, is left-multiplied by (I − K H̄). Writes dx (15,); returns the NIS yᵀ S⁻¹ y. With
+    ``gate`` > 0 and NIS > gate nothing is changed (chi-square gate, 3 degrees of freedom)."""
     T = np.empty((3, 15))
     velocity_rows_of_inverse_transition(C, f_n, dt, T)
     Hb = np.zeros((3, 15))
@@ -110,13 +111,19 @@ def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarr
             S[r, c] = m
             S[c, r] = m
     Si = inv3_sym(S)
+    y = np.empty(3)
+    for k in range(3):
+        y[k] = alpha * v_prev[k] - x[3 + k]
+    nis = 0.0
+    for r in range(3):
+        for c in range(3):
+            nis += y[r] * Si[r, c] * y[c]
+    if gate > 0.0 and nis > gate:
+        return nis
     K = np.empty((15, 3))
     for r in range(15):
         for c in range(3):
             K[r, c] = G[r, 0] * Si[0, c] + G[r, 1] * Si[1, c] + G[r, 2] * Si[2, c]
-    y = np.empty(3)
-    for k in range(3):
-        y[k] = alpha * v_prev[k] - x[3 + k]
     for r in range(15):
         dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
     # E = I − K H̄
@@ -161,8 +168,4 @@ def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarr
             P[r, c] = v
             P[c, r] = v
     inject(x, dx)
-    nis = 0.0
-    for r in range(3):
-        for c in range(3):
-            nis += y[r] * Si[r, c] * y[c]
     return nis

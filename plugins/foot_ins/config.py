@@ -37,6 +37,10 @@ class FootFilterConfig(StrictModel):
     zupt_sigma_mps: float = Field(default=0.01, gt=0)
     """Zero-velocity pseudo-measurement noise, m/s; for ckf and cenekf the σ of the white
     driving noise ξ of the coloured noise."""
+    zupt_gate_probability: float | None = Field(default=0.999, gt=0, lt=1)
+    """Chi-square gate of every zero-velocity update (ekf, ckf; 3 degrees of freedom): a
+    consistent update passes with this probability; beyond the gate the update is de-weighted
+    to the gate (bounded influence, :mod:`fusion.zupt`) and counted. null: off."""
     zaru_sigma_radps: float | None = Field(default=None, gt=0)
     """Zero-angular-rate update noise, rad/s; unset: no ZARU."""
     earth_rate: bool = False
@@ -46,15 +50,24 @@ class FootFilterConfig(StrictModel):
 class DetectorConfig(StrictModel):
     """Zero-velocity detector. ``labels`` uses the data's stance column.
 
-    shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a (m/s^2), σ_ω (rad/s) and
-    ``threshold`` γ; magnitude: | ‖f‖ − g | ≤ ``threshold`` (m/s^2); axes_band: ``low`` ≤
-    f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance runs shorter than ``min_stance_s`` and swing
-    gaps shorter than ``min_swing_s`` are removed.
+    adaptive (the default): the SHOE statistic with a threshold taken from the recording
+    (:func:`fusion.detectors.adaptive_shoe_threshold`: ``margin_decades`` above the local
+    stance floor, between ``threshold`` (default 3e4) and ``motion_threshold``), window
+    25 ms at the recording's rate unless ``window`` is set; it follows walking, running and
+    stair stances at any rate. shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a
+    (m/s^2), σ_ω (rad/s) and the fixed ``threshold`` γ; magnitude: | ‖f‖ − g | ≤
+    ``threshold`` (m/s^2); axes_band: ``low`` ≤ f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance
+    runs shorter than ``min_stance_s`` and swing gaps shorter than ``min_swing_s`` are removed.
     """
 
-    kind: Literal["labels", "shoe", "magnitude", "axes_band"] = "shoe"
-    """labels, shoe, magnitude or axes_band."""
-    window: int = Field(default=5, ge=1)
+    kind: Literal["adaptive", "labels", "shoe", "magnitude", "axes_band"] = "adaptive"
+    """adaptive, labels, shoe, magnitude or axes_band."""
+    window: int | None = Field(default=None, ge=1)
+    """Samples per test window (shoe, magnitude, axes_band: default 5; adaptive: 25 ms)."""
+    motion_threshold: float = Field(default=1e5, gt=0)
+    """adaptive: the SHOE statistic above which a sample is never stance."""
+    margin_decades: float = Field(default=1.0, gt=0)
+    """adaptive: how far (decades of the statistic) above the local stance floor stance reaches."""
     threshold: float | None = Field(default=None, gt=0)
     sigma_acc: float = Field(default=0.01, gt=0)
     """SHOE accelerometer noise σ_a, m/s^2."""
@@ -67,13 +80,28 @@ class DetectorConfig(StrictModel):
 
 
 class InitialStateConfig(StrictModel):
-    """Initial state: position (ENU m), heading (azimuth of the body x axis, degrees
-    clockwise from North, or ``auto`` to align with the other systems), the stationary
-    window at the start used for levelling and gyro bias (s), and one-sigma uncertainties."""
+    """Initial state at the first sample: position (ENU m), heading (azimuth of the
+    horizontal projection of the body ``heading_axis``, degrees clockwise from North, or
+    ``auto`` to align with the other systems), and one-sigma uncertainties.
+
+    The IMU is levelled and its gyro bias estimated on the first still interval of the
+    recording (:mod:`fusion.initial_alignment`): at least ``stationary_s`` long, with the
+    spreads of specific force and angular rate within ``still_acc_sd_mps2`` and
+    ``still_gyro_sd_radps``. Motion before it is navigated backward from it to give the
+    state at the first sample. Without any still interval the quietest window is used and
+    the level and gyro-bias σ are inflated to its spreads (a warning says so)."""
 
     position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     heading_deg: float | Literal["auto"] = 0.0
-    stationary_s: float = Field(default=1.0, gt=0)
+    heading_axis: Literal["x", "y", "z"] = "x"
+    """Body axis whose heading ``heading_deg`` gives; if it is within 30° of vertical at
+    rest, the most horizontal axis is used instead (a warning says so)."""
+    stationary_s: float = Field(default=0.5, gt=0)
+    """Shortest still interval used for levelling and the gyro bias, s."""
+    still_acc_sd_mps2: float = Field(default=0.2, gt=0)
+    """Largest spread √(Σ var) of the specific force over a still window, m/s^2."""
+    still_gyro_sd_radps: float = Field(default=0.05, gt=0)
+    """Largest spread √(Σ var) of the angular rate over a still window, rad/s."""
     position_sd_m: float = Field(default=1e-3, gt=0)
     """Initial position one-sigma, m."""
     velocity_sd_mps: float = Field(default=1e-2, gt=0)

@@ -8,40 +8,54 @@ import numpy as np
 
 from fusion import detectors
 from fusion.config import KeyedError, Layout, apply_axis_map
+from fusion.earth import earth_rate_enu
 from fusion.errors import ConfigError, FusionError
-from fusion.quaternion import levelling, quat_from_azimuth_pitch_roll
+from fusion.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force, find_still_interval,
+                                     heading_axis)
 from fusion.measurements import GateCounts, chi2_gate, position_fix_update
-from fusion.readers import read_imu_csv, read_truth_csv
+from fusion.quaternion import quat_to_dcm
+from fusion.readers import read_imu, read_truth_csv
 from fusion.strapdown import NOMINAL_SIZE
 from fusion.system import LayoutContext, SensorSystem
 from fusion.types import ImuStream, InputReport, Trajectory
 from fusion_plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, DetectorConfig, FootInsConfig
-from fusion.error_state import PARAMS_SIZE, inv3_sym
+from fusion.error_state import (DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, inject, inv3_sym,
+                                rotate_about_up)
 from fusion_plugins.foot_ins.ensemble import Ensemble
-from fusion_plugins.foot_ins.kernels import (C_COLOURED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                             differenced_samples, run_foot_ins,
-                                             run_foot_ins_coloured)
+from fusion_plugins.foot_ins.kernels import (C_CALL_COLOURED, C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS,
+                                             COUNTERS_SIZE, differenced_samples, run_foot_ins, run_foot_ins_coloured)
 
-_DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "magnitude": 0.5}
+MIN_STILL_SAMPLES = 10
+"""Fewest samples in a still window: its spreads must measure the sensor's noise."""
+
+_DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
 
 
 def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
     """Stance flags (N,) from the configured detector, then debounced (durations in s)."""
     threshold = cfg.threshold if cfg.threshold is not None else _DEFAULT_THRESHOLDS.get(cfg.kind)
+    window = cfg.window if cfg.window is not None else 5
+    rate = 1.0 / np.median(np.diff(stream.t))
     if cfg.kind == "labels":  # the config model ensures the data have a stance column
         stance = stream.stance.copy()
+    elif cfg.kind == "adaptive":
+        if threshold >= cfg.motion_threshold:
+            raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
+        stance, _ = detectors.adaptive_shoe(stream.acc_b, stream.gyro_b, rate, window=cfg.window,
+                                            sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro, gravity=gravity,
+                                            gamma_still=threshold, gamma_motion=cfg.motion_threshold,
+                                            margin_decades=cfg.margin_decades)
     elif cfg.kind == "shoe":
-        stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=cfg.window, sigma_acc=cfg.sigma_acc,
+        stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
                                 sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity)
     elif cfg.kind == "magnitude":
-        stance = detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=cfg.window)
+        stance = detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=window)
     else:
         low = cfg.low if cfg.low is not None else gravity - 1.0
         high = cfg.high if cfg.high is not None else gravity + 1.0
         if not low < high:
             raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
-        stance = detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=cfg.window)
-    rate = 1.0 / np.median(np.diff(stream.t))
+        stance = detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=window)
     if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
         stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
                                     min_swing=max(1, round(cfg.min_swing_s * rate)))
@@ -77,13 +91,12 @@ class FootIns(SensorSystem):
 
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)
-        d = config.data
-        self.stream = read_imu_csv(
-            d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns, stance_column=d.stance_column,
-            acc_unit=d.acc_unit, gyro_unit=d.gyro_unit, time_column=d.time_column, time_scale=d.time_scale,
-            rate_hz=d.rate_hz, skip_rows=d.skip_rows, delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
+        self.stream = read_imu(config.data)
+        self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
         self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
         self._params = self._filter_params()
+        self.still = self._find_still_interval()
+        self._gap_index, self._gap_P = self._gap_inflation()
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
         self._fix_sigma = fx.sigma_m if fx is not None else 0.0
@@ -132,29 +145,119 @@ class FootIns(SensorSystem):
         p[:7] = (f.acc_noise_density, f.gyro_noise_density, f.acc_bias_random_walk, f.gyro_bias_random_walk,
                  f.zupt_sigma_mps, f.zaru_sigma_radps or 0.0, self.context.gravity_mps2)
         if f.earth_rate:
-            from fusion.earth import earth_rate_enu
-
-            p[7:10] = earth_rate_enu(self.context.latitude_deg)
+            p[P_EARTH_RATE] = earth_rate_enu(self.context.latitude_deg)
+        if f.zupt_gate_probability is not None:
+            p[P_ZUPT_GATE] = chi2_gate(f.zupt_gate_probability, 3)
         return p
 
-    def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Levelling and gyro bias from the stationary window at the start (roll/pitch from
-        the mean specific force, b_g = mean angular rate); heading from the layout."""
+    def _find_still_interval(self) -> StillInterval:
+        """The first still interval (:func:`fusion.initial_alignment.find_still_interval`);
+        without one, the quietest window, and a warning."""
         ini = self.config.initial
+        key = f"systems.{self.name}.initial.stationary_s"
         t = self.stream.t
-        window = t - t[0] <= ini.stationary_s
-        if window.sum() < 2:
-            raise ConfigError(f"systems.{self.name}.initial.stationary_s", "window holds fewer than 2 samples")
-        pitch, roll = levelling(self.stream.acc_b[window].mean(axis=0))
+        length = round(ini.stationary_s * self._rate_hz)
+        if length < MIN_STILL_SAMPLES:
+            raise ConfigError(key, f"{ini.stationary_s:g} s holds {length} samples at {self._rate_hz:.4g} Hz; "
+                                   f"the noise of a still window needs at least {MIN_STILL_SAMPLES}")
+        if length > len(t):
+            raise ConfigError(key, f"{ini.stationary_s} s is longer than the recording ({t[-1] - t[0]:.3g} s)")
+        still = find_still_interval(self.stream.acc_b, self.stream.gyro_b, length, ini.still_acc_sd_mps2,
+                                    ini.still_gyro_sd_radps)
+        span = f"t = {t[still.start]:.2f}–{t[still.stop - 1]:.2f} s"
+        if not still.still:
+            self.stream.report.warn(
+                f"{self.name}: no still interval of {ini.stationary_s:g} s (spreads ≤ {ini.still_acc_sd_mps2:g} m/s^2, "
+                f"{ini.still_gyro_sd_radps:g} rad/s); levelled on the quietest window {span} (spreads "
+                f"{still.acc_spread_mps2:.2g} m/s^2, {still.gyro_spread_radps:.2g} rad/s), level and gyro-bias "
+                "uncertainty inflated to match")
+        elif still.start > 0:
+            self.stream.report.notes.append(f"{self.name}: levelled on the still interval {span}; the "
+                                            f"{t[still.start] - t[0]:.2f} s before it navigated backward from there")
+        return still
+
+    def _gap_inflation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gap policy: before the step across a gap of Δ missing seconds the covariance grows by
+        an unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
+        σ_ω = rms(‖ω‖): δp += (σ_f Δ²/2)², δv += (σ_f Δ)², δθ += (σ_ω Δ)² per axis. Returns the
+        gap sample indices and the (K, 15, 15) covariance increments."""
+        checks = self.stream.checks
+        if checks is None or checks.gap_index.size == 0:
+            return np.empty(0, dtype=np.int64), np.empty((0, 15, 15))
+        f_dev = np.linalg.norm(self.stream.acc_b, axis=1) - self.context.gravity_mps2
+        sigma_f = float(np.sqrt(np.mean(f_dev**2)))
+        sigma_w = float(np.sqrt(np.mean(np.sum(self.stream.gyro_b**2, axis=1))))
+        dP = np.zeros((checks.gap_index.size, 15, 15))
+        for k, missing in enumerate(checks.gap_missing_s):
+            for block, var in ((DPOS, (sigma_f * missing**2 / 2) ** 2), (DVEL, (sigma_f * missing) ** 2),
+                               (DATT, (sigma_w * missing) ** 2)):
+                dP[k, block, block] = var * np.eye(3)
+        return checks.gap_index, dP
+
+    def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The state at the first sample: levelled (TRIAD on the mean specific force) and the
+        gyro bias (mean angular rate) on the still interval, the heading from the layout; if
+        the interval starts later, navigated backward to the first sample (:meth:`_navigate_back`)."""
+        ini = self.config.initial
+        st = self.still
+        window = slice(st.start, st.stop)
+        f_b = self.stream.acc_b[window].mean(axis=0)
+        self.heading_axis = heading_axis(f_b, ini.heading_axis)
+        if self.heading_axis != ini.heading_axis and ini.heading_deg != "auto" and not hasattr(self, "_x0"):
+            self.stream.report.warn(f"{self.name}: body axis {ini.heading_axis} is near vertical at rest; "
+                                    f"initial.heading_deg is taken as the heading of axis {self.heading_axis}")
+        level_sd = np.deg2rad(ini.level_sd_deg)
+        gyro_bias_sd = ini.gyro_bias_sd_radps
+        if not st.still:  # the mean over a moving window: level and rate errors of the window's spreads
+            level_sd = max(level_sd, st.acc_spread_mps2 / self.context.gravity_mps2)
+            gyro_bias_sd = max(gyro_bias_sd, st.gyro_spread_radps)
         x = np.zeros(NOMINAL_SIZE)
-        x[0:3] = ini.position_m
-        x[6:10] = quat_from_azimuth_pitch_roll(self._azimuth0, pitch, roll)
+        x[6:10] = attitude_from_specific_force(f_b, self._azimuth0, self.heading_axis)
         x[13:16] = self.stream.gyro_b[window].mean(axis=0)
         sd = np.concatenate([
             np.full(3, ini.position_sd_m), np.full(3, ini.velocity_sd_mps),
-            np.deg2rad([ini.level_sd_deg, ini.level_sd_deg, ini.heading_sd_deg]),
-            np.full(3, ini.acc_bias_sd_mps2), np.full(3, ini.gyro_bias_sd_radps)])
-        return x, np.diag(sd**2)
+            [level_sd, level_sd, np.deg2rad(ini.heading_sd_deg)],
+            np.full(3, ini.acc_bias_sd_mps2), np.full(3, gyro_bias_sd)])
+        P = np.diag(sd**2)
+        if st.start > 0:
+            x, P = self._navigate_back(x, P, st.start)
+        x[0:3] = ini.position_m
+        return x, P
+
+    def _navigate_back(self, x_s: np.ndarray, P_s: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """From the state at sample s back to sample 0: the forward kernel run on the reversed
+        record (t → −t, ω → −ω, the same specific force; velocity, gyro bias and the Earth
+        rate change sign), with the same gated ZUPTs. The result is turned about Up so that
+        the heading at sample 0 is the layout's, and its covariance doubled: the forward run
+        uses the same zero-velocity updates again (the bound for information counted twice);
+        position restarts from the layout's with its prior σ."""
+        st = self.stream
+        r = np.arange(s + 1)
+        src = np.minimum(s - r + 1, s)  # the sample whose interval is stepped back over (r ≥ 1)
+        params = self._params.copy()
+        params[P_EARTH_RATE] *= -1.0
+        sign = np.ones(15)
+        sign[3:6] = sign[12:15] = -1.0
+        flip = np.outer(sign, sign)
+        xb = x_s.copy()
+        xb[3:6] *= -1.0
+        xb[13:16] *= -1.0
+        Pb = P_s * flip
+        t_r, acc_r, gyro_r = -st.t[s - r], st.acc_b[src], -st.gyro_b[src]
+        stance_r = np.ascontiguousarray(self.stance[s - r])
+        hist_x, hist_var = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 3))
+        self.backward_counters = np.zeros(COUNTERS_SIZE)
+        run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
+                     hist_x, hist_var, self.backward_counters)
+        xb[3:6] *= -1.0
+        xb[13:16] *= -1.0
+        Pb = 2.0 * (Pb * flip)
+        a_n = quat_to_dcm(xb[6:10]) @ AXIS_VECTORS[self.heading_axis]
+        x0, P0 = rotate_about_up(xb, Pb, self._azimuth0 - float(np.arctan2(a_n[0], a_n[1])))
+        P0[DPOS, :] = 0.0
+        P0[:, DPOS] = 0.0
+        P0[DPOS, DPOS] = np.eye(3) * self.config.initial.position_sd_m**2
+        return x0, P0
 
     def restart(self) -> None:
         """Back to the initial state at the first sample; history cleared (the ensemble
@@ -180,6 +283,7 @@ class FootIns(SensorSystem):
         self.mech_memory = np.zeros(6)
         self.fix_counts = GateCounts()
         self._next_fix = 0
+        self._next_gap = 0
         self._i = 0  # index of the sample the state refers to
         # for the smoother (fusion.smoothing): covariances left by corrections outside the
         # compiled loop (fuser constraints, position fixes), and the smoothed result
@@ -211,31 +315,42 @@ class FootIns(SensorSystem):
         self._run_to(i1)
 
     def _run_to(self, i1: int) -> None:
-        """Process samples up to (excluding) index i1 in one compiled chunk."""
-        if i1 <= self._i + 1:
+        """Process samples up to (excluding) index i1 in compiled chunks, split where the gap
+        policy inflates the covariance (recorded for the smoothers)."""
+        i = self._i + 1
+        if i1 <= i:
             return
-        i0 = self._i + 1
         st = self.stream
         if self.ensemble is not None:
-            self.ensemble.run(st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params, self.hist_x,
+            self.ensemble.run(st.t, st.acc_b, st.gyro_b, self.stance, i, i1, self._params, self.hist_x,
                               self.hist_pos_var, self.counters)
             self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
             self.P = self.ensemble.covariance()
         else:
-            f = self.config.filter
-            if f.kind == "ckf":
-                idx = differenced_samples(self.stance, i0, i1)
-                post_P = np.empty((idx.size, 15, 15))
-                run_foot_ins_coloured(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
-                                      f.colour_factor, self.mech_memory, self.phi, self.hist_x, self.hist_pos_var,
-                                      self.counters, post_P)
-                if idx.size:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
-                    self._override_idx.append(idx.astype(np.int64))
-                    self._override_P.append(post_P)
-            else:
-                run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
-                             self.mech_memory, self.phi, self.hist_x, self.hist_pos_var, self.counters)
+            gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
+            for a, b in zip([i, *gaps], [*gaps, i1]):
+                if a in gaps:
+                    self.P += self._gap_P[np.searchsorted(self._gap_index, a)]
+                    self._record_override(a - 1)
+                self._run_kernel(a, b)
         self._i = i1 - 1
+
+    def _run_kernel(self, i0: int, i1: int) -> None:
+        st = self.stream
+        f = self.config.filter
+        if f.kind == "ckf":
+            bound = differenced_samples(self.stance, i0, i1).size
+            post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
+            run_foot_ins_coloured(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
+                                  f.colour_factor, self.mech_memory, self.phi, self.hist_x, self.hist_pos_var,
+                                  self.counters, post_idx, post_P)
+            k = int(self.counters[C_CALL_COLOURED])
+            if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+                self._override_idx.append(post_idx[:k])
+                self._override_P.append(post_P[:k])
+            return
+        run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params, self.mech_memory,
+                     self.phi, self.hist_x, self.hist_pos_var, self.counters)
 
     # --- heading ------------------------------------------------------------------
     @property
@@ -273,8 +388,6 @@ class FootIns(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        from fusion.error_state import inject
-
         P = 0.5 * (P + P.T)
         if self.ensemble is not None:
             self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
@@ -354,6 +467,19 @@ class FootIns(SensorSystem):
         self.smoothed_pos_var = pos_var
         self.smoothing_diagnostics = diagnostics
 
+    def _initialisation_report(self) -> dict:
+        st, t = self.still, self.stream.t
+        report = {"still_interval_s": [float(t[st.start]), float(t[st.stop - 1])], "still": st.still,
+                  "acc_spread_mps2": st.acc_spread_mps2, "gyro_spread_radps": st.gyro_spread_radps,
+                  "heading_axis": self.heading_axis, "level_sd_deg": float(np.degrees(np.sqrt(self._P0[6, 6]))),
+                  "heading_sd_deg": float(np.degrees(np.sqrt(self._P0[8, 8]))),
+                  "gyro_bias_sd_radps": float(np.sqrt(self._P0[14, 14]))}
+        if st.start > 0:
+            report["backward_s"] = float(t[st.start] - t[0])
+            report["backward_zupts"] = int(self.backward_counters[C_ZUPTS])
+            report["backward_zupt_gated"] = int(self.backward_counters[C_GATED])
+        return report
+
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         n = self._i + 1
@@ -377,6 +503,9 @@ class FootIns(SensorSystem):
             "zupt_updates": zupts,
             "zaru_updates": int(self.counters[C_ZARUS]),
             "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
+            "zupt_gated": int(self.counters[C_GATED]),
+            "initialisation": self._initialisation_report(),
+            **({"input_checks": self.stream.checks.to_dict()} if self.stream.checks is not None else {}),
             "filter_kind": self.config.filter.kind,
             **({"coloured_updates": int(self.counters[C_COLOURED])} if self.config.filter.kind == "ckf" else {}),
             **({"members": self.config.filter.members} if self.ensemble is not None else {}),
