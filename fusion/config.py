@@ -330,8 +330,8 @@ def _first_error(err: ValidationError, prefix: str = "", data: Any = None) -> tu
     e = err.errors(include_url=False)[0]
     loc = _dotted(_data_location(e["loc"], data) if data is not None else e["loc"])
     ctx_err = (e.get("ctx") or {}).get("error")
-    if isinstance(ctx_err, KeyedError):
-        return ".".join(p for p in (prefix, ctx_err.key) if p), str(ctx_err)
+    if isinstance(ctx_err, KeyedError):  # its key is relative to the section that raised it
+        return ".".join(p for p in (prefix, loc, ctx_err.key) if p), str(ctx_err)
     msg = e["msg"]
     if e["type"] == "extra_forbidden":
         msg = "unknown key"

@@ -9,9 +9,9 @@ them), the rest are the user's to fix in the layout.
 
 Thresholds are physical and hold for any body-worn MEMS IMU:
 
-* specific force: its median magnitude over a recording is within 10 % of g whatever the
-  motion (the body is mostly supported); 1 ± 0.5 means g was declared as m/s^2, 9.8 × g
-  the reverse;
+* specific force: at rest (the quietest quarter-second of the recording,
+  :func:`fusion.initial_alignment.window_spreads`) its magnitude is g to within 10 %;
+  1 ± 0.5 means g was declared as m/s^2, 9.8 × g the reverse;
 * angular rate: no human segment turns faster than ~35 rad/s (2000 °/s, the largest
   full-scale range of such sensors); a moving recording (specific-force spread above
   1 m/s^2) whose rate never exceeds 0.2 rad/s was most likely declared deg/s while in rad/s;
@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusion.earth import STANDARD_GRAVITY
+from fusion.initial_alignment import window_spreads
 
 MAX_BODY_RATE_RADPS = 35.0
 """Above any human segment's angular rate and the widest MEMS gyro range (2000 °/s), rad/s."""
@@ -51,7 +52,7 @@ class ImuChecks:
 
     source: str
     rate_hz: float
-    median_specific_force_mps2: float
+    rest_specific_force_mps2: float
     max_angular_rate_radps: float
     gap_index: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
     gap_missing_s: np.ndarray = field(default_factory=lambda: np.empty(0))
@@ -61,7 +62,7 @@ class ImuChecks:
 
     def to_dict(self) -> dict:
         """Plain-JSON figures for metrics.json."""
-        return {"rate_hz": self.rate_hz, "median_specific_force_mps2": self.median_specific_force_mps2,
+        return {"rate_hz": self.rate_hz, "rest_specific_force_mps2": self.rest_specific_force_mps2,
                 "max_angular_rate_radps": self.max_angular_rate_radps, "gaps": int(self.gap_index.size),
                 "gap_missing_s": float(self.gap_missing_s.sum()), "clipped_acc_samples": self.clipped_acc_samples,
                 "clipped_gyro_samples": self.clipped_gyro_samples, "warnings": len(self.warnings)}
@@ -91,19 +92,22 @@ def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: s
     rate = 1.0 / nominal_dt if nominal_dt > 0 else float("nan")
     f = np.linalg.norm(acc_b, axis=1)
     w = np.linalg.norm(gyro_b, axis=1)
-    median_f = float(np.median(f))
+    length = int(min(len(t), max(10, round(0.25 * rate)) if np.isfinite(rate) else 10))
+    s_f, s_w = window_spreads(acc_b, gyro_b, length)
+    rest = int(np.argmin(s_f / max(s_f.min(), 1e-12) + s_w / max(s_w.min(), 1e-12)))
+    rest_f = float(np.linalg.norm(acc_b[rest:rest + length].mean(axis=0)))
     w_top = float(np.percentile(w, 99.9))
-    out = ImuChecks(source, rate, median_f, float(w.max()))
+    out = ImuChecks(source, rate, rest_f, float(w.max()))
     warn = out.warnings.append
     g = STANDARD_GRAVITY
-    if not 0.9 * g <= median_f <= 1.1 * g:
+    if not 0.9 * g <= rest_f <= 1.1 * g:
         hint = ""
-        if 0.5 <= median_f <= 2.0:
-            hint = " (≈ 1: the data look like g; set acc_unit: g)" if acc_unit != "g" else ""
-        elif 0.5 * g * g <= median_f <= 2.0 * g * g:
-            hint = " (≈ 9.8 g: the data look like m/s^2; set acc_unit: m/s^2)" if acc_unit == "g" else ""
-        warn(f"{source}: median specific force {median_f:.3g} m/s^2 is not near gravity ({g:.2f}); "
-             f"check acc_unit ({acc_unit}){hint}")
+        if 0.5 <= rest_f <= 2.0 and acc_unit != "g":
+            hint = " (≈ 1: the data look like g; set acc_unit: g)"
+        elif 0.5 * g * g <= rest_f <= 2.0 * g * g and acc_unit == "g":
+            hint = " (≈ 9.8 g: the data look like m/s^2; set acc_unit: m/s^2)"
+        warn(f"{source}: specific force at rest {rest_f:.3g} m/s^2 (t = {t[rest]:.3g} s) is not near gravity "
+             f"({g:.2f}); check acc_unit ({acc_unit}){hint}")
     if w_top > MAX_BODY_RATE_RADPS:
         hint = " (the data look like deg/s; set gyro_unit: deg/s)" if gyro_unit != "deg/s" else ""
         warn(f"{source}: angular rate reaches {w_top:.3g} rad/s (99.9th percentile), faster than any body "

@@ -202,3 +202,49 @@ def test_shoe_agrees_with_vicon_labels(side, bound):
     assert agreement > bound, agreement  # measured 0.928 (left), 0.883 (right)
     # labelled stance is (almost) never missed
     assert (s.stance & ~det).sum() < 0.05 * s.stance.sum()  # measured 0.6 % / 2.2 %
+
+
+# --------------------------------------------------------------------------- adaptive SHOE
+
+
+def _statistic_of(stance_floor: float, swing: float, rate: float, stance_s: float, swing_s: float,
+                  seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """A synthetic SHOE statistic: ``stance_floor`` during stance, ``swing`` during swing."""
+    n = int(seconds * rate)
+    t = np.arange(n) / rate
+    in_stance = np.mod(t, stance_s + swing_s) < stance_s
+    return np.where(in_stance, stance_floor, swing), in_stance
+
+
+def test_adaptive_threshold_keeps_the_fixed_one_where_stance_is_still():
+    from fusion.detectors import adaptive_shoe_threshold
+
+    stat, _ = _statistic_of(3e2, 1e7, 200.0, 0.6, 0.5)
+    assert np.allclose(adaptive_shoe_threshold(stat, 200.0), 3e4)
+
+
+def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it():
+    from fusion.detectors import adaptive_shoe_threshold
+
+    stat, truth = _statistic_of(2e4 * 1.5, 1e7, 200.0, 0.15, 0.55)  # above any walking threshold
+    gamma = adaptive_shoe_threshold(stat, 200.0)
+    assert np.all(gamma > 3e4) and np.all(gamma <= 1e5)
+    np.testing.assert_array_equal(stat < gamma, truth)
+
+
+def test_adaptive_threshold_never_makes_stance_of_continuous_motion():
+    from fusion.detectors import adaptive_shoe_threshold
+
+    rng = np.random.default_rng(0)
+    stat = 10 ** rng.uniform(5.2, 7.0, 4000)  # a sensor that never rests (RMS rate > 1 rad/s)
+    assert not np.any(stat < adaptive_shoe_threshold(stat, 200.0))
+
+
+def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
+    from fusion.detectors import adaptive_shoe
+
+    for rate, w in ((60.0, 3), (200.0, 5), (400.0, 10)):
+        n = int(5 * rate)
+        acc = np.tile([0.0, 0.0, 9.81], (n, 1))
+        stance, gamma = adaptive_shoe(acc, np.zeros((n, 3)), rate, gravity=9.81)
+        assert stance.all() and gamma.size == n - w + 1

@@ -216,12 +216,10 @@ def _simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> System
         "plugin": "foot_ins",
         "data": {**imu_data_section(csv_path, IMU_COLUMNS), "stance_column": "stance"},
         "filter": filt,
-        "detector": {"kind": "shoe"},
         "initial": {
             "position_m": [float(v) for v in pos[0]],
             "heading_deg": float(azimuth % 360.0),
             "heading_sd_deg": max(cfg.heading_error_sd_deg, HEADING_SD_FLOOR_DEG),
-            "stationary_s": ctx.plan.start_still_s,
         },
     }
     # the filter starts with the heading and bias uncertainty the simulated sensor has:

@@ -219,6 +219,7 @@ class FootIns(SensorSystem):
             [level_sd, level_sd, np.deg2rad(ini.heading_sd_deg)],
             np.full(3, ini.acc_bias_sd_mps2), np.full(3, gyro_bias_sd)])
         P = np.diag(sd**2)
+        self._still_priors = {"level_sd_deg": float(np.degrees(level_sd)), "gyro_bias_sd_radps": float(gyro_bias_sd)}
         if st.start > 0:
             x, P = self._navigate_back(x, P, st.start)
         x[0:3] = ini.position_m
@@ -469,11 +470,13 @@ class FootIns(SensorSystem):
 
     def _initialisation_report(self) -> dict:
         st, t = self.still, self.stream.t
+        P0 = self._P0
         report = {"still_interval_s": [float(t[st.start]), float(t[st.stop - 1])], "still": st.still,
                   "acc_spread_mps2": st.acc_spread_mps2, "gyro_spread_radps": st.gyro_spread_radps,
-                  "heading_axis": self.heading_axis, "level_sd_deg": float(np.degrees(np.sqrt(self._P0[6, 6]))),
-                  "heading_sd_deg": float(np.degrees(np.sqrt(self._P0[8, 8]))),
-                  "gyro_bias_sd_radps": float(np.sqrt(self._P0[14, 14]))}
+                  "heading_axis": self.heading_axis, **self._still_priors,
+                  "first_sample_sd": {"level_deg": float(np.degrees(np.sqrt(max(P0[6, 6], P0[7, 7])))),
+                                      "heading_deg": float(np.degrees(np.sqrt(P0[8, 8]))),
+                                      "gyro_bias_radps": float(np.sqrt(np.max(np.diag(P0)[12:15])))}}
         if st.start > 0:
             report["backward_s"] = float(t[st.start] - t[0])
             report["backward_zupts"] = int(self.backward_counters[C_ZUPTS])
