@@ -205,7 +205,7 @@ def shoe(
 
 
 def adaptive_shoe_threshold(statistic: np.ndarray, rate_hz: float, *, gamma_still: float = 0.3e5,
-                            gamma_motion: float = 1e5, floor_window_s: float = 2.0, floor_percentile: float = 10.0,
+                            gamma_motion: float = 1e5, floor_window_s: float = 2.0, floor_percentile: float = 5.0,
                             margin_decades: float = 1.0) -> np.ndarray:
     """Per-window threshold γ_k for the SHOE statistic T_k, from the recording itself.
 

@@ -20,6 +20,7 @@ from fusion.detectors import (
 
 G = 9.81
 VICON = Path("/work/shared/data/dual_foot_vicon_hu2025")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def synthetic(seed: int = 1, up=(0.0, 0.0, 1.0)):
@@ -248,3 +249,20 @@ def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
         acc = np.tile([0.0, 0.0, 9.81], (n, 1))
         stance, gamma = adaptive_shoe(acc, np.zeros((n, 3)), rate, gravity=9.81)
         assert stance.all() and gamma.size == n - w + 1
+
+
+def test_the_default_detector_holds_on_a_running_stance_that_never_rests(tmp_path):
+    """Simulated running whose 0.15 s stance rolls heel to toe throughout: the fixed SHOE
+    threshold finds almost no stance and the foot drifts away; the adaptive default follows it."""
+    from fusion.config import load_layout
+    from fusion.run import run_layout
+    from fusion.sim import simulate
+
+    cfg = simulate(ROOT / "configs" / "sim_running.yaml", tmp_path / "run", seed=1, overrides=[
+        "gait.roll.heel_s=0.07", "gait.roll.toe_s=0.07", "path.laps=1", "systems={left_foot: {kind: foot_imu, "
+        "foot: left, imu: {preset: icm20948}}}"]).config_path
+    rmse = {}
+    for kind in ("adaptive", "shoe"):
+        result = run_layout(load_layout(cfg, [f"systems.left_foot.detector.kind={kind}"]))
+        rmse[kind] = result.scores["left_foot"].metrics["horizontal_error_m"]["rmse"]
+    assert rmse["adaptive"] < 0.3 and rmse["shoe"] > 3 * rmse["adaptive"], rmse
