@@ -1,20 +1,23 @@
-"""IPIN 2023 smartphone trials: GNSS alone, PDR alone, PDR+GNSS, and a 60 s GNSS outage.
+"""IPIN 2023 smartphone trials: GNSS alone, PDR alone, PDR+GNSS (with and without the
+magnetometer), and a 60 s GNSS outage.
 
-Scores each at the surveyed points (POSI lines) with the competition's metric (the 75th
-percentile of the horizontal error) plus the median and the maximum:
+Every log in ``../shared/data/handheld_phone_ipin2023`` runs through
+``configs/ipin2023_trial01.yaml`` with its defaults (start from the first confirmed fix,
+heading acquired while the phone walks, magnetometer on where its field turns with the
+gyro), scored at the surveyed points (POSI lines) with the competition's metric (the 75th
+percentile of the horizontal error), the median and the maximum:
 
-* GNSS alone: the phone's fixes, interpolated to the points' times;
-* PDR alone: PDR+GNSS with the GNSS masked once the initial heading is aligned (the
-  fixes until then, the first 15 m of walking, only set the start and the heading);
-* PDR+GNSS: ``configs/ipin2023_trial01.yaml`` as it is;
+* GNSS alone: the phone's fixes, scored like the estimates (points outside their span skipped);
+* PDR alone: PDR+GNSS with the GNSS masked once the heading is resolved (the fixes until
+  then only set the start and the heading; "-" where it never resolves);
+* PDR+GNSS, and the same with ``magnetometer.enabled=false``;
 * PDR+GNSS with the GNSS masked for the first 60 s of walking after the first point.
 
-``--magnetometer`` adds a row per trial with the magnetometer heading aiding on (the
-layout's ``magnetometer`` section: WMM field check, declination); ``--set KEY=VALUE``
-overrides that run further, e.g. ``--set systems.hand_phone.magnetometer.field_check=null``.
+The last column is the time the heading resolved (s) and how often handling the phone
+re-opened it. ``--set KEY=VALUE`` overrides every run, e.g.
+``--set systems.hand_phone.initial.heading_hypotheses=8``.
 
-Usage: python examples/ipin2023_gnss_pdr.py [--magnetometer [--set KEY=VALUE]...]
-(reads ../shared/data/handheld_phone_ipin2023)
+Usage: python examples/ipin2023_gnss_pdr.py [--set KEY=VALUE]...
 """
 
 from __future__ import annotations
@@ -23,19 +26,18 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from pymap3d import geodetic2enu
 from rich.console import Console
 from rich.table import Table
 
 from fusion.config import load_layout
+from fusion.metrics import score_systems
 from fusion.phone_log import read_getsensordata
 from fusion.run import run_layout
+from fusion.types import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "ipin2023_trial01.yaml"
 DATA = ROOT.parent / "shared" / "data" / "handheld_phone_ipin2023"
-TRIALS = {"Trial01 rep04": "IPIN2023_T3_TrainingTrial01_repetition04.txt",
-          "Trial03 rep03": "IPIN2023_T3_TrainingTrial03_repetition03.txt"}
 
 
 def stats(err: np.ndarray) -> str:
@@ -53,39 +55,36 @@ def errors(result) -> np.ndarray:
     return result.scores["hand_phone"].horizontal_error_m
 
 
-def magnetometer_note(result) -> str:
-    """Accepted / rejected by the gate / rejected by the field check."""
-    c = result.systems["hand_phone"].diagnostics().get("magnetometer")
-    return "off" if c is None else f"on ({c['accepted']}/{c['rejected_gate']}/{c['rejected_field']})"
+def gnss_errors(log_path: Path, result) -> np.ndarray:
+    """The fixes as a trajectory, scored against the same points and origin as ``result``."""
+    gnss = read_getsensordata(log_path).gnss
+    enu = gnss.enu(result.geodetic_origin)
+    _, scores = score_systems({"hand_phone": Trajectory(gnss.t, enu, np.zeros_like(enu))},
+                              {"hand_phone": result.truths["hand_phone"]}, alignment="none")
+    return scores["hand_phone"].horizontal_error_m
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--magnetometer", action="store_true", help="add runs with the magnetometer on")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="layout override of the magnetometer runs")
+                        help="layout override of every run")
     args = parser.parse_args()
-    variants = [[]] + ([["systems.hand_phone.magnetometer.enabled=true", *args.overrides]] if args.magnetometer else [])
-    table = Table(title="Horizontal error at the surveyed points, m: p50 / p75 (IPIN metric) / max; "
-                        "magnetometer updates accepted / gated out / failed field check (PDR+GNSS)")
-    for col in ("trial", "magnetometer", "GNSS alone", "PDR alone", "PDR+GNSS", "PDR+GNSS, 60 s outage"):
+    table = Table(title="Horizontal error at the surveyed points, m: p50 / p75 (IPIN metric) / max")
+    for col in ("trial", "GNSS alone", "PDR alone", "PDR+GNSS", "no magnetometer", "60 s outage", "heading"):
         table.add_column(col, justify="right")
-    for trial, file in TRIALS.items():
-        path = DATA / file
-        log = read_getsensordata(path)
-        ref = log.reference
-        origin = load_layout(CONFIG).layout.geodetic_origin
-        g = log.gnss.enu(origin)
-        e, n, _ = geodetic2enu(ref.lat_deg, ref.lon_deg, np.full(len(ref.t), origin[2]), *origin)
-        gnss_err = np.hypot(np.interp(ref.t, log.gnss.t, g[:, 0]) - e, np.interp(ref.t, log.gnss.t, g[:, 1]) - n)
-        for extra in variants:
-            both = pdr_gnss_run(path, None, extra)
-            aligned = both.systems["hand_phone"].heading_alignment_end_s
-            pdr = pdr_gnss_run(path, (aligned + 0.5, 1e6), extra)
-            masked = pdr_gnss_run(path, (float(ref.t[0]), 60.0), extra)
-            table.add_row(trial, magnetometer_note(both), stats(gnss_err), stats(errors(pdr)), stats(errors(both)),
-                          stats(errors(masked)))
-    Console(width=160).print(table)
+    for path in sorted(DATA.glob("IPIN2023_T3_*.txt")):
+        both = pdr_gnss_run(path, None, args.overrides)
+        hand = both.systems["hand_phone"]
+        resolved = hand.heading_resolved_s
+        pdr = "-" if resolved is None else stats(errors(pdr_gnss_run(path, (resolved + 0.5, 1e6), args.overrides)))
+        no_mag = pdr_gnss_run(path, None, [*args.overrides, "systems.hand_phone.magnetometer.enabled=false"])
+        first_point = float(both.truths["hand_phone"].t[0])
+        masked = pdr_gnss_run(path, (first_point, 60.0), args.overrides)
+        heading = hand.diagnostics()["heading"]
+        table.add_row(path.stem.replace("IPIN2023_T3_Training", ""), stats(gnss_errors(path, both)), pdr,
+                      stats(errors(both)), stats(errors(no_mag)), stats(errors(masked)),
+                      f"{'-' if resolved is None else f'{resolved:.0f} s'}, reopened {heading.get('reopened', 0)}")
+    Console(width=170).print(table)
 
 
 if __name__ == "__main__":

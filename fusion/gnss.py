@@ -46,6 +46,12 @@ class GnssFixes:
         e, n, u = pymap3d.geodetic2enu(self.lat_deg, self.lon_deg, self.height_m, *origin)
         return np.column_stack([e, n, u])
 
+    def repeats_previous(self) -> np.ndarray:
+        """(N,) True where a fix repeats the previous fix's latitude, longitude and height
+        exactly: a receiver holding its last solution (phones do while standing still)."""
+        same = (np.diff(self.lat_deg) == 0) & (np.diff(self.lon_deg) == 0) & (np.diff(self.height_m) == 0)
+        return np.concatenate([[False], same])
+
     def select(self, keep: np.ndarray) -> "GnssFixes":
         return GnssFixes(self.t[keep], self.lat_deg[keep], self.lon_deg[keep], self.height_m[keep],
                          self.accuracy_m[keep], self.speed_mps[keep], self.course_deg[keep], self.report)

@@ -85,3 +85,10 @@ def test_select_keeps_the_report():
     f = GnssFixes(*(np.arange(3.0) for _ in range(7)))
     f.report.notes.append("x")
     assert f.select(np.array([True, False, True])).report.notes == ["x"]
+
+
+def test_repeats_previous_marks_a_receiver_holding_its_position():
+    lat = np.array([49.0, 49.0, 49.0, 49.00001, 49.00001])
+    lon = np.array([11.0, 11.0, 11.0, 11.0, 11.00001])
+    f = GnssFixes(np.arange(5.0), lat, lon, np.zeros(5), *(np.full(5, np.nan) for _ in range(3)))
+    assert f.repeats_previous().tolist() == [False, True, True, False, False]

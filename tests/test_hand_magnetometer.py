@@ -192,13 +192,61 @@ def test_bad_magnetometer_config_is_one_line_with_its_key(mag_walk):
 
 
 @pytest.mark.skipif(not IPIN.exists(), reason="shared IPIN 2023 logs not present")
-def test_ipin_indoor_field_fails_the_earth_field_check():
+def test_ipin_indoor_field_fails_the_earth_field_check_but_is_quasi_static_while_read():
     """The museum's field reads 25–40 µT against the Earth's 48.8 µT: nearly every sample is
-    rejected by the field check, and the run still completes."""
+    rejected by the Earth-field check (the site's WMM values). Without it (the default) the
+    quasi-static check keeps the samples taken while the phone is held to be read (from
+    ~30 s on) and refuses those of the first 25 s, when it is carried and handled."""
     log = IPIN / "IPIN2023_T3_TrainingTrial01_repetition04.txt"
-    loaded = load_layout(CONFIGS / "ipin2023_trial01.yaml", [f"systems.hand_phone.phone_log={log}",
-                                                              "systems.hand_phone.magnetometer.enabled=true"])
+    wmm = "systems.hand_phone.magnetometer.field_check={expected_uT: 48.8, inclination_deg: 65.5}"
+    loaded = load_layout(CONFIGS / "ipin2023_trial01.yaml", [f"systems.hand_phone.phone_log={log}", wmm])
     hand = HandPdr("hand_phone", loaded.system_configs["hand_phone"], default_context(CONFIGS))
     hand.advance(hand.t_end)
     counts = hand.diagnostics()["magnetometer"]
-    assert counts["rejected_field"] > 0.9 * sum(counts[k] for k in ("accepted", "rejected_gate", "rejected_field"))
+    assert counts["rejected_field"] > 0.9 * sum(counts.get(k) for k in ("accepted", "rejected_gate", "rejected_field",
+                                                                       "rejected_turning"))
+    loaded = load_layout(CONFIGS / "ipin2023_trial01.yaml", [f"systems.hand_phone.phone_log={log}"])
+    hand = HandPdr("hand_phone", loaded.system_configs["hand_phone"], default_context(CONFIGS))
+    mag = hand._mag
+    assert mag.quasi_static[mag.t < 25.0].mean() < 0.1 and mag.quasi_static[mag.t > 60.0].mean() > 0.4
+
+
+# --------------------------------------------------------------------------- the quasi-static check
+
+
+def test_quasi_static_check_keeps_a_fixed_field_and_refuses_one_that_turns_on_its_own():
+    """ψ_d follows the gyro (plus 1° noise) for 10 s, then wanders by ±30° at 0.5 Hz while the
+    gyro does not turn (a bent field): the first kept, the second refused; the first window
+    (not yet covered by data) is refused too."""
+    from fusion_plugins.hand_pdr.config import QuasiStaticConfig
+    from fusion_plugins.hand_pdr.magnetometer import quasi_static
+
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 20.0, 0.02)
+    psi_g = 0.3 * t  # turning at 0.3 rad/s
+    psi_d = psi_g + 0.5 + np.deg2rad(1.0) * rng.standard_normal(t.size) + np.where(
+        t > 10.0, np.deg2rad(30.0) * np.sin(np.pi * t), 0.0)
+    keep = np.searchsorted(t, np.arange(1.0, 20.0))
+    ok = quasi_static(t, np.angle(np.exp(1j * psi_d)), psi_g, keep, QuasiStaticConfig())
+    assert not ok[0] and ok[1:9].all() and not ok[11:].any()
+    assert quasi_static(t, psi_d, psi_g, keep, None).all()
+
+
+def test_phone_log_defaults_are_those_of_an_android_phone_read_while_walking(tmp_path):
+    """A phone log: magnetometer unset (on when the log has MAGN lines), device axis +y (the
+    top of the screen), holding offset 0, gyro bias σ 0.01 rad/s; an IMU CSV: off, +x, auto, 0.002."""
+    from fusion.config import validate_section
+    from fusion_plugins.hand_pdr.config import HandPdrConfig
+
+    (tmp_path / "log.txt").write_text("")
+    phone = validate_section(HandPdrConfig, {"phone_log": "log.txt", "gnss": {"format": "phone_log"}},
+                             key="systems.h", path=None, base_dir=tmp_path)
+    assert phone.magnetometer.enabled is None and phone.magnetometer.axis_b == (0.0, 1.0, 0.0)
+    assert phone.magnetometer.offset_deg == 0.0 and phone.filter.gyro_bias_sd == 0.01
+    (tmp_path / "imu.csv").write_text("t,ax,ay,az,gx,gy,gz\n")
+    csv = validate_section(HandPdrConfig, {"imu": {"path": "imu.csv", "time_column": "t", "acc_columns": ["ax", "ay", "az"],
+                                                   "gyro_columns": ["gx", "gy", "gz"]},
+                                           "initial": {"position_m": [0, 0, 0], "heading_deg": 0}},
+                           key="systems.h", path=None, base_dir=tmp_path)
+    assert csv.magnetometer.enabled is False and csv.magnetometer.axis_b == (1.0, 0.0, 0.0)
+    assert csv.magnetometer.offset_deg == "auto" and csv.filter.gyro_bias_sd == 0.002

@@ -57,51 +57,85 @@ class StepConfig(StrictModel):
 
 
 class PdrFilterConfig(StrictModel):
-    """The PDR error filter (PDR/GNSS paper eqs. 38–44), state [δE, δN, δU, δψ, δS, δb, δβE, δβN].
+    """The PDR error filter (PDR/GNSS paper eqs. 38–44), state [δE, δN, δU, δψ, δS, δb, δβE, δβN, δc].
 
-    step_length_sd_m: white step-length error σ_S; heading_noise_density: gyro angle
-    random walk, rad/√s; gyro_bias_sd: steady-state σ of the first-order Gauss–Markov
-    gyro bias (rad/s) with ``correlation_time_s`` (1/α); height_noise_density: random walk
-    of the height, m/√s; GNSS: per-axis σ from the receiver's accuracy
-    (``accuracy_to_sigma`` × accuracy) or ``default_sigma_m``; GNSS heading (eq. 44)
-    only above ``min_speed_for_heading_mps`` with σ ``gnss_heading_sd_deg``;
-    chi-square gating with ``gate_probability``. GNSS errors are correlated in time
-    (multipath, atmosphere): a horizontal first-order Gauss–Markov bias with σ
-    ``gnss_bias_sd_m`` and correlation time ``gnss_bias_time_s`` is estimated beside the
-    white noise (two more states; σ 0 switches it off), so that a minute of fixes is not
-    taken for a minute of independent evidence. A wrong step model (Weinberg K) is a scale
-    error common to every step: estimated as the state δc with initial σ ``step_scale_sd``
-    (relative, 0.1 = 10 %) and random walk ``step_scale_random_walk`` (1/√s); σ 0 (the
-    default, the paper's white step errors only) leaves the scale at 1. Off by default:
-    on the IPIN 2023 logs the phone's GNSS track is shorter than the walk (corners cut)
-    and the state takes that for a 10–25 % step-scale error.
+    PDR. step_length_sd_m: white step-length error σ_S; heading_noise_density: gyro angle
+    random walk, rad/√s; gyro_bias_sd: steady-state σ of the first-order Gauss–Markov gyro
+    bias (rad/s) with ``correlation_time_s`` (1/α); unset, 0.01 for a ``phone_log``
+    (consumer phones: one IPIN 2023 phone reads −1.5 °/s standing still) and 0.002 for an
+    ``imu`` CSV; height_noise_density: random walk of the height, m/√s. A wrong step model
+    (Weinberg K) is a scale error common to every step: estimated as the state δc with
+    initial σ ``step_scale_sd`` (relative, 0.1 = 10 %) and random walk
+    ``step_scale_random_walk`` (1/√s); σ 0 (the default, the paper's white step errors
+    only) leaves the scale at 1. Off by default: on the IPIN 2023 logs the phone's GNSS
+    track is shorter than the walk (corners cut) and the state takes that for a 10–25 %
+    step-scale error.
+
+    GNSS position. Per-axis σ_k of fix k from the receiver's accuracy (``accuracy_to_sigma``
+    × accuracy) or ``default_sigma_m``. GNSS errors are correlated in time (multipath,
+    atmosphere, a receiver converging) and grow with the accuracy the receiver reports:
+    the horizontal error of fix k is σ_k (√ρ β_k + √(1 − ρ) v_k), v white and β a unit
+    first-order Gauss–Markov process (two states, correlation time ``gnss_bias_time_s``),
+    ρ = ``gnss_correlated_fraction`` the correlated share of the variance (0: white fixes,
+    no β). So a minute of fixes is not taken for a minute of independent evidence.
+    Chi-square gating with ``gate_probability``; after ``reset_after_rejections`` fixes in
+    a row fail the gate the filter has lost the GNSS (its position is wrong, or the GNSS
+    jumped): the position is forgotten and taken again from the fix (0: never). Skipped:
+    a fix whose reported ground speed exceeds ``max_speed_mps`` (more than a walking
+    pedestrian's: the receiver's solution moving on its own, converging from a cold start
+    or jumping between multipath solutions; nor can it be the start), and a fix that
+    repeats the previous one's position exactly (a receiver holding its solution while
+    the phone stands: no new measurement).
+
+    GNSS heading (eq. 44, σ ``gnss_heading_sd_deg``) and the weights of the heading
+    hypotheses: only from fixes taken while the phone walks (a step detected in the last
+    ``walking_window_s``) and is held steadily (its Up direction in the phone frame turned
+    by no more than ``pose_change_deg`` over any ``pose_window_s`` of the last
+    ``pose_window_s``: otherwise it is being put away, swung or raised, and its yaw says
+    nothing of the walking direction); the course also needs a speed of at least
+    ``min_speed_for_heading_mps`` and a reported accuracy of at most
+    ``max_accuracy_for_heading_m`` (a course from jitter or from a poor fix is noise).
     """
 
     step_length_sd_m: float = Field(default=0.1, gt=0)
     heading_noise_density: float = Field(default=0.002, ge=0)
-    gyro_bias_sd: float = Field(default=0.002, ge=0)
+    gyro_bias_sd: float | None = Field(default=None, ge=0)
     correlation_time_s: float = Field(default=300.0, gt=0)
     height_noise_density: float = Field(default=0.05, ge=0)
     accuracy_to_sigma: float = Field(default=0.66, gt=0)
     default_sigma_m: float = Field(default=5.0, gt=0)
     gnss_heading_sd_deg: float = Field(default=15.0, gt=0)
     min_speed_for_heading_mps: float = Field(default=0.8, ge=0)
+    max_accuracy_for_heading_m: float = Field(default=10.0, gt=0)
+    walking_window_s: float = Field(default=2.0, gt=0)
+    pose_change_deg: float = Field(default=30.0, gt=0)
+    pose_window_s: float = Field(default=2.0, gt=0)
+    max_speed_mps: float = Field(default=2.5, gt=0)
     gate_probability: float = Field(default=0.999, gt=0, lt=1)
-    gnss_bias_sd_m: float = Field(default=3.0, ge=0)
+    reset_after_rejections: int = Field(default=10, ge=0)
+    gnss_correlated_fraction: float = Field(default=0.8, ge=0, lt=1)
     gnss_bias_time_s: float = Field(default=60.0, gt=0)
     step_scale_sd: float = Field(default=0.0, ge=0)
     step_scale_random_walk: float = Field(default=1e-4, ge=0)
 
 
 class PdrInitialConfig(StrictModel):
-    """Initial state: position (ENU, m; ``gnss``: the first fix), heading (azimuth of walking,
-    degrees clockwise from North; ``gnss_track``: the rotation that best aligns the first
-    ``align_distance_m`` of PDR track with the GNSS track; ``auto``: aligned to the other
-    systems), and one-sigma uncertainties."""
+    """Initial state: position (ENU, m; ``gnss``: the first fix that its successor confirms,
+    see :class:`~fusion_plugins.hand_pdr.system.HandPdr`), heading (azimuth of walking,
+    degrees clockwise from North; ``auto``: aligned to the other systems; ``gnss_track``:
+    unknown at the start and acquired from the GNSS while the phone walks by a bank of
+    ``heading_hypotheses`` filters spread round the circle, weighted by their likelihood
+    of the fixes and collapsed into one once the mixture's heading σ is at most
+    ``heading_resolved_sd_deg``, see :mod:`fusion_plugins.hand_pdr.hypotheses`), and
+    one-sigma uncertainties (``position_sd_m`` of a given position; a ``gnss`` start is
+    taken with the fix's own σ; ``heading_sd_deg`` of a numeric or ``auto`` heading)."""
 
     position_m: tuple[float, float, float] | Literal["gnss"] = "gnss"
     heading_deg: float | Literal["gnss_track", "auto"] = "gnss_track"
-    align_distance_m: float = Field(default=15.0, gt=0)
+    heading_hypotheses: int = Field(default=16, ge=4, le=360)
+    """Hypotheses of the ``gnss_track`` bank; each starts with σ = 180° / count."""
+    heading_resolved_sd_deg: float = Field(default=15.0, gt=0, le=90)
+    """Heading σ of the mixture (degrees) at which the bank collapses into one filter."""
     position_sd_m: float = Field(default=5.0, gt=0)
     """Initial horizontal position one-sigma, m."""
     heading_sd_deg: float = Field(default=10.0, gt=0)
@@ -128,8 +162,20 @@ class FieldCheckConfig(StrictModel):
     """Accepted |dip − inclination_deg|, degrees."""
 
 
+class QuasiStaticConfig(StrictModel):
+    """Rejects magnetometer samples whose device azimuth turned differently from the gyro's
+    azimuth: standard deviation of (ψ_d − ψ_gyro) over the last ``window_s`` above
+    ``tolerance_deg`` (a bent field, or a phone swinging so the levelling fails). Needs no
+    site values."""
+
+    window_s: float = Field(default=2.0, gt=0)
+    """Window before each sample, s."""
+    tolerance_deg: float = Field(default=6.0, gt=0)
+    """Accepted standard deviation of ψ_d − ψ_gyro over the window, degrees."""
+
+
 class MagnetometerConfig(StrictModel):
-    """Heading aiding by the magnetometer (off unless ``enabled``).
+    """Heading aiding by the magnetometer.
 
     Measurement: the tilt-compensated azimuth of the phone axis ``axis_b`` (the field's
     horizontal part, levelled with the accelerometer's gravity direction), plus the
@@ -138,23 +184,32 @@ class MagnetometerConfig(StrictModel):
     walking direction, ψ = ψ_d + o: o is an error state (random walk ``offset_random_walk``,
     degrees/√s). ``offset_deg``: its prior (degrees, with σ ``offset_sd_deg``) or ``auto``:
     set from the first accepted sample, o = ψ̂ − ψ_d, with the heading's uncertainty plus
-    the measurement's. Updates at most ``rate_hz`` per second (a decimation of the samples),
-    σ ``sigma_deg``, chi-square gated with ``gate_probability``, after the ``field_check``
-    (null: none). Data: the ``columns`` of the ``imu`` CSV (in ``unit``), or the MAGN lines
-    of the ``phone_log`` (µT).
+    the measurement's (then the magnetometer holds the heading but cannot find it). Updates
+    at most ``rate_hz`` per second (a decimation of the samples), σ ``sigma_deg``,
+    chi-square gated with ``gate_probability``, after the ``field_check`` against the site's
+    Earth field (null, the default: none; it needs the site's values) and the site-free
+    ``quasi_static`` check (null: none). Data: the ``columns`` of the ``imu`` CSV (in
+    ``unit``), or the MAGN lines of the ``phone_log`` (µT).
+
+    Defaults that depend on the data (unset, they are filled in by :class:`HandPdrConfig`):
+    a ``phone_log`` is an Android phone, whose sensor frame has y towards the top of the
+    screen, held in front to read it (the top pointing where one walks): ``enabled`` when
+    the log has MAGN lines, ``axis_b`` [0, 1, 0], ``offset_deg`` 0. An ``imu`` CSV's frame
+    is the writer's: off, ``axis_b`` [1, 0, 0], ``offset_deg`` auto.
     """
 
-    enabled: bool = False
+    enabled: bool | None = None
     sigma_deg: float = Field(default=10.0, gt=0)
     declination_deg: float = Field(default=0.0, ge=-180, le=180)
-    axis_b: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    axis_b: tuple[float, float, float] | None = None
     """Phone-frame axis whose azimuth is the device azimuth (best one that stays horizontal)."""
-    offset_deg: float | Literal["auto"] = "auto"
-    offset_sd_deg: float = Field(default=30.0, gt=0)
+    offset_deg: float | Literal["auto"] | None = None
+    offset_sd_deg: float = Field(default=20.0, gt=0)
     offset_random_walk: float = Field(default=0.2, ge=0)
     gate_probability: float = Field(default=0.99, gt=0, lt=1)
     rate_hz: float = Field(default=1.0, gt=0)
-    field_check: FieldCheckConfig | None = Field(default_factory=FieldCheckConfig)
+    field_check: FieldCheckConfig | None = None
+    quasi_static: QuasiStaticConfig | None = Field(default_factory=QuasiStaticConfig)
     columns: tuple[str, str, str] | None = None
     """Header names of the magnetometer x, y, z columns of the ``imu`` CSV (phone frame);
     cells may be empty where the magnetometer has no sample."""
@@ -163,8 +218,8 @@ class MagnetometerConfig(StrictModel):
 
     @field_validator("axis_b")
     @classmethod
-    def _unit_axis(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
-        if not 0.5 < math.hypot(*v) < 2.0:
+    def _unit_axis(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if v is not None and not 0.5 < math.hypot(*v) < 2.0:
             raise ValueError("give a unit vector of the phone frame, e.g. [1, 0, 0]")
         return v
 
@@ -192,6 +247,15 @@ class HandPdrConfig(StrictModel):
     def _one_imu_source(self) -> "HandPdrConfig":
         if (self.imu is None) == (self.phone_log is None):
             raise KeyedError("imu", "give exactly one of imu or phone_log")
+        phone, m = self.phone_log is not None, self.magnetometer  # the data's defaults (MagnetometerConfig)
+        if m.enabled is None and not phone:
+            m.enabled = False
+        if m.axis_b is None:
+            m.axis_b = (0.0, 1.0, 0.0) if phone else (1.0, 0.0, 0.0)
+        if m.offset_deg is None:
+            m.offset_deg = 0.0 if phone else "auto"
+        if self.filter.gyro_bias_sd is None:
+            self.filter.gyro_bias_sd = 0.01 if phone else 0.002
         if self.gnss is not None and self.gnss.format == "phone_log" and self.phone_log is None:
             raise KeyedError("gnss.format", "phone_log GNSS needs the system's phone_log")
         if self.gnss is None and ("gnss" in (self.initial.position_m, ) or self.initial.heading_deg == "gnss_track"):

@@ -11,6 +11,14 @@ ENU frame. The azimuth of a phone axis ``a_b`` is then ``atan2(a_b·e_b, a_b·n_
 magnetic North; adding the declination (East positive) refers it to true North.
 
 Dip: ``asin(−m_b·u_b / ‖m_b‖)``, positive when the field points below the horizontal.
+
+Quasi-static check (site-independent). In a field that is fixed in the world the device
+azimuth ψ_d and the gyro's azimuth ψ_g (:func:`fusion_plugins.hand_pdr.pdr.azimuth_increments`)
+turn together, so ψ_d − ψ_g is constant up to the gyro's slow drift. Where steel bends the
+field as the phone moves past it, or where the levelling fails (a phone swinging in the
+hand, carried in a pocket), ψ_d turns on its own: a sample is kept only if the standard
+deviation of unwrap(ψ_d − ψ_g) over the preceding ``window_s`` (every raw sample, so the
+magnetometer's own noise counts too) is at most ``tolerance_deg``.
 """
 
 from __future__ import annotations
@@ -23,7 +31,7 @@ import numpy as np
 from fusion.config import ImuCsvConfig
 from fusion.errors import InputError
 from fusion.readers import apply_timestamp_policy, read_table
-from fusion_plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig
+from fusion_plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig, QuasiStaticConfig
 
 MAG_UNITS: dict[str, float] = {"uT": 1.0, "nT": 1e-3, "G": 100.0}
 """Magnetometer unit → µT."""
@@ -56,6 +64,26 @@ def earth_like(m_uT: np.ndarray, up_b: np.ndarray, check: FieldCheckConfig | Non
     return ok
 
 
+def quasi_static(t_m: np.ndarray, psi_d: np.ndarray, psi_g: np.ndarray, keep: np.ndarray,
+                 check: QuasiStaticConfig | None) -> np.ndarray:
+    """(K,) True for the samples ``keep`` (indices into ``t_m``, s) where ψ_d − ψ_g (rad, both
+    at ``t_m``) has a standard deviation of at most ``check.tolerance_deg`` over the
+    ``check.window_s`` before them (a window the data does not cover fails); all True
+    without a check."""
+    if check is None:
+        return np.ones(len(keep), dtype=bool)
+    finite = np.isfinite(psi_d)
+    diff = np.full(len(t_m), np.nan)
+    diff[finite] = np.unwrap(psi_d[finite] - psi_g[finite])
+    start = np.searchsorted(t_m, t_m[keep] - check.window_s)
+    ok = np.zeros(len(keep), dtype=bool)
+    for k, (i0, i1) in enumerate(zip(start, keep)):
+        span = diff[i0:i1 + 1]
+        ok[k] = (t_m[i1] - t_m[0] >= check.window_s and np.all(np.isfinite(span))
+                 and np.std(span) <= np.deg2rad(check.tolerance_deg))
+    return ok
+
+
 def decimate(t: np.ndarray, rate_hz: float) -> np.ndarray:
     """Indices of the first sample in each 1/``rate_hz`` interval from ``t[0]`` (s)."""
     _, first = np.unique(np.floor((t - t[0]) * rate_hz), return_index=True)
@@ -65,30 +93,33 @@ def decimate(t: np.ndarray, rate_hz: float) -> np.ndarray:
 @dataclass
 class MagneticHeading:
     """Decimated magnetometer updates: times t (s), device azimuths ψ_d (rad, clockwise
-    from true North, declination applied) and whether each passed the field check (a
-    sample without a horizontal field component never does)."""
+    from true North, declination applied), whether each passed the field check (a sample
+    without a horizontal field component never does) and the quasi-static check."""
 
     t: np.ndarray
     psi_d: np.ndarray
     earth_like: np.ndarray
+    quasi_static: np.ndarray
 
     @classmethod
-    def of(cls, t_m: np.ndarray, m_uT: np.ndarray, t_imu: np.ndarray, up_b: np.ndarray,
+    def of(cls, t_m: np.ndarray, m_uT: np.ndarray, t_imu: np.ndarray, up_b: np.ndarray, azimuth: np.ndarray,
            cfg: MagnetometerConfig) -> "MagneticHeading":
-        """From samples ``m_uT`` (N, 3, µT, phone frame) at ``t_m`` (s) and the Up direction
-        ``up_b`` at the IMU's times ``t_imu``; samples outside the IMU's span are dropped."""
+        """From samples ``m_uT`` (N, 3, µT, phone frame) at ``t_m`` (s), the Up direction ``up_b``
+        and the gyro's azimuth ``azimuth`` (rad) at the IMU's times ``t_imu``; samples outside the
+        IMU's span are dropped."""
         inside = (t_m >= t_imu[0]) & (t_m <= t_imu[-1])
         t_m, m_uT = t_m[inside], m_uT[inside]
         if t_m.size == 0:
-            return cls(np.empty(0), np.empty(0), np.empty(0, dtype=bool))
-        keep = decimate(t_m, cfg.rate_hz)
-        t_k, m_k = t_m[keep], m_uT[keep]
-        u = np.column_stack([np.interp(t_k, t_imu, up_b[:, i]) for i in range(3)])
+            return cls(np.empty(0), np.empty(0), np.empty(0, dtype=bool), np.empty(0, dtype=bool))
+        u = np.column_stack([np.interp(t_m, t_imu, up_b[:, i]) for i in range(3)])
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         axis = np.asarray(cfg.axis_b, dtype=float)
         with np.errstate(invalid="ignore"):  # a field along Up has no azimuth: NaN, refused below
-            psi = device_azimuth(m_k, u, axis / np.linalg.norm(axis)) + np.deg2rad(cfg.declination_deg)
-        return cls(t_k, psi, earth_like(m_k, u, cfg.field_check) & np.isfinite(psi))
+            psi = device_azimuth(m_uT, u, axis / np.linalg.norm(axis)) + np.deg2rad(cfg.declination_deg)
+        keep = decimate(t_m, cfg.rate_hz)
+        still = quasi_static(t_m, psi, np.interp(t_m, t_imu, azimuth), keep, cfg.quasi_static)
+        return cls(t_m[keep], psi[keep], earth_like(m_uT[keep], u[keep], cfg.field_check) & np.isfinite(psi[keep]),
+                   still)
 
 
 def read_magnetometer_csv(d: ImuCsvConfig, columns: tuple[str, str, str], unit: str) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,23 @@ def up_in_body(t: np.ndarray, acc_b: np.ndarray, cutoff_hz: float = 0.3) -> np.n
     return g_b / np.linalg.norm(g_b, axis=1, keepdims=True)
 
 
+def pose_change(t: np.ndarray, up_b: np.ndarray, window_s: float) -> np.ndarray:
+    """(N,) angle (rad) by which the Up direction in the phone frame ``up_b`` (N, 3, unit)
+    turned over the last ``window_s`` (0 within the first window): how much the way the phone
+    is held changed (into a pocket, swinging, raised to read)."""
+    j = np.maximum(np.searchsorted(t, t - window_s), 0)
+    return np.arccos(np.clip(np.einsum("ij,ij->i", up_b, up_b[j]), -1.0, 1.0))
+
+
+def held_steadily(t: np.ndarray, up_b: np.ndarray, window_s: float, max_change_rad: float) -> np.ndarray:
+    """(N,) True where the phone has been held steadily for ``window_s``: no :func:`pose_change`
+    above ``max_change_rad`` within the last ``window_s`` (one tip up and back, whose
+    2-s change dips at its top, is one handling, not two)."""
+    moved = np.concatenate([[0], np.cumsum(pose_change(t, up_b, window_s) > max_change_rad)])
+    j = np.maximum(np.searchsorted(t, t - window_s), 0)
+    return moved[1:] - moved[j] == 0
+
+
 def azimuth_increments(t: np.ndarray, gyro_b: np.ndarray, up_b: np.ndarray) -> np.ndarray:
     """(N,) cumulative change of azimuth (rad, clockwise from North) from the rate about Up:
     levelled gyro integration, ψ̇ = −ω_b · u_b (trapezoidal; 0 at the first sample)."""
