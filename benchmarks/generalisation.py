@@ -13,7 +13,9 @@ defaults and scored with the project's scorer (:func:`fusion.metrics.score_syste
   x-io's published 0.421 m;
 * ``handheld_phone_ipin2023`` (nine phone logs): the 75th percentile of the horizontal error
   at the surveyed points (the competition's metric); beside it the phone's GNSS alone, scored
-  the same way, and the ratio PDR+GNSS / GNSS.
+  the same way (its first fix before GNSS starts, its last held after it stops, so both are scored
+  at every surveyed point; ``gnss_coverage`` is the share of points inside the GNSS span), and the
+  ratio PDR+GNSS / GNSS.
 
 Each data set ends with a summary line ``<set>: median=<m> p90=<m> worst=<m> failed=<n>``.
 ``--set KEY=VALUE`` overrides every layout (e.g. ``--set smoother.kind=rts``); ``--only SET``
@@ -187,12 +189,18 @@ def ipin_row(log: Path, overrides: list[str]) -> list[Row]:
     result = _run(ipin_layout(log), overrides)
     p75 = result.scores["hand_phone"].metrics["horizontal_error_m"]["p75"]
     gnss = read_getsensordata(log).gnss
+    truth = result.truths["hand_phone"]
+    # GNSS alone as its user has it: the first fix before GNSS starts, the last one held after it
+    # stops, so both are scored at every surveyed point
+    t = np.concatenate([[min(truth.t[0], gnss.t[0]) - 1.0], gnss.t, [max(truth.t[-1], gnss.t[-1]) + 1.0]])
     enu = gnss.enu(result.geodetic_origin)
-    _, gnss_scores = score_systems({"hand_phone": Trajectory(gnss.t, enu, np.zeros_like(enu))},
-                                   {"hand_phone": result.truths["hand_phone"]}, alignment="none")
+    enu = np.vstack([enu[:1], enu, enu[-1:]])
+    _, gnss_scores = score_systems({"hand_phone": Trajectory(t, enu, np.zeros_like(enu))}, {"hand_phone": truth},
+                                   alignment="none")
     gnss_p75 = gnss_scores["hand_phone"].metrics["horizontal_error_m"]["p75"]
+    covered = float(np.mean((truth.t >= gnss.t[0]) & (truth.t <= gnss.t[-1])))
     return [Row("ipin", log.stem.replace("IPIN2023_T3_", ""), p75, gnss_p75,
-                {"ratio": p75 / gnss_p75, **_notes(result)})]
+                {"ratio": p75 / gnss_p75, "gnss_coverage": covered, **_notes(result)})]
 
 
 def _notes(result) -> dict:
