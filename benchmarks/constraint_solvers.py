@@ -23,7 +23,7 @@ import warnings
 
 import numpy as np
 
-from fusion.constraints import DistanceConstraint, ProjectionSolver, QpSolver, SocpSolver, solve_projection
+from bodyfusion.core.constraints import DistanceConstraint, ProjectionSolver, QpSolver, SocpSolver, solve_projection
 
 
 def random_problem(rng: np.random.Generator, d: float = 0.8, excess: float = 0.2) -> tuple[np.ndarray, np.ndarray]:

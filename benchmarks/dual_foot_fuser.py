@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.config import load_layout
-from fusion.run import run_layout
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run_layout
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml"
 

@@ -15,8 +15,8 @@ import argparse
 import time
 from pathlib import Path
 
-from fusion.config import load_layout
-from fusion.run import build_systems, layout_context
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import build_systems, layout_context
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "dual_foot_vicon.yaml"

@@ -2,7 +2,7 @@
 
 Each data set has ONE layout template (what is worn, where the files are, their units and
 frames — nothing tuned); every recording of the set is run through it with the project's
-defaults and scored with the project's scorer (:func:`fusion.metrics.score_systems`):
+defaults and scored with the project's scorer (:func:`bodyfusion.evaluation.metrics.score_systems`):
 
 * ``foot_vicon_pyshoe`` (21 trials, one foot, 200 Hz): horizontal RMSE, first-3 m alignment;
   beside it PyShoe's own published trajectory (``pyshoe.csv``) scored the same way, and the
@@ -128,8 +128,8 @@ def ipin_layout(log: Path) -> dict:
 
 
 def _run(layout: dict, overrides: list[str]):
-    from fusion.config import load_layout
-    from fusion.run import run_layout
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.core.run import run_layout
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{layout['name']}.yaml"
@@ -142,9 +142,9 @@ def _zupt_nis(result, name: str) -> float | None:
 
 
 def pyshoe_row(trial: Path, overrides: list[str]) -> list[Row]:
-    from fusion.metrics import score_systems
-    from fusion.readers import read_truth_csv
-    from fusion.types import Trajectory
+    from bodyfusion.evaluation.metrics import score_systems
+    from bodyfusion.io.readers import read_truth_csv
+    from bodyfusion.core.types import Trajectory
 
     result = _run(pyshoe_layout(trial), overrides)
     score = result.scores["foot"].metrics["horizontal_error_m"]["rmse"]
@@ -174,7 +174,7 @@ def vicon_rows(folder: Path, overrides: list[str]) -> list[Row]:
 
 
 def xio_row(csv: Path, overrides: list[str]) -> list[Row]:
-    from fusion.metrics import loop_closure_m
+    from bodyfusion.evaluation.metrics import loop_closure_m
 
     result = _run(xio_layout(csv), overrides)
     return [Row("xio", csv.stem, loop_closure_m(result.trajectories["foot"]), XIO_PUBLISHED_LOOP_M,
@@ -182,9 +182,9 @@ def xio_row(csv: Path, overrides: list[str]) -> list[Row]:
 
 
 def ipin_row(log: Path, overrides: list[str]) -> list[Row]:
-    from fusion.metrics import score_systems
-    from fusion.phone_log import read_getsensordata
-    from fusion.types import Trajectory
+    from bodyfusion.evaluation.metrics import score_systems
+    from bodyfusion.io.phone_log import read_getsensordata
+    from bodyfusion.core.types import Trajectory
 
     result = _run(ipin_layout(log), overrides)
     p75 = result.scores["hand_phone"].metrics["horizontal_error_m"]["p75"]

@@ -1,8 +1,8 @@
 """Per-segment latency of the FB-RTS smoother on the FB-RTS paper's simulation.
 
 Simulates ``configs/fbrts_paper_sim.yaml`` (one seed) in a temporary directory with
-:func:`fusion.sim.simulate`, runs the forward filter once (``smoother.kind=none``), then
-:func:`fusion.smoothing.smooth_record` with ``kind=fb-rts`` on its record and prints the
+:func:`bodyfusion.sim.simulate`, runs the forward filter once (``smoother.kind=none``), then
+:func:`bodyfusion.plugins.foot_ins.smoothing.smooth_record` with ``kind=fb-rts`` on its record and prints the
 per-segment compute time (forward re-run, backward pass, both RTS sweeps and the fusion
 of one segment: the latency after the segment's last sample). The first segment is left
 out of the statistics: it includes numba's compilation (or cache load) of the kernels.
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.config import SmootherConfig, load_layout
-from fusion.run import run_layout
-from fusion.sim import simulate
-from fusion.smoothing import smooth_record
+from bodyfusion.core.layout import SmootherConfig, load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from bodyfusion.plugins.foot_ins.smoothing import smooth_record
 
 ROOT = Path(__file__).resolve().parents[1]
 

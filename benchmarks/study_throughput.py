@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from fusion.study import run_study
+from bodyfusion.study import run_study
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 

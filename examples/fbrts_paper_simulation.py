@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.config import SmootherConfig, load_layout
-from fusion.run import run_layout
-from fusion.sim import simulate
-from fusion.smoothing import smooth_record
+from bodyfusion.core.layout import SmootherConfig, load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from bodyfusion.plugins.foot_ins.smoothing import smooth_record
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"ZUPT": (1.07, 1.32, 2.94), "RTS": (0.596, 0.723, 1.64), "FB": (0.426, 0.520, 1.23),

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.config import load_layout
-from fusion.run import run_layout
-from fusion.sim import simulate
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 GAITS = {"walk": ("sim_dual_foot_square.yaml", []), "run": ("sim_running.yaml", []),

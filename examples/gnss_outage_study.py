@@ -27,7 +27,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from fusion.study import run_study
+from bodyfusion.study import run_study
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 

@@ -29,11 +29,11 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from fusion.config import load_layout
-from fusion.metrics import score_systems
-from fusion.phone_log import read_getsensordata
-from fusion.run import run_layout
-from fusion.types import Trajectory
+from bodyfusion.core.layout import load_layout
+from bodyfusion.evaluation.metrics import score_systems
+from bodyfusion.io.phone_log import read_getsensordata
+from bodyfusion.core.run import run_layout
+from bodyfusion.core.types import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "ipin2023_trial01.yaml"

@@ -23,9 +23,9 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
-from fusion.config import load_layout
-from fusion.run import run_layout
-from fusion.sim import simulate
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 DUAL_CASES = {

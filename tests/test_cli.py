@@ -24,7 +24,7 @@ CONTRACT_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
 
 
 def fusion(*args: str, cwd: Path = ROOT, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fusion.cli", *map(str, args)], cwd=cwd, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "bodyfusion.cli", *map(str, args)], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout)
 
 

@@ -1,6 +1,6 @@
-"""Tests for fusion.config: strict two-stage layout validation, overrides, path resolution.
+"""Tests for bodyfusion.core.layout: strict two-stage layout validation, overrides, path resolution.
 
-Every refusal is a :class:`fusion.errors.ConfigError` whose text names the file and the
+Every refusal is a :class:`bodyfusion.core.errors.ConfigError` whose text names the file and the
 dotted path of the offending key (CONTRACT.md).
 """
 
@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fusion.config import Layout, apply_overrides, load_layout, parse_override, read_yaml
-from fusion.errors import ConfigError, FusionError
+from bodyfusion.core.layout import Layout, apply_overrides, load_layout, parse_override, read_yaml
+from bodyfusion.core.errors import ConfigError, FusionError
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -199,7 +199,7 @@ def test_relative_data_paths_resolve_against_the_config_folder(tmp_path, monkeyp
     assert loaded.system_configs["right_foot"].data.path.resolve() == (folder / "data" / "right.csv").resolve()
     assert loaded.layout.truth.path.resolve() == (folder / "truth.csv").resolve()
     # and the systems really read their data from there
-    from fusion.run import build_systems, layout_context
+    from bodyfusion.core.run import build_systems, layout_context
 
     systems = build_systems(loaded, layout_context(loaded))
     assert systems["left_foot"].samples == systems["right_foot"].samples > 1000

@@ -1,4 +1,4 @@
-"""fusion.testing.check_system: every built-in plugin conforms, and the checker catches
+"""bodyfusion.testing.check_system: every built-in plugin conforms, and the checker catches
 seeded defects, each reported under its check's name."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from pydantic import Field
 
-from fusion.config import StrictModel, read_yaml
-from fusion.system import SensorSystem
-from fusion.testing import (CHECKS, ConformanceError, JacobianCase, check_jacobian, check_system, default_context,
+from bodyfusion.core.layout import StrictModel, read_yaml
+from bodyfusion.core.system import SensorSystem
+from bodyfusion.testing import (CHECKS, ConformanceError, JacobianCase, check_jacobian, check_system, default_context,
                             strapdown15_jacobian_cases, undocumented_fields, with_value)
-from fusion.types import InputReport, Trajectory
-from fusion_plugins.foot_ins import FootIns
-from fusion_plugins.random_walk import RandomWalk
+from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.plugins.foot_ins import FootIns
+from bodyfusion.plugins.random_walk import RandomWalk
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -72,7 +72,7 @@ class Toy(SensorSystem):
         self.hist = [(self.x.copy(), np.diag(self.P).copy())]
 
     def draw_steps(self):
-        from fusion.seeding import system_seed
+        from bodyfusion.core.seeding import system_seed
 
         rng = np.random.default_rng(system_seed(self.context.seed, self.name))
         return 1.0 + rng.normal(0, self.config.noise_m, self.t.size)

@@ -1,4 +1,4 @@
-"""Property tests for fusion.constraints: projection (eqs. 55–60), OSQP QP, cvxpy SOCP.
+"""Property tests for bodyfusion.core.constraints: projection (eqs. 55–60), OSQP QP, cvxpy SOCP.
 
 Hypothesis draws the structure (number of systems, full or block-diagonal Σ,
 horizontal or 3-D, lever arms, how far the constraint is violated) and a seed;
@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from fusion import constraints as fc
-from fusion.constraints import (
+from bodyfusion.core import constraints as fc
+from bodyfusion.core.constraints import (
     ConstraintSolution,
     DistanceConstraint,
     ProjectionSolver,

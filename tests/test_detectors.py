@@ -1,4 +1,4 @@
-"""Tests for fusion.detectors on synthetic signals, small exact arrays and real labels."""
+"""Tests for bodyfusion.nav.detectors on synthetic signals, small exact arrays and real labels."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusion.detectors import (
+from bodyfusion.nav.detectors import (
     acceleration_magnitude,
     axes_sum_band,
     debounce,
@@ -191,7 +191,7 @@ def test_debounce_properties(bits, min_stance, min_swing):
 @pytest.mark.skipif(not VICON.exists(), reason="shared Vicon data not available")
 @pytest.mark.parametrize("side,bound", [("Left", 0.90), ("Right", 0.85)])
 def test_shoe_agrees_with_vicon_labels(side, bound):
-    from fusion.readers import read_imu_csv
+    from bodyfusion.io.readers import read_imu_csv
 
     s = read_imu_csv(
         VICON / f"imuMeas{side}.csv", time_column="time_index", time_scale=1 / 60,
@@ -218,14 +218,14 @@ def _statistic_of(stance_floor: float, swing: float, rate: float, stance_s: floa
 
 
 def test_adaptive_threshold_keeps_the_fixed_one_where_stance_is_still():
-    from fusion.detectors import adaptive_shoe_threshold
+    from bodyfusion.nav.detectors import adaptive_shoe_threshold
 
     stat, _ = _statistic_of(3e2, 1e7, 200.0, 0.6, 0.5)
     assert np.allclose(adaptive_shoe_threshold(stat, 200.0), 3e4)
 
 
 def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it():
-    from fusion.detectors import adaptive_shoe_threshold
+    from bodyfusion.nav.detectors import adaptive_shoe_threshold
 
     stat, truth = _statistic_of(2e4 * 1.5, 1e7, 200.0, 0.15, 0.55)  # above any walking threshold
     gamma = adaptive_shoe_threshold(stat, 200.0)
@@ -234,7 +234,7 @@ def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it():
 
 
 def test_adaptive_threshold_never_makes_stance_of_continuous_motion():
-    from fusion.detectors import adaptive_shoe_threshold
+    from bodyfusion.nav.detectors import adaptive_shoe_threshold
 
     rng = np.random.default_rng(0)
     stat = 10 ** rng.uniform(5.2, 7.0, 4000)  # a sensor that never rests (RMS rate > 1 rad/s)
@@ -242,7 +242,7 @@ def test_adaptive_threshold_never_makes_stance_of_continuous_motion():
 
 
 def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
-    from fusion.detectors import adaptive_shoe
+    from bodyfusion.nav.detectors import adaptive_shoe
 
     for rate, w in ((60.0, 3), (200.0, 5), (400.0, 10)):
         n = int(5 * rate)
@@ -254,9 +254,9 @@ def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
 def test_the_default_detector_holds_on_a_running_stance_that_never_rests(tmp_path):
     """Simulated running whose 0.15 s stance rolls heel to toe throughout: the fixed SHOE
     threshold finds almost no stance and the foot drifts away; the adaptive default follows it."""
-    from fusion.config import load_layout
-    from fusion.run import run_layout
-    from fusion.sim import simulate
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.core.run import run_layout
+    from bodyfusion.sim import simulate
 
     cfg = simulate(ROOT / "configs" / "sim_running.yaml", tmp_path / "run", seed=1, overrides=[
         "gait.roll.heel_s=0.07", "gait.roll.toe_s=0.07", "path.laps=1", "systems={left_foot: {kind: foot_imu, "

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import load_layout
-from fusion.run import run_layout
-from fusion.sim import simulate
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
@@ -34,7 +34,7 @@ def test_error_free_imus_navigate_to_under_a_centimetre_after_a_minute_of_walkin
 
 def test_run_writes_the_contract_outputs_for_a_simulation(perfect_walk, tmp_path):
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "fusion.cli", "run", str(perfect_walk), "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "bodyfusion.cli", "run", str(perfect_walk), "--out", str(out)],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((out / "metrics.json").read_text())

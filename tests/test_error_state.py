@@ -1,5 +1,5 @@
-"""Tests for fusion.error_state and fusion.zupt: the 15-state error model is the
-linearisation of fusion.strapdown.mechanise, and the updates are the textbook KF.
+"""Tests for bodyfusion.nav.error_state and bodyfusion.nav.zupt: the 15-state error model is the
+linearisation of bodyfusion.nav.strapdown.mechanise, and the updates are the textbook KF.
 
 Error convention (fusion/error_state.py): true minus estimated; attitude error δθ in the
 navigation frame on the LEFT, C_true = (I + [δθ×]) C_est, applied by ``inject``.
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fusion.error_state import ERROR_SIZE, error_between, inject, inv3_sym, propagate_covariance, update_selected
-from fusion.strapdown import mechanise
-from fusion.testing import random_nominal_state
-from fusion.zupt import zero_angular_rate_update, zero_velocity_update
+from bodyfusion.nav.error_state import ERROR_SIZE, error_between, inject, inv3_sym, propagate_covariance, update_selected
+from bodyfusion.nav.strapdown import mechanise
+from bodyfusion.testing import random_nominal_state
+from bodyfusion.nav.zupt import zero_angular_rate_update, zero_velocity_update
 
 G = 9.8
 NO_EARTH = np.zeros(3)

@@ -19,11 +19,11 @@ EXAMPLE = ROOT / "examples" / "plugin_barometer"
 if str(EXAMPLE) not in sys.path:
     sys.path.insert(0, str(EXAMPLE))
 
-import fusion_barometer  # noqa: E402
+import bodyfusion_barometer  # noqa: E402
 
-from fusion import plugins, run  # noqa: E402
-from fusion.config import load_layout  # noqa: E402
-from fusion.errors import ConfigError  # noqa: E402
+from bodyfusion.core import registry as plugins, run  # noqa: E402
+from bodyfusion.core.layout import load_layout  # noqa: E402
+from bodyfusion.core.errors import ConfigError  # noqa: E402
 
 
 def _own_tests():
@@ -46,7 +46,7 @@ def test_the_example_plugins_own_tests(name):
 def registry_with_barometer(monkeypatch):
     """The installed plugins plus the example, registered through the same hook."""
     pm = plugins.make_plugin_manager()
-    pm.register(fusion_barometer)
+    pm.register(bodyfusion_barometer)
     registry = plugins.Registry(pm)
     monkeypatch.setattr(plugins, "get_registry", lambda: registry)
     monkeypatch.setattr(run, "get_registry", lambda: registry)
@@ -57,7 +57,7 @@ def test_pyproject_declares_the_entry_point():
     import tomllib
 
     project = tomllib.loads((EXAMPLE / "pyproject.toml").read_text())["project"]
-    assert project["entry-points"]["fusion.plugins"] == {"barometer": "fusion_barometer"}
+    assert project["entry-points"]["bodyfusion.plugins"] == {"barometer": "bodyfusion_barometer"}
     assert any(dep.startswith("bodyfusion") for dep in project["dependencies"])
 
 

@@ -1,6 +1,6 @@
 """The foot-mounted INS plugin on the vendored dual-foot Vicon walk (Hu & Hu, PLANS 2025).
 
-Runs through the public path: ``fusion.run.run_layout(load_layout(...))``.
+Runs through the public path: ``bodyfusion.core.run.run_layout(load_layout(...))``.
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import load_layout
-from fusion.errors import ConfigError
-from fusion.heading import wrap_angle
-from fusion.run import build_systems, layout_context, run_layout
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.heading import wrap_angle
+from bodyfusion.core.run import build_systems, layout_context, run_layout
 
 ROOT = Path(__file__).resolve().parents[1]
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"
@@ -142,7 +142,7 @@ def test_stance_fraction_in_diagnostics_equals_the_label_fraction(vicon, name, f
 
 def test_debounced_labels_drop_short_flickers(vicon):
     """The layout's 0.05 s debounce: no stance or inner swing run shorter than 3 samples at 60 Hz."""
-    from fusion.detectors import stance_events
+    from bodyfusion.nav.detectors import stance_events
 
     for system in vicon.systems.values():
         starts, ends = stance_events(system.stance)

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fusion.config import load_layout, read_yaml
-from fusion.error_state import accumulate_propagation, process_noise_diag
-from fusion.errors import ConfigError
-from fusion.run import build_systems, layout_context, run_layout
-from fusion.testing import check_system, default_context, with_value
-from fusion_plugins.foot_ins import FootIns
-from fusion_plugins.foot_ins.coloured import coloured_zero_velocity_update, velocity_rows_of_inverse_transition
+from bodyfusion.core.layout import load_layout, read_yaml
+from bodyfusion.nav.error_state import accumulate_propagation, process_noise_diag
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.testing import check_system, default_context, with_value
+from bodyfusion.plugins.foot_ins import FootIns
+from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update, velocity_rows_of_inverse_transition
 
 ROOT = Path(__file__).resolve().parents[1]
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"
@@ -235,7 +235,7 @@ def test_ensemble_refuses_smoothing_and_cross_covariances_at_validation(override
 
 
 def test_fusion_validate_prints_one_line_for_colour_factor_one():
-    proc = subprocess.run([sys.executable, "-m", "fusion.cli", "validate", str(VICON_CFG), "--set",
+    proc = subprocess.run([sys.executable, "-m", "bodyfusion.cli", "validate", str(VICON_CFG), "--set",
                            "systems.left_foot.filter.kind=ckf", "--set", "systems.left_foot.filter.colour_factor=1"],
                           capture_output=True, text=True)
     assert proc.returncode == 2
@@ -268,10 +268,10 @@ def test_every_kind_conforms(vicon_slice, kind):
 
 
 def test_stance_noise_moves_the_truth_and_the_imu_consistently():
-    from fusion.sim.gait import StanceNoiseConfig, plan_gait, stance_drift
-    from fusion.sim.imu import ideal_imu
-    from fusion.sim.scenario import load_scenario
-    from fusion.strapdown import integrate
+    from bodyfusion.sim.gait import StanceNoiseConfig, plan_gait, stance_drift
+    from bodyfusion.sim.imu import ideal_imu
+    from bodyfusion.sim.scenario import load_scenario
+    from bodyfusion.nav.strapdown import integrate
 
     loaded = load_scenario(SCENARIO)
     plan = plan_gait(loaded.path.build(), loaded.scenario.gait, 100.0)
@@ -301,7 +301,7 @@ def test_stance_noise_moves_the_truth_and_the_imu_consistently():
 
 
 def test_simulated_stance_noise_is_seeded_and_scored(tmp_path):
-    from fusion.sim import simulate
+    from bodyfusion.sim import simulate
 
     a = simulate(SCENARIO, tmp_path / "a", seed=5, overrides=["path.length_m=6", "path.width_m=3"])
     simulate(SCENARIO, tmp_path / "b", seed=5, overrides=["path.length_m=6", "path.width_m=3"])

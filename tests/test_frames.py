@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import apply_axis_map, load_layout
-from fusion.errors import ConfigError
-from fusion.run import run_layout
+from bodyfusion.core.layout import apply_axis_map, load_layout
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.run import run_layout
 
 ROOT = Path(__file__).resolve().parents[1]
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import load_layout
-from fusion.constraints import DistanceConstraint, constrained_covariance, solve_projection
-from fusion.fuser import spread_correction
-from fusion.run import run, run_layout
-from fusion.sim import simulate
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.constraints import DistanceConstraint, constrained_covariance, solve_projection
+from bodyfusion.core.fuser import spread_correction
+from bodyfusion.core.run import run, run_layout
+from bodyfusion.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 WALKERS = ROOT / "configs" / "paper_constraint_monte_carlo.yaml"

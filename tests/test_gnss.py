@@ -8,8 +8,8 @@ import numpy as np
 import pynmea2
 import pytest
 
-from fusion.errors import InputError
-from fusion.gnss import GnssFixes, enu_to_geodetic, read_gnss_csv, read_nmea
+from bodyfusion.core.errors import InputError
+from bodyfusion.io.gnss import GnssFixes, enu_to_geodetic, read_gnss_csv, read_nmea
 
 
 def gga(time: str, lat: str, ns: str, lon: str, ew: str, quality: str = "1", hdop: str = "0.9") -> str:

@@ -12,15 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from fusion.config import ImuCsvConfig, load_layout, read_yaml
-from fusion.errors import ConfigError
-from fusion.run import run_layout
-from fusion.sim import simulate
-from fusion.sim.magnetometer import MagnetometerSimConfig
-from fusion.testing import CHECKS, check_system, default_context, with_value
-from fusion_plugins.hand_pdr import HandPdr
-from fusion_plugins.hand_pdr.config import FieldCheckConfig
-from fusion_plugins.hand_pdr.magnetometer import device_azimuth, earth_like, read_magnetometer_csv
+from bodyfusion.core.layout import ImuCsvConfig, load_layout, read_yaml
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from bodyfusion.sim.magnetometer import MagnetometerSimConfig
+from bodyfusion.testing import CHECKS, check_system, default_context, with_value
+from bodyfusion.plugins.hand_pdr import HandPdr
+from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig
+from bodyfusion.plugins.hand_pdr.magnetometer import device_azimuth, earth_like, read_magnetometer_csv
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 SHORT = ["path.length_m=30", "path.width_m=20", "path.laps=1"]
@@ -218,8 +218,8 @@ def test_quasi_static_check_keeps_a_fixed_field_and_refuses_one_that_turns_on_it
     """ψ_d follows the gyro (plus 1° noise) for 10 s, then wanders by ±30° at 0.5 Hz while the
     gyro does not turn (a bent field): the first kept, the second refused; the first window
     (not yet covered by data) is refused too."""
-    from fusion_plugins.hand_pdr.config import QuasiStaticConfig
-    from fusion_plugins.hand_pdr.magnetometer import quasi_static
+    from bodyfusion.plugins.hand_pdr.config import QuasiStaticConfig
+    from bodyfusion.plugins.hand_pdr.magnetometer import quasi_static
 
     rng = np.random.default_rng(0)
     t = np.arange(0.0, 20.0, 0.02)
@@ -235,8 +235,8 @@ def test_quasi_static_check_keeps_a_fixed_field_and_refuses_one_that_turns_on_it
 def test_phone_log_defaults_are_those_of_an_android_phone_read_while_walking(tmp_path):
     """A phone log: magnetometer unset (on when the log has MAGN lines), device axis +y (the
     top of the screen), holding offset 0, gyro bias σ 0.01 rad/s; an IMU CSV: off, +x, auto, 0.002."""
-    from fusion.config import validate_section
-    from fusion_plugins.hand_pdr.config import HandPdrConfig
+    from bodyfusion.core.layout import validate_section
+    from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 
     (tmp_path / "log.txt").write_text("")
     phone = validate_section(HandPdrConfig, {"phone_log": "log.txt", "gnss": {"format": "phone_log"}},

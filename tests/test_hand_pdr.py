@@ -8,11 +8,11 @@ import numpy as np
 import pymap3d
 import pytest
 
-from fusion.config import load_layout, read_yaml
-from fusion.run import run_layout
-from fusion.sim import simulate
-from fusion.testing import CHECKS, check_system, default_context, with_value
-from fusion_plugins.hand_pdr import HandPdr
+from bodyfusion.core.layout import load_layout, read_yaml
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from bodyfusion.testing import CHECKS, check_system, default_context, with_value
+from bodyfusion.plugins.hand_pdr import HandPdr
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 SHORT = ["path.length_m=30", "path.width_m=20", "path.laps=1"]
@@ -99,9 +99,9 @@ def test_gnss_calibrates_the_step_scale_of_an_uncalibrated_step_model(tmp_path):
 def test_weinberg_k_calibrated_on_one_walk_measures_another_to_three_percent(tmp_path):
     """Calibrate K on a walk of known length (seed 0), then measure a different walk (seed 1,
     other noise, other hand sway): mean step length within 3 % of the true 0.70 m."""
-    from fusion.readers import read_imu_csv
-    from fusion_plugins.hand_pdr.config import StepConfig
-    from fusion_plugins.hand_pdr.pdr import calibrate_weinberg_k, detect_steps, step_lengths
+    from bodyfusion.io.readers import read_imu_csv
+    from bodyfusion.plugins.hand_pdr.config import StepConfig
+    from bodyfusion.plugins.hand_pdr.pdr import calibrate_weinberg_k, detect_steps, step_lengths
 
     def imu(seed):
         res = simulate(CONFIGS / "foot_hand_gnss_outage.yaml", tmp_path / str(seed), seed=seed, overrides=SHORT)
@@ -275,7 +275,7 @@ def test_a_correction_while_the_bank_is_open_moves_the_mixture_as_asked(stand_th
 
 
 def test_spread_headings_cover_the_circle_with_equal_weights():
-    from fusion_plugins.hand_pdr.hypotheses import spread_headings
+    from bodyfusion.plugins.hand_pdr.hypotheses import spread_headings
 
     x, P = np.array([1.0, 2.0, 0.5]), np.diag([4.0, 4.0, 0.01])
     P[0, 2] = P[2, 0] = 0.1
@@ -290,7 +290,7 @@ def test_spread_headings_cover_the_circle_with_equal_weights():
 def test_mixture_moments_wrap_the_heading_and_add_the_spread():
     """Two equally likely hypotheses at ±170° (20° apart across the wrap): mean 180°, heading
     variance σ² + 10²(°); positions 2 m apart: variance + 1 m²."""
-    from fusion_plugins.hand_pdr.hypotheses import Hypothesis, collapse_if_resolved, mixture_moments
+    from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis, collapse_if_resolved, mixture_moments
 
     sd = np.deg2rad(5.0)
     P = np.diag([1.0, sd**2])
@@ -306,7 +306,7 @@ def test_mixture_moments_wrap_the_heading_and_add_the_spread():
 
 
 def test_normalise_prunes_negligible_hypotheses():
-    from fusion_plugins.hand_pdr.hypotheses import PRUNE_WEIGHT, Hypothesis, normalise
+    from bodyfusion.plugins.hand_pdr.hypotheses import PRUNE_WEIGHT, Hypothesis, normalise
 
     bank = [Hypothesis(np.zeros(1), np.eye(1), lw) for lw in (0.0, -1.0, np.log(PRUNE_WEIGHT) - 5.0)]
     kept = normalise(bank)
@@ -314,7 +314,7 @@ def test_normalise_prunes_negligible_hypotheses():
 
 
 def test_affine_map_takes_one_covariance_to_another_with_a_shared_null_space():
-    from fusion_plugins.hand_pdr.hypotheses import affine_map
+    from bodyfusion.plugins.hand_pdr.hypotheses import affine_map
 
     rng = np.random.default_rng(3)
     A = rng.standard_normal((4, 3))

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from fusion.imu_checks import check_imu
-from fusion.readers import read_imu_csv
+from bodyfusion.io.imu_checks import check_imu
+from bodyfusion.io.readers import read_imu_csv
 
 RATE = 100.0
 
@@ -134,8 +134,8 @@ def test_warnings_reach_metrics_json_and_the_console(tmp_path):
 def test_the_foot_ins_inflates_its_covariance_across_a_gap(tmp_path):
     """Gap policy: the step across 0.4 s of missing samples is not integrated silently; the
     velocity and attitude variances grow by the recording's own RMS motion over the gap."""
-    from fusion.config import load_layout
-    from fusion.run import run_layout
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.core.run import run_layout
 
     t, acc, gyro = walking_imu()
     keep = np.ones(t.size, dtype=bool)

@@ -9,12 +9,12 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from fusion.config import load_layout
-from fusion.initial_alignment import (attitude_from_specific_force, find_still_interval, heading_axis,
+from bodyfusion.core.layout import load_layout
+from bodyfusion.nav.initial_alignment import (attitude_from_specific_force, find_still_interval, heading_axis,
                                       window_spreads)
-from fusion.quaternion import azimuth_pitch_roll
-from fusion.run import run_layout
-from fusion.sim import simulate
+from bodyfusion.nav.attitude import azimuth_pitch_roll
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
 
 G = 9.80665
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from fusion.errors import FusionError
-from fusion.metrics import (
+from bodyfusion.core.errors import FusionError
+from bodyfusion.evaluation.metrics import (
     PERCENTILES,
     PlanarTransform,
     error_cdf,
@@ -19,8 +19,8 @@ from fusion.metrics import (
     path_length_m,
     score_systems,
 )
-from fusion.plots import plot_error_cdf, plot_error_vs_time, plot_trajectories
-from fusion.types import Trajectory, TruthTrack
+from bodyfusion.evaluation.plots import plot_error_cdf, plot_error_vs_time, plot_trajectories
+from bodyfusion.core.types import Trajectory, TruthTrack
 
 STAT_KEYS = {"rmse", "mean", "max", "p50", "p75", "p90", "p95", "p99"}
 

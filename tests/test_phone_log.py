@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.errors import InputError
-from fusion.phone_log import read_getsensordata
+from bodyfusion.core.errors import InputError
+from bodyfusion.io.phone_log import read_getsensordata
 
 IPIN = Path(__file__).resolve().parents[2] / "shared" / "data" / "handheld_phone_ipin2023"
 

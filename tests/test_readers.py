@@ -1,4 +1,4 @@
-"""Tests for fusion.readers: every bad input names the file and the line."""
+"""Tests for bodyfusion.io.readers: every bad input names the file and the line."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.errors import InputError
-from fusion.readers import (
+from bodyfusion.core.errors import InputError
+from bodyfusion.io.readers import (
     ACC_UNITS,
     GYRO_UNITS,
     TIMESTAMP_POLICIES,

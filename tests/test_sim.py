@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import yaml
 
-from fusion.config import Layout, validate_section
-from fusion.errors import ConfigError
-from fusion.quaternion import azimuth_pitch_roll
-from fusion.readers import read_imu_csv
-from fusion.seeding import stable_hash
-from fusion.sim import simulate
-from fusion.sim.gait import GaitConfig, plan_gait
-from fusion.sim.imu import (
+from bodyfusion.core.layout import Layout, validate_section
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.nav.attitude import azimuth_pitch_roll
+from bodyfusion.io.readers import read_imu_csv
+from bodyfusion.core.seeding import stable_hash
+from bodyfusion.sim import simulate
+from bodyfusion.sim.gait import GaitConfig, plan_gait
+from bodyfusion.sim.imu import (
     ImuErrorConfig,
     MotionState,
     SensorErrors,
@@ -25,9 +25,9 @@ from fusion.sim.imu import (
     error_generators,
     ideal_imu,
 )
-from fusion.sim.paths import LoopsPath, OutAndBackPath, PolylinePath, RectanglePath, SquarePath
-from fusion.strapdown import integrate
-from plugins.foot_ins.config import FootInsConfig
+from bodyfusion.sim.paths import LoopsPath, OutAndBackPath, PolylinePath, RectanglePath, SquarePath
+from bodyfusion.nav.strapdown import integrate
+from bodyfusion.plugins.foot_ins.config import FootInsConfig
 
 G = 9.80665
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -45,7 +45,7 @@ def _walk(rate: float, waypoints=((0.0, 0.0), (0.0, 14.0), (12.0, 14.0)), mount_
 
 
 def _free_inertial(t, motion):
-    """Position error (N, 3) of unaided fusion.strapdown.integrate of the ideal IMU."""
+    """Position error (N, 3) of unaided bodyfusion.nav.strapdown.integrate of the ideal IMU."""
     acc, gyro = ideal_imu(motion, t, G)
     truth = motion.evaluate(t)
     x0 = np.zeros(16)
@@ -121,7 +121,7 @@ def test_pure_yaw_turn_integrates_to_the_right_heading():
 
 
 def test_free_inertial_integration_follows_truth():
-    """3-D, 100 Hz, fusion.strapdown.integrate of the ideal IMU with no aiding: < 1 mm
+    """3-D, 100 Hz, bodyfusion.nav.strapdown.integrate of the ideal IMU with no aiding: < 1 mm
     after one stride, < 5 cm after 20 s of walking (with a 90° turn and a 7° mounting yaw)."""
     rate = 100.0
     t, motion, plan = _walk(rate)

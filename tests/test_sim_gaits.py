@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import yaml
 
-from fusion.config import Layout, load_layout, validate_section
-from fusion.errors import ConfigError
-from fusion.run import run_layout
-from fusion.sim import load_scenario, simulate
-from fusion.sim.gait import GAIT_KINDS, GaitConfig, GaitPlan, plan_gait
-from fusion.sim.imu import ideal_imu
-from fusion.sim.paths import PolylinePath
-from fusion.strapdown import integrate
+from bodyfusion.core.layout import Layout, load_layout, validate_section
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import load_scenario, simulate
+from bodyfusion.sim.gait import GAIT_KINDS, GaitConfig, GaitPlan, plan_gait
+from bodyfusion.sim.imu import ideal_imu
+from bodyfusion.sim.paths import PolylinePath
+from bodyfusion.nav.strapdown import integrate
 
 G = 9.80665
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -98,7 +98,7 @@ def _plan(rate: float, waypoints=((0.0, 0.0), (0.0, 16.0), (12.0, 16.0)), **gait
 
 
 def _stride_error(plan: GaitPlan, foot: str, swing: int, mount_yaw_deg: float = 7.0) -> tuple[float, float, float]:
-    """fusion.strapdown.integrate of the ideal IMU from the last rest sample before swing
+    """bodyfusion.nav.strapdown.integrate of the ideal IMU from the last rest sample before swing
     ``swing`` to the first after it (toe roll, swing, impact, heel roll): the largest position
     error (m), the velocity (m/s) and the attitude error (rad) at the end."""
     motion = plan.feet[foot].mounted(mount_yaw_deg)

@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 import yaml
 
-from fusion.config import Layout, load_layout, validate_section
-from fusion.gnss import read_gnss_csv
-from fusion.sim import simulate
-from fusion.sim.gait import GaitConfig, plan_gait
-from fusion.sim.gnss import RADIUS_68_PER_SIGMA, GnssReceiverConfig, simulate_fixes
-from fusion.sim.hand import HandSwayConfig, hand_motion
-from fusion.sim.imu import MotionState, ideal_imu
-from fusion.sim.paths import PolylinePath
-from fusion.sim.scenario import DEFAULT_GEODETIC_ORIGIN
-from fusion.strapdown import integrate
-from plugins.hand_pdr.config import HandPdrConfig, StepConfig
-from plugins.hand_pdr.pdr import detect_steps
+from bodyfusion.core.layout import Layout, load_layout, validate_section
+from bodyfusion.io.gnss import read_gnss_csv
+from bodyfusion.sim import simulate
+from bodyfusion.sim.gait import GaitConfig, plan_gait
+from bodyfusion.sim.gnss import RADIUS_68_PER_SIGMA, GnssReceiverConfig, simulate_fixes
+from bodyfusion.sim.hand import HandSwayConfig, hand_motion
+from bodyfusion.sim.imu import MotionState, ideal_imu
+from bodyfusion.sim.paths import PolylinePath
+from bodyfusion.sim.scenario import DEFAULT_GEODETIC_ORIGIN
+from bodyfusion.nav.strapdown import integrate
+from bodyfusion.plugins.hand_pdr.config import HandPdrConfig, StepConfig
+from bodyfusion.plugins.hand_pdr.pdr import detect_steps
 
 G = 9.80665
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -75,7 +75,7 @@ def test_hand_imu_at_rest_reads_gravity():
 
 
 def test_free_inertial_integration_of_the_hand_imu_follows_truth():
-    """Unaided fusion.strapdown.integrate of the ideal hand IMU from rest through the start of
+    """Unaided bodyfusion.nav.strapdown.integrate of the ideal hand IMU from rest through the start of
     the walk (bounce, sway, wobble, 10° mount yaw), then from a moving start across the turn."""
     plan, motion = _motion()
     t = plan.t
@@ -100,7 +100,7 @@ def test_heading_and_offset_follow_the_body_path():
     plan, motion = _motion(mount_yaw_deg=10.0)
     t = np.array([8.0])  # on the first (northbound) leg
     st = motion.evaluate(t)
-    from fusion.quaternion import azimuth_pitch_roll
+    from bodyfusion.nav.attitude import azimuth_pitch_roll
 
     az, pitch, roll = azimuth_pitch_roll(st.q_nb[0])
     assert abs(math.degrees(az) - 10.0) < 3 * 2.0 + 1  # mount yaw plus a few σ of wobble
@@ -231,7 +231,7 @@ def test_truth_keeps_the_hand_within_reach_of_the_feet(tmp_path):
 
 @pytest.mark.parametrize("name", ["foot_hand_gnss_outage.yaml", "dual_foot_hand_gnss.yaml"])
 def test_shipped_hand_scenarios_load(name):
-    from fusion.sim.scenario import load_scenario
+    from bodyfusion.sim.scenario import load_scenario
 
     loaded = load_scenario(CONFIGS / name)
     assert "hand_phone" in loaded.systems and loaded.systems["hand_phone"].gnss.outages

@@ -1,4 +1,4 @@
-"""Smoothers of the foot INS (fusion.smoothing): RTS, FB, FB-RTS."""
+"""Smoothers of the foot INS (bodyfusion.plugins.foot_ins.smoothing): RTS, FB, FB-RTS."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import SmootherConfig, load_layout
-from fusion.errors import ConfigError
-from fusion.run import run_layout
-from fusion.sim import simulate
-from fusion.smoothing import segment_bounds, smooth_record
-from fusion.smoothing_kernels import backward_block, forward_rerun_block, rts_block
-from fusion.strapdown import integrate
+from bodyfusion.core.layout import SmootherConfig, load_layout
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from bodyfusion.plugins.foot_ins.smoothing import segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing_kernels import backward_block, forward_rerun_block, rts_block
+from bodyfusion.nav.strapdown import integrate
 
 ROOT = Path(__file__).resolve().parents[1]
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"

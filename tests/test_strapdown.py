@@ -1,4 +1,4 @@
-"""Tests for fusion.strapdown (mechanisation) and fusion.quaternion (conventions).
+"""Tests for bodyfusion.nav.strapdown (mechanisation) and bodyfusion.nav.attitude (conventions).
 
 Conventions under test (fusion/quaternion.py): scalar-first Hamilton quaternions,
 q_nb maps body vectors into ENU, azimuth clockwise from North.
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fusion.earth import EARTH_RATE, earth_rate_enu
-from fusion.quaternion import (
+from bodyfusion.nav.earth import EARTH_RATE, earth_rate_enu
+from bodyfusion.nav.attitude import (
     azimuth_pitch_roll,
     levelling,
     quat_from_azimuth_pitch_roll,
@@ -20,7 +20,7 @@ from fusion.quaternion import (
     quat_normalise,
     quat_to_dcm,
 )
-from fusion.strapdown import NOMINAL_SIZE, integrate, mechanise
+from bodyfusion.nav.strapdown import NOMINAL_SIZE, integrate, mechanise
 
 G = 9.8
 NO_EARTH = np.zeros(3)

@@ -16,9 +16,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fusion.errors import ConfigError
-from fusion.metrics import PlanarTransform, outage_errors
-from fusion.study import (
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.evaluation.metrics import PlanarTransform, outage_errors
+from bodyfusion.study import (
     ResultStore,
     expand_grid,
     is_timing_column,
@@ -26,7 +26,7 @@ from fusion.study import (
     run_study,
     summarise,
 )
-from fusion.types import Trajectory, TruthTrack
+from bodyfusion.core.types import Trajectory, TruthTrack
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,7 +55,7 @@ def write_study(folder: Path, body: str) -> Path:
 
 
 def fusion(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fusion.cli", *map(str, args)], cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "bodyfusion.cli", *map(str, args)], cwd=ROOT, capture_output=True,
                           text=True, timeout=timeout)
 
 
@@ -222,7 +222,7 @@ def test_killed_study_resumes_without_lost_or_duplicated_rows(tmp_path):
         seeds: 4
         """)
     out = tmp_path / "out"
-    code = f"from fusion.study import run_study; run_study({str(study)!r}, {str(out)!r}, workers=1, batch_rows=1)"
+    code = f"from bodyfusion.study import run_study; run_study({str(study)!r}, {str(out)!r}, workers=1, batch_rows=1)"
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     parts = out / "parts"

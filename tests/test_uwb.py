@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 import yaml
 
-from fusion.config import load_layout
-from fusion.errors import ConfigError, InputError
-from fusion.fuser import Fuser
-from fusion.run import build_systems, layout_context, run, run_layout
-from fusion.seeding import system_seed
-from fusion.sim import simulate
-from fusion.sim.uwb import NlosConfig, nlos_states
-from fusion.testing import check_system, default_context, with_value
-from fusion_plugins.uwb import UwbTag
-from fusion_plugins.uwb.ranges import read_ranges
-from fusion_plugins.uwb.system import ACCEPTED, REJECTED
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.errors import ConfigError, InputError
+from bodyfusion.core.fuser import Fuser
+from bodyfusion.core.run import build_systems, layout_context, run, run_layout
+from bodyfusion.core.seeding import system_seed
+from bodyfusion.sim import simulate
+from bodyfusion.sim.uwb import NlosConfig, nlos_states
+from bodyfusion.testing import check_system, default_context, with_value
+from bodyfusion.plugins.uwb import UwbTag
+from bodyfusion.plugins.uwb.ranges import read_ranges
+from bodyfusion.plugins.uwb.system import ACCEPTED, REJECTED
 
 ROOT = Path(__file__).resolve().parents[1]
 ANCHORS = {"A1": [-10.0, -10.0, 2.0], "A2": [-10.0, 10.0, 2.0], "A3": [20.0, 10.0, 2.0], "A4": [20.0, -10.0, 2.0]}

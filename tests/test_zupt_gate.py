@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusion.error_state import nis_selected
-from fusion.measurements import chi2_gate
-from fusion.zupt import gated_noise_variance, zero_velocity_update
+from bodyfusion.nav.error_state import nis_selected
+from bodyfusion.nav.measurements import chi2_gate
+from bodyfusion.nav.zupt import gated_noise_variance, zero_velocity_update
 
 GATE = chi2_gate(0.999, 3)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion_barometer.atmosphere import SEA_LEVEL_K, SEA_LEVEL_PA, pressure_at
+from bodyfusion_barometer.atmosphere import SEA_LEVEL_K, SEA_LEVEL_PA, pressure_at
 
 RATE_HZ, DURATION_S, SITE_M = 25.0, 60.0, 250.0
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusion.config import validate_section
-from fusion.testing import check_system, default_context, with_value
-from fusion_barometer import Barometer, atmosphere
+from bodyfusion.core.layout import validate_section
+from bodyfusion.testing import check_system, default_context, with_value
+from bodyfusion_barometer import Barometer, atmosphere
 
 HERE = Path(__file__).resolve().parents[1]
 CONFIG = {"data": {"path": "data/stairs_pressure.csv"}, "filter": {"pressure_sigma_pa": 2.5, "bias_random_walk": 0.05}}
@@ -52,6 +52,6 @@ def test_is_discovered_once_installed():
         metadata.distribution("bodyfusion-barometer")
     except metadata.PackageNotFoundError:
         pytest.skip("bodyfusion-barometer is not pip-installed")
-    from fusion.plugins import get_registry
+    from bodyfusion.core.registry import get_registry
 
     assert get_registry().system_class("barometer") is Barometer

@@ -1,0 +1,131 @@
+"""Command-line interface (CONTRACT.md): ``fusion run | simulate | study | validate | plugins``."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Annotated, Literal, Optional
+
+import typer
+
+from bodyfusion.core.errors import FusionError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Fuse body-worn pedestrian navigation systems under body distance constraints.")
+
+SetOption = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: KEY=VALUE (dotted path).")]
+
+
+@app.command()
+def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
+        out: Annotated[Optional[Path], typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
+        set_: SetOption = None,
+        seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
+    """Run a layout and write metrics.json, trajectories.csv and plots."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from bodyfusion.core.run import run as run_layout
+
+    result, out_dir = run_layout(config, set_ or [], out, seed)
+    console = Console(stderr=False)
+    table = Table(title=f"{result.loaded.name} → {out_dir}")
+    for col in ("system", "samples", "distance m", "h-RMSE m", "h-max m", "% dist", "loop m"):
+        table.add_column(col, justify="right")
+    import json
+
+    doc = json.loads((out_dir / "metrics.json").read_text())
+    for name, block in doc["systems"].items():
+        h = block.get("horizontal_error_m", {})
+
+        def fmt(v: float | None, spec: str = ".3f") -> str:
+            return "-" if v is None else format(v, spec)
+
+        table.add_row(name, str(block["samples"]), fmt(block.get("distance_m"), ".1f"), fmt(h.get("rmse")),
+                      fmt(h.get("max")), fmt(block.get("final_error_pct_distance"), ".2f"), fmt(block.get("loop_closure_m")))
+    console.print(table)
+    rt = doc["runtime"]
+    console.print(f"{rt['samples']} samples, navigation {rt['navigation_s']:.2f} s "
+                  f"({rt['samples_per_s']:,.0f} samples/s), total {rt['wall_s']:.2f} s")
+
+
+@app.command()
+def simulate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
+             out: Annotated[Path, typer.Option("--out", help="Output folder.")],
+             seed: Annotated[int, typer.Option("--seed")] = 0,
+             set_: SetOption = None) -> None:
+    """Simulate a walk: sensor files, truth.csv and a ready config.yaml."""
+    from bodyfusion.sim import simulate as simulate_scenario
+
+    result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [])
+    typer.echo(f"wrote {result.config_path}")
+
+
+@app.command()
+def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Study YAML file.")],
+          out: Annotated[Path, typer.Option("--out", help="Output folder (a study there is resumed).")],
+          executor: Annotated[Literal["local", "dask"], typer.Option(
+              "--executor", help="A local process pool or a Dask cluster.")] = "local",
+          workers: Annotated[Optional[int], typer.Option("--workers", help="Processes (default: all cores).")] = None,
+          scheduler: Annotated[Optional[str], typer.Option(
+              "--scheduler", help="Dask scheduler address, tcp://host:port (default: a LocalCluster).")] = None) -> None:
+    """Run a study: layouts × overrides × GNSS outages × seeds; results.parquet, summary.csv, plots."""
+    from bodyfusion.study import run_study
+
+    report = run_study(study_file, out, executor, workers, scheduler)
+    typer.echo(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
+               f"in {report.wall_s:.1f} s ({report.runs_per_s:.2f} runs/s, {report.executor}, "
+               f"{report.workers} workers) -> {report.out_dir}")
+
+
+@app.command()
+def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
+    """Check a layout (both stages: layout and each plugin's section)."""
+    from bodyfusion.core.layout import load_layout
+
+    loaded = load_layout(config, set_ or [])
+    typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
+
+
+@app.command()
+def plugins() -> None:
+    """List the installed plugins, the systems each provides, and its package and version."""
+    from bodyfusion.core.registry import get_registry
+
+    for info in get_registry().describe():
+        typer.echo(f"{', '.join(info.systems):<20} {info.module:<32} {info.package} {info.version}")
+
+
+def _console_warnings() -> None:
+    """Warnings of the ``fusion`` logger (input checks, initialisation) as one line each on stderr."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("warning: %(message)s"))
+    log = logging.getLogger("fusion")
+    log.addHandler(handler)
+    log.setLevel(logging.WARNING)
+    log.propagate = False
+
+
+def main() -> None:
+    """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
+    _console_warnings()
+    try:
+        app(standalone_mode=False)
+    except FusionError as err:
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    except (typer.Abort, KeyboardInterrupt):
+        print("aborted", file=sys.stderr)
+        sys.exit(130)
+    except Exception as err:  # usage errors, from click or from typer's own copy of it
+        import click
+
+        if isinstance(err, (click.ClickException, typer.TyperException)) and hasattr(err, "show"):
+            err.show()
+            sys.exit(getattr(err, "exit_code", 2))
+        raise
+
+
+if __name__ == "__main__":
+    main()

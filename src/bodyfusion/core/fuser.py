@@ -1,0 +1,298 @@
+"""The central fuser: drives every system through time and enforces the body's distance limits.
+
+At each sync epoch the constrained systems are advanced to the epoch, their positions
+and covariances stacked, all active constraints solved together in position space
+(:mod:`bodyfusion.core.constraints`), and the correction spread to each system's full error
+state (DESIGN.md, "Distance constraints"):
+
+    x* − x̂ = P_{x,p} Σ⁻¹ (p* − p̂) = −P_{x,p} Jᵀ λ,
+    P* = (I − M) P (I − M)ᵀ,  M = P_{x,p} Jᵀ (J Σ Jᵀ)⁻¹ J S,
+
+where P = blkdiag(P_1 … P_n) is the stacked error-state covariance, S selects the
+positions, Σ = S P Sᵀ, and J, λ are the active constraints' Jacobian and multipliers
+at the solution (PDR/GNSS paper eqs. 55–60 written for the full state). Each system
+then takes its own block. The cross-covariances the constraint creates are dropped, as
+in the papers, unless ``fuser.cross_covariance`` is on: then the fuser keeps them and
+carries them between epochs with each system's accumulated transition,
+C_ij ← Φ_i C_ij Φ_jᵀ (the systems' process noises are independent).
+
+Aiding sources (:class:`bodyfusion.core.system.AidingSource`, e.g. a UWB tag) give scalar
+measurements of one system's position (a range to an anchor) or of two systems'
+positions (a range between two body-worn tags). At each measurement time the fuser
+advances the measured systems to it (their state refers to their last sample at or
+before it) and applies a gated EKF update on their stacked error states:
+
+    y = z − h(p̂),  H = [∂h/∂p_i S_i ...],  s = H P Hᵀ + r,  NIS = y²/s,
+    K = P Hᵀ / s,  δx = K y,  P* = (I − K H) P (I − K H)ᵀ + K r Kᵀ  (Joseph form),
+
+rejected when the NIS exceeds the source's chi-square gate (NLOS outliers). Systems
+measured together with another (body-to-body ranges) and constrained systems form one
+joint state: with ``fuser.cross_covariance`` the update uses and keeps their
+cross-covariances (so it also corrects the other joint members through them, and
+C_ij ← (I − K H) C_ij stays consistent); without, each update acts on the measured
+systems' blocks alone and the correlation it creates is dropped, as for constraints.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bodyfusion.core.layout import ConstraintConfig, FuserConfig
+from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
+                                SocpSolver)
+from bodyfusion.core.system import AidingSource, SensorSystem
+
+SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
+
+
+@dataclass
+class FuserReport:
+    """What the fuser did; becomes metrics.json ``constraints`` where constraints exist.
+
+    epochs: sync epochs at which constraints were checked; activations: epochs where
+    at least one was active; multipliers: λ of every activation (m⁻² scale, see
+    :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs.
+    """
+
+    method: str
+    epochs: int = 0
+    activations: int = 0
+    solver_fallbacks: int = 0
+    not_converged: int = 0
+    max_violation_before_m: float = 0.0
+    max_violation_after_m: float = 0.0
+    multipliers: list[float] = field(default_factory=list)
+    solve_times_us: list[float] = field(default_factory=list)
+    wall_s: float = 0.0
+
+
+def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
+    """Layout constraints as solver constraints over the systems in ``order``."""
+    out = []
+    for c in configs:
+        a, b = c.between
+        lever = {k: np.asarray(v, dtype=float) for k, v in c.lever_arms_m.items()}
+        out.append(DistanceConstraint(i=order.index(a), j=order.index(b), kind=c.kind, distance_m=c.distance_m,
+                                      horizontal=c.horizontal, lever_i_m=lever.get(a), lever_j_m=lever.get(b)))
+    return out
+
+
+def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
+    """Sync epochs (s) inside the span all constrained systems cover."""
+    t0 = max(s.t_start for s in systems)
+    t1 = min(s.t_end for s in systems)
+    if config.epochs == "events":
+        times = np.concatenate([s.sync_times() for s in systems])
+    elif config.epochs == "interval":
+        times = np.arange(t0 + config.interval_s, t1, config.interval_s)
+    else:
+        times = np.concatenate([s.sample_times() for s in systems])
+    times = np.unique(times)
+    return times[(times > t0) & (times <= t1)]
+
+
+def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSolution,
+                      positions_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Joint error-state correction dx and covariance P* from a position-space solution.
+
+    P: (n, n) joint error-state covariance of the constrained systems (block diagonal
+    unless cross-covariances are tracked); pos: indices of their positions in it, in
+    the order of the solver's stacked positions. ``positions_only`` keeps every other
+    state out of the correction (Schmidt consider states: their rows of the gain are
+    zero; the Joseph form keeps P* the exact covariance of that sub-optimal update).
+    """
+    P_xp = P[:, pos]
+    J = solution.jacobian
+    lam = solution.multipliers[solution.active]
+    dx = -P_xp @ (J.T @ lam)
+    JS = J @ P[pos][:, pos] @ J.T
+    M = np.zeros_like(P)
+    M[:, pos] = P_xp @ J.T @ np.linalg.solve(JS, J)
+    if positions_only:
+        others = np.setdiff1d(np.arange(P.shape[0]), pos)
+        dx[others] = 0.0
+        M[others] = 0.0
+    IM = np.eye(P.shape[0]) - M
+    P_new = IM @ P @ IM.T
+    return dx, 0.5 * (P_new + P_new.T)
+
+
+def scalar_update(P: np.ndarray, H: np.ndarray, y: float, r_var: float,
+                  gate_nis: float) -> tuple[float, np.ndarray | None, np.ndarray | None]:
+    """Gated scalar EKF update of an error state with covariance P (n, n).
+
+    H (n,) the measurement row, y the innovation z − h(x̂), r_var the noise variance.
+    Returns (NIS, δx, P*) with P* in Joseph form; δx and P* are None when the NIS
+    y²/(H P Hᵀ + r) exceeds ``gate_nis``.
+    """
+    PHt = P @ H
+    s = float(H @ PHt) + r_var
+    nis = y * y / s
+    if not nis <= gate_nis:
+        return nis, None, None
+    K = PHt / s
+    IKH = np.eye(P.shape[0]) - np.outer(K, H)
+    P_new = IKH @ P @ IKH.T + r_var * np.outer(K, K)
+    return nis, K * y, 0.5 * (P_new + P_new.T)
+
+
+class JointState:
+    """Systems corrected together (constraint members, ends of body-to-body measurements):
+    their stacked error-state layout and, with ``track``, the cross-covariances between
+    them, carried between corrections as C_ij ← Φ_i C_ij Φ_jᵀ.
+
+    ``blocks[k]``: slice of system k's error state in the stack; ``pos``: stacked indices
+    of every system's δp, in system order.
+    """
+
+    def __init__(self, systems: list[SensorSystem], track: bool) -> None:
+        self.systems = systems
+        self.track = track
+        sizes = [s.covariance().shape[0] for s in systems]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self.blocks = [slice(int(offsets[k]), int(offsets[k + 1])) for k in range(len(systems))]
+        self.pos = np.concatenate([offsets[k] + np.arange(s.position_indices.start, s.position_indices.stop)
+                                   for k, s in enumerate(systems)])
+        self.cross = np.zeros((offsets[-1], offsets[-1]))
+        if track:
+            for s in systems:
+                s.track_transition()
+
+    def advance(self, t: float) -> None:
+        """Advance every system to t; carry the cross-covariances with each one's Φ."""
+        for k, s in enumerate(self.systems):
+            s.advance(t)
+            if self.track:
+                self._left_multiply(k, s.transition_since_sync())
+
+    def _left_multiply(self, k: int, A: np.ndarray) -> None:
+        """C_kj ← A C_kj for every j ≠ k (and C_jk = C_kjᵀ)."""
+        b = self.blocks[k]
+        self.cross[b, :] = A @ self.cross[b, :]
+        self.cross[:, b] = self.cross[b, :].T
+        self.cross[b, b] = 0.0
+
+    def covariance(self) -> np.ndarray:
+        """Stacked covariance: each system's own blocks, the tracked cross-covariances."""
+        P = self.cross.copy()
+        for b, s in zip(self.blocks, self.systems):
+            P[b, b] = s.covariance()
+        return P
+
+    def correct(self, dx: np.ndarray, P_new: np.ndarray, which: list[int]) -> None:
+        """Hand each system in ``which`` its block of δx and P*; keep P*'s cross-covariances
+        when tracking (then ``which`` must be every system: all of them moved)."""
+        for k in which:
+            b = self.blocks[k]
+            self.systems[k].apply_correction(dx[b], P_new[b, b])
+        if self.track:
+            self.cross = P_new.copy()
+            for b in self.blocks:
+                self.cross[b, b] = 0.0
+
+
+class Fuser:
+    """Runs the layout's systems to the end of their data, enforcing the constraints and
+    applying the aiding sources' measurements, in time order (at one time: measurements
+    first, then the constraints).
+
+    Parameters: ``systems`` (name → system, initialised and heading-aligned),
+    ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list),
+    ``aiding`` (name → aiding source). Result: ``report`` (:class:`FuserReport`).
+    """
+
+    def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig,
+                 constraints: list[ConstraintConfig] | None = None,
+                 aiding: Mapping[str, AidingSource] | None = None) -> None:
+        self.systems = systems
+        self.config = config
+        self.constraints = constraints or []
+        self.aiding = dict(aiding or {})
+        self.report = FuserReport(method=config.method)
+
+    def run(self) -> FuserReport:
+        t_begin = time.perf_counter()
+        constrained = self.config.method != "none" and bool(self.constraints)
+        order = list(dict.fromkeys(name for c in self.constraints for name in c.between)) if constrained else []
+        n_constrained = len(order)
+        sources = list(self.aiding.values())
+        for src in sources:
+            pairs = {src.measured_systems(k) for k in range(len(src.measurement_times()))}
+            order += [name for pair in pairs if len(pair) > 1 for name in pair if name not in order]
+        self.joint = JointState([self.systems[name] for name in order], self.config.cross_covariance) if order else None
+        self._index = {name: k for k, name in enumerate(order)}
+        events: list[tuple[float, int, int, int]] = []
+        if constrained:
+            members = self.joint.systems[:n_constrained]
+            self._solver = SOLVERS[self.config.method](
+                n_constrained, distance_constraints(self.constraints, order[:n_constrained]),
+                tol_m=self.config.tolerance_m, max_iter=self.config.max_iterations)
+            events += [(float(t), 1, 0, 0) for t in epoch_times(members, self.config)]
+        for i, src in enumerate(sources):
+            events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
+        for t, kind, i, k in sorted(events):
+            if kind == 0:
+                self._measurement(sources[i], k, t)
+            else:
+                self._constraint_epoch(t, n_constrained)
+        for system in self.systems.values():
+            system.advance(system.t_end)
+        self.report.wall_s = time.perf_counter() - t_begin
+        return self.report
+
+    def _measurement(self, src: AidingSource, k: int, t: float) -> None:
+        """Gated scalar update with measurement k of ``src`` at time t."""
+        names = src.measured_systems(k)
+        measured = [self.systems[name] for name in names]
+        if any(t < s.t_start or t > s.t_end for s in measured):
+            src.record(k, None, False)
+            return
+        joint = [self._index[name] for name in names if name in self._index]
+        if joint:
+            self.joint.advance(t)
+            P = self.joint.covariance()
+            offsets = [self.joint.blocks[self._index[name]].start for name in names]
+            which = list(range(len(self.joint.systems))) if self.joint.track else joint
+        else:  # one system on its own
+            measured[0].advance(t)
+            P = measured[0].covariance()
+            offsets = [0]
+        m = src.measure(k, [s.position_n() for s in measured])
+        H = np.zeros(P.shape[0])
+        for row, s, off in zip(np.atleast_2d(m.H_p), measured, offsets):
+            H[off + s.position_indices.start:off + s.position_indices.stop] += row
+        nis, dx, P_new = scalar_update(P, H, m.z - m.predicted, m.r_var, src.gate_nis)
+        src.record(k, nis, dx is not None)
+        if dx is None:
+            return
+        if joint:
+            self.joint.correct(dx, P_new, which)
+        else:
+            measured[0].apply_correction(dx, P_new)
+
+    def _constraint_epoch(self, t: float, n: int) -> None:
+        """Solve the active constraints among the first n joint systems at time t and
+        spread the correction (to every joint system when cross-covariances are tracked)."""
+        joint, rep = self.joint, self.report
+        joint.advance(t)
+        P = joint.covariance()
+        pos = joint.pos[:3 * n]
+        p_hat = np.concatenate([s.position_n() for s in joint.systems[:n]])
+        t0 = time.perf_counter_ns()
+        sol = self._solver.solve(p_hat, P[np.ix_(pos, pos)])
+        rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
+        rep.epochs += 1
+        rep.solver_fallbacks += int(sol.fallback)
+        rep.not_converged += int(not sol.converged)
+        rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
+        rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
+        if not sol.active:
+            return
+        rep.activations += 1
+        rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
+        dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
+        joint.correct(dx, P_new, list(range(len(joint.systems) if joint.track else n)))

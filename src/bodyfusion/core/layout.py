@@ -1,0 +1,548 @@
+"""Layouts: the YAML file that says which systems are worn, their data, and how they are fused.
+
+Validation is strict (unknown keys are refused) and two-staged: the core checks the
+layout's shape here; each system's own section is then checked by its plugin's
+``Config`` model (see :mod:`bodyfusion.core.registry`). Every error names the file and the
+dotted path of the offending key. Relative paths resolve against the config file's folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
+
+from bodyfusion.core.errors import ConfigError
+
+
+def _resolve_path(value: Path, info: ValidationInfo) -> Path:
+    base = (info.context or {}).get("base_dir")
+    value = Path(value).expanduser()
+    if base is not None and not value.is_absolute():
+        value = Path(base) / value
+    return value
+
+
+DataPath = Annotated[Path, AfterValidator(_resolve_path)]
+"""A file path; relative paths resolve against the folder of the layout file."""
+
+
+def _right_handed(signs: tuple[int, int, int]) -> tuple[int, int, int]:
+    if any(v not in (-1, 1) for v in signs):
+        raise ValueError("each axis sign must be 1 or -1")
+    if signs[0] * signs[1] * signs[2] != 1:
+        raise ValueError("these signs mirror the frame (their product must be +1 for a right-handed ENU)")
+    return signs
+
+
+AxisSigns = Annotated[tuple[int, int, int], AfterValidator(_right_handed)]
+"""Signs (+1/−1) turning a file's x, y, z position axes into east, north, up; e.g.
+``[1, -1, -1]`` for a right-handed frame whose z points down (a rotation of 180° about x).
+Kept for older layouts: :data:`AxisMap` (``frame:``) says the same and more."""
+
+_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+def _signed_axis_map(axes: tuple[str, str, str]) -> tuple[str, str, str]:
+    seen = []
+    for entry in axes:
+        name = entry.strip().lstrip("+-")
+        if name not in _AXIS_INDEX or entry.strip().count("-") > 1:
+            raise ValueError(f"each entry must be one of x, y, z, -x, -y, -z; got {entry!r}")
+        seen.append(name)
+    if sorted(seen) != ["x", "y", "z"]:
+        raise ValueError(f"each of x, y, z must appear once, got {list(axes)}")
+    return tuple(a.strip().lstrip("+") for a in axes)  # type: ignore[return-value]
+
+
+AxisMap = Annotated[tuple[str, str, str], AfterValidator(_signed_axis_map)]
+"""A signed axis map: entry k names the file axis (``x``, ``-y``, ...) that becomes axis k of
+the project's frame. ``[x, -y, -z]``: a frame with z down turned 180° about x; ``[y, x, -z]``:
+north-east-down to east-north-up. Any signed permutation (a map that mirrors is allowed: the
+file's frame may be left-handed)."""
+
+NAMED_FRAMES: dict[str, tuple[str, str, str]] = {"enu": ("x", "y", "z"), "ned": ("y", "x", "-z")}
+"""Position frames by name, as axis maps into east, north, up."""
+
+
+def apply_axis_map(axes: tuple[str, str, str], v_file: np.ndarray) -> np.ndarray:
+    """Vectors (N, 3) in the file's axes → (N, 3) in the project's frame by a signed axis map
+    (:data:`AxisMap`); a column that is NaN in the file (absent height) stays NaN only where
+    it is used."""
+    v_file = np.asarray(v_file, dtype=float)
+    out = np.empty_like(v_file)
+    for k, entry in enumerate(axes):
+        out[:, k] = v_file[:, _AXIS_INDEX[entry.lstrip("-")]] * (-1.0 if entry.startswith("-") else 1.0)
+    return out
+
+
+class StrictModel(BaseModel):
+    """Base of every layout section: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+class PositionFrame(StrictModel):
+    """The frame of positions read from a file (truth, position fixes)."""
+
+    frame: Literal["enu", "ned"] | AxisMap = "enu"
+    """The file's position frame: ``enu``, ``ned`` or a signed axis map such as ``[x, -y, -z]``."""
+    axis_signs: AxisSigns | None = None
+    """Older spelling of a sign-only ``frame`` (``[1, -1, -1]`` is ``[x, -y, -z]``)."""
+
+    @property
+    def axes(self) -> tuple[str, str, str]:
+        """The file's frame as an axis map into east, north, up."""
+        if self.axis_signs is not None:
+            return tuple(("-" if s < 0 else "") + a for s, a in zip(self.axis_signs, "xyz"))  # type: ignore[return-value]
+        return NAMED_FRAMES[self.frame] if isinstance(self.frame, str) else self.frame
+
+    @model_validator(mode="after")
+    def _one_frame(self) -> "PositionFrame":
+        if self.axis_signs is not None and self.frame != "enu":
+            raise KeyedError("axis_signs", "give frame or axis_signs, not both")
+        return self
+
+
+class SystemSection(BaseModel):
+    """A system's section as the core sees it: its plugin name; the rest is the plugin's."""
+
+    model_config = ConfigDict(extra="allow")
+    plugin: str
+
+
+class ConstraintConfig(StrictModel):
+    """A distance limit between two systems' positions (m), horizontal by default."""
+
+    between: tuple[str, str]
+    kind: Literal["max", "min", "fixed"] = "max"
+    distance_m: float = Field(gt=0)
+    horizontal: bool = True
+    lever_arms_m: dict[str, tuple[float, float, float]] = Field(default_factory=dict)
+    """Per system, the offset (ENU, m) from its navigated point to the constrained point."""
+
+
+class OutageConfig(StrictModel):
+    """A window (s, on the system's clock) in which a system's GNSS is masked."""
+
+    system: str
+    start_s: float
+    duration_s: float = Field(gt=0)
+
+
+class FuserConfig(StrictModel):
+    """How constraints are enforced.
+
+    method: ``none`` (systems run independently), ``projection`` (linearised, active
+    set; PDR/GNSS paper eqs. 55–60), ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy).
+    epochs: when constraints are enforced — at the constrained systems' ``events``
+    (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
+    any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
+    cross_covariance: keep the cross-covariances a constraint creates between systems
+    (the papers drop them). correct: spread the correction to ``all`` error states through
+    their covariance with position (the papers), or correct ``positions`` only and keep the
+    other states as Schmidt consider states (robust when those correlations are poorly known).
+    """
+
+    method: Literal["none", "projection", "qp", "socp"] = "none"
+    epochs: Literal["events", "interval", "sample"] = "events"
+    interval_s: float = Field(default=0.5, gt=0)
+    tolerance_m: float = Field(default=1e-6, gt=0)
+    max_iterations: int = Field(default=20, ge=1)
+    cross_covariance: bool = False
+    correct: Literal["all", "positions"] = "all"
+
+
+class SmootherConfig(StrictModel):
+    """Smoothing of the systems that support it (the foot INS), after the fuser
+    (:mod:`bodyfusion.plugins.foot_ins.smoothing`).
+
+    ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward
+    filter's error states); ``fb`` (forward–backward navigation, covariance-weighted
+    fusion, position re-integrated); ``fb-rts`` (the FB-RTS paper: both passes RTS-smoothed
+    before the fusion). Segments run between stance midpoints (stance runs shorter than
+    ``min_stance_s`` are ignored; segments longer than ``max_segment_s`` are split).
+    ``span`` (``rts`` only): ``whole`` smooths the whole run, ``segment`` each segment on
+    its own. Distance constraints act in the forward pass through the fuser
+    (``fuser.method``); ``constrain_smoothed`` applies them again on the smoothed tracks.
+    """
+
+    kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
+    span: Literal["whole", "segment"] = "whole"
+    min_stance_s: float = Field(default=0.04, ge=0)
+    max_segment_s: float = Field(default=10.0, gt=0)
+    constrain_smoothed: bool = False
+
+
+class HeadingAlignmentConfig(StrictModel):
+    """Puts systems worn together in one navigation frame.
+
+    Systems whose ``initial.heading_deg`` is ``auto`` are rotated about their start so
+    that their first ``distance_m`` of travel points the same way as the reference
+    system's (the first system with a numeric heading, unless ``reference`` names one).
+    """
+
+    reference: str | None = None
+    distance_m: float = Field(default=3.0, gt=0)
+
+
+class TruthConfig(PositionFrame):
+    """Reference positions (ENU, m) for scoring; ``loop`` when the walk ends where it began.
+
+    ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
+    ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
+    ``phone_log``: the surveyed points (POSI lines) of a GetSensorData log, sparse truth
+    for ``score_systems``, converted to ENU about the layout's geodetic origin.
+    ``frame`` declares the file's position axes: ``enu``, ``ned`` or a signed axis map
+    (:data:`AxisMap`) into east, north, up. A system given two columns is horizontal truth
+    (its axes are the map's first two entries' sources; vertical errors are not scored).
+    """
+
+    path: DataPath | None = None
+    format: Literal["wide", "long", "phone_log"] = "wide"
+    systems: dict[str, tuple[str, str, str] | tuple[str, str]] = Field(default_factory=dict)
+    """wide format: each system's position columns, x, y[, z] of the file's frame."""
+    score_systems: list[str] = Field(default_factory=list)
+    """phone_log format: the systems scored at the log's surveyed points (POSI lines)."""
+    time_column: str | None = None
+    time_scale: float = Field(default=1.0, gt=0)
+    rate_hz: float | None = Field(default=None, gt=0)
+    skip_rows: int = Field(default=0, ge=0)
+    delimiter: str = ","
+    sparse: bool = False
+    loop: bool = False
+    alignment: Literal["first_3m", "none"] = "first_3m"
+    alignment_distance_m: float = Field(default=3.0, gt=0)
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "TruthConfig":
+        if self.path is None or self.format == "long":
+            return self
+        if self.format == "phone_log":
+            if not self.score_systems:
+                raise ValueError("score_systems: name the systems to score at the surveyed points")
+            return self
+        if (self.time_column is None) == (self.rate_hz is None):
+            raise ValueError("give exactly one of time_column or rate_hz")
+        if not self.systems:
+            raise ValueError("systems: name the position columns of at least one system")
+        return self
+
+
+class OutputConfig(StrictModel):
+    dir: DataPath | None = None
+    plots: bool = True
+    decimate: int = Field(default=1, ge=1)
+
+
+class Layout(StrictModel):
+    """A whole body layout. ``systems`` maps a name to its plugin section."""
+
+    name: str | None = None
+    gravity_mps2: float | None = Field(default=None, gt=9.7, lt=9.9)
+    latitude_deg: float = Field(default=45.0, ge=-90, le=90)
+    height_m: float = 0.0
+    geodetic_origin: tuple[float, float, float] | None = None
+    """Latitude (deg), longitude (deg), height (m) of the ENU frame's origin, for GNSS,
+    surveyed points and geo-referenced output; unset: the first GNSS fix."""
+    systems: dict[str, SystemSection]
+    outages: list[OutageConfig] = Field(default_factory=list)
+    heading_alignment: HeadingAlignmentConfig = Field(default_factory=HeadingAlignmentConfig)
+    constraints: list[ConstraintConfig] = Field(default_factory=list)
+    fuser: FuserConfig = Field(default_factory=FuserConfig)
+    smoother: SmootherConfig = Field(default_factory=SmootherConfig)
+    truth: TruthConfig | None = None
+    output: OutputConfig = Field(default_factory=OutputConfig)
+
+    @model_validator(mode="after")
+    def _cross_references(self) -> "Layout":
+        if not self.systems:
+            raise ValueError("systems: at least one system is needed")
+        names = set(self.systems)
+        ref = self.heading_alignment.reference
+        if ref is not None and ref not in names:
+            raise KeyedError("heading_alignment.reference", f"unknown system {ref!r} (have {sorted(names)})")
+        for k, c in enumerate(self.constraints):
+            for side in c.between:
+                if side not in names:
+                    raise KeyedError(f"constraints.{k}.between", f"unknown system {side!r} (have {sorted(names)})")
+            if c.between[0] == c.between[1]:
+                raise KeyedError(f"constraints.{k}.between", "a constraint needs two different systems")
+            for side in c.lever_arms_m:
+                if side not in c.between:
+                    raise KeyedError(f"constraints.{k}.lever_arms_m.{side}", "not one of the constrained systems")
+        bounds: dict[frozenset[str], dict[str, float]] = {}
+        for k, c in enumerate(self.constraints):
+            pair = bounds.setdefault(frozenset(c.between), {})
+            pair[c.kind] = c.distance_m
+            if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
+                raise KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
+        for k, outage in enumerate(self.outages):
+            if outage.system not in names:
+                raise KeyedError(f"outages.{k}.system", f"unknown system {outage.system!r} (have {sorted(names)})")
+        if self.truth is not None:
+            for k, sys_name in enumerate(self.truth.score_systems):
+                if sys_name not in names:
+                    raise KeyedError(f"truth.score_systems.{k}", f"unknown system (have {sorted(names)})")
+            for sys_name in self.truth.systems:
+                if sys_name not in names:
+                    raise KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")
+        return self
+
+
+class KeyedError(ValueError):
+    """A cross-field error raised in a validator that knows the dotted key (relative to
+    the section being validated) it is about."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(reason)
+        self.key = key
+
+
+def _dotted(loc: tuple[Any, ...]) -> str:
+    return ".".join(str(p) for p in loc if p not in ("function-after", "function-before"))
+
+
+def _data_location(loc: tuple[Any, ...], data: Any) -> tuple[Any, ...]:
+    """The part of a pydantic error location that names keys of the user's data
+    (drops union-member tags such as ``float`` that pydantic appends)."""
+    kept: list[Any] = []
+    node = data
+    for part in loc:
+        if isinstance(node, dict):
+            kept.append(part)
+            if part not in node:  # a missing or unknown key is still the user's key
+                break
+            node = node[part]
+        elif isinstance(node, (list, tuple)) and isinstance(part, int) and part < len(node):
+            kept.append(part)
+            node = node[part]
+        else:
+            break
+    return tuple(kept)
+
+
+def _first_error(err: ValidationError, prefix: str = "", data: Any = None) -> tuple[str, str]:
+    e = err.errors(include_url=False)[0]
+    loc = _dotted(_data_location(e["loc"], data) if data is not None else e["loc"])
+    ctx_err = (e.get("ctx") or {}).get("error")
+    if isinstance(ctx_err, KeyedError):  # its key is relative to the section that raised it
+        return ".".join(p for p in (prefix, loc, ctx_err.key) if p), str(ctx_err)
+    msg = e["msg"]
+    if e["type"] == "extra_forbidden":
+        msg = "unknown key"
+    elif msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    key = ".".join(p for p in (prefix, loc) if p)
+    return key, msg
+
+
+def validate_section(model: type[BaseModel], data: Any, *, key: str, path: Path | None, base_dir: Path | None) -> Any:
+    """Validate ``data`` with ``model``; errors become one-line :class:`ConfigError` under ``key``."""
+    try:
+        return model.model_validate(data, context={"base_dir": base_dir})
+    except ValidationError as err:
+        k, msg = _first_error(err, key, data)
+        raise ConfigError(k, msg, path) from None
+
+
+def parse_override(item: str) -> tuple[str, Any]:
+    """``a.b.c=VALUE`` → (``a.b.c``, VALUE parsed as YAML)."""
+    if "=" not in item:
+        raise ConfigError(item, "override must be KEY=VALUE, e.g. fuser.method=none")
+    key, raw = item.split("=", 1)
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise ConfigError(key, "empty part in the dotted key")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key, value
+
+
+def _unshared_copy(node: Any) -> Any:
+    """Copy dicts and lists without keeping YAML aliases shared (unlike ``copy.deepcopy``)."""
+    if isinstance(node, dict):
+        return {k: _unshared_copy(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_unshared_copy(v) for v in node]
+    return node
+
+
+def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Set dotted paths in a raw layout dict (lists by integer index); returns a copy."""
+    out = _unshared_copy(raw)
+    for item in overrides:
+        key, value = parse_override(item)
+        node: Any = out
+        parts = key.split(".")
+        for depth, part in enumerate(parts):
+            last = depth == len(parts) - 1
+            here = ".".join(parts[: depth + 1])
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise ConfigError(here, f"no list item {part} (the list has {len(node)})")
+                idx = int(part)
+                if last:
+                    node[idx] = value
+                else:
+                    node = node[idx]
+            elif isinstance(node, dict):
+                if last:
+                    node[part] = value
+                else:
+                    if node.get(part) is None:
+                        node[part] = {}
+                    node = node[part]
+            else:
+                raise ConfigError(here, "cannot set a key inside a plain value")
+    return out
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key repeated in one mapping (two systems with one name)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"key {key!r} appears twice", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def read_yaml(path: Path) -> dict[str, Any]:
+    """Read a YAML mapping; syntax errors name the file and line."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError("", "file not found", path) from None
+    except OSError as err:
+        raise ConfigError("", f"cannot read: {err.strerror}", path) from None
+    try:
+        raw = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        raise ConfigError("", f"YAML syntax: {problem}", where) from None
+    if not isinstance(raw, dict):
+        raise ConfigError("", "the file must hold a YAML mapping", path)
+    return raw
+
+
+class LoadedLayout:
+    """A validated layout with each system's section validated by its plugin.
+
+    Attributes: ``path`` (file), ``layout`` (:class:`Layout`), ``system_configs``
+    (name → plugin config model), ``raw`` (the dict after overrides), ``sha256``.
+    """
+
+    def __init__(self, path: Path, layout: Layout, system_configs: dict[str, BaseModel], raw: dict[str, Any]) -> None:
+        self.path = path
+        self.layout = layout
+        self.system_configs = system_configs
+        self.raw = raw
+        self.sha256 = hashlib.sha256(yaml.safe_dump(raw, sort_keys=True).encode()).hexdigest()
+
+    @property
+    def name(self) -> str:
+        return self.layout.name or self.path.stem
+
+
+def load_layout(path: str | Path, overrides: list[str] | None = None, registry: Any = None) -> LoadedLayout:
+    """Read, override, and validate a layout file (both stages)."""
+    from bodyfusion.core.registry import get_registry
+
+    path = Path(path)
+    raw = apply_overrides(read_yaml(path), overrides or [])
+    base_dir = path.resolve().parent
+    layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
+    registry = registry or get_registry()
+    system_configs: dict[str, BaseModel] = {}
+    for name, section in raw["systems"].items():
+        system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
+        system_configs[name] = validate_section(system_cls.Config, section, key=f"systems.{name}", path=path, base_dir=base_dir)
+        check_layout = getattr(system_cls, "check_layout", None)  # optional: refuse unsupported layout settings
+        if check_layout is not None:
+            try:
+                check_layout(name, system_configs[name], layout)
+            except KeyedError as err:
+                raise ConfigError(err.key, str(err), path) from None
+    _check_aiding_references(layout, system_configs, registry, path)
+    return LoadedLayout(path, layout, system_configs, raw)
+
+
+def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel], registry: Any, path: Path) -> None:
+    """Aiding sources (:class:`bodyfusion.core.system.AidingSource`) name navigation systems, and
+    constraints and the heading reference name navigation systems, not aiding sources."""
+    from bodyfusion.core.system import AidingSource
+
+    classes = {name: registry.system_class(cfg.plugin) for name, cfg in system_configs.items()}
+    aiding = {name for name, cls in classes.items() if issubclass(cls, AidingSource)}
+    navigators = sorted(set(system_configs) - aiding)
+    if not navigators:
+        raise ConfigError("systems", "no navigation system: aiding sources need a host", path)
+    for name in sorted(aiding):
+        for key, ref in classes[name].system_references(system_configs[name]):
+            if ref not in navigators:
+                raise ConfigError(f"systems.{name}.{key}", f"{ref!r} is not a navigation system of this layout "
+                                                           f"(have {navigators})", path)
+    for k, c in enumerate(layout.constraints):
+        for side in c.between:
+            if side in aiding:
+                raise ConfigError(f"constraints.{k}.between", f"{side!r} is an aiding source, not a navigation system",
+                                  path)
+    if layout.heading_alignment.reference in aiding:
+        raise ConfigError("heading_alignment.reference", "an aiding source has no heading", path)
+
+
+class ImuCsvConfig(StrictModel):
+    """An IMU recorded as CSV: column names, units and time base (see :func:`bodyfusion.io.readers.read_imu_csv`)."""
+
+    path: DataPath
+    """CSV file; relative to the layout file."""
+    acc_columns: tuple[str, str, str]
+    """Header names of the accelerometer x, y, z columns (body frame)."""
+    gyro_columns: tuple[str, str, str]
+    """Header names of the gyroscope x, y, z columns (body frame)."""
+    stance_column: str | None = None
+    """Optional 0/1 stance labels given with the data."""
+    acc_unit: Literal["m/s^2", "g"] = "m/s^2"
+    """Unit of the accelerometer columns: m/s^2 or g (9.80665 m/s^2)."""
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    """Unit of the gyroscope columns: rad/s or deg/s."""
+    time_column: str | None = None
+    """Column of sample times, multiplied by time_scale to give seconds."""
+    time_scale: float = Field(default=1.0, gt=0)
+    """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
+    rate_hz: float | None = Field(default=None, gt=0)
+    """Sample rate (Hz): the time base when the file has no time column; with one, the
+    nominal rate the timestamps are checked against."""
+    skip_rows: int = Field(default=0, ge=0)
+    """Lines before the header line."""
+    delimiter: str = ","
+    """Field separator."""
+    timestamp_policy: Literal["drop", "sort", "error"] = "drop"
+    """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
+    axes: AxisMap = ("x", "y", "z")
+    """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
+    whose z points down at rest into one whose z points up."""
+    max_step_samples: float = Field(default=5.0, gt=1)
+    """A time step longer than this many nominal sample periods is a gap (reported, and
+    handled by the navigation system's gap policy)."""
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "ImuCsvConfig":
+        if self.time_column is None and self.rate_hz is None:
+            raise ValueError("give time_column or rate_hz")
+        return self
+

@@ -1,0 +1,151 @@
+"""Writers of the run outputs named in CONTRACT.md: metrics.json, trajectories.csv, plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from bodyfusion.core.errors import FusionError
+from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
+
+if TYPE_CHECKING:
+    from bodyfusion.core.run import RunResult
+
+TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
+
+
+def _json_safe(value):
+    """NaN and inf (e.g. the error statistics of a system with no finite error) become null:
+    strict JSON has no NaN."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _median_p99(values: list[float]) -> dict[str, float]:
+    if not values:
+        return {"median": 0.0, "p99": 0.0}
+    a = np.asarray(values)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
+
+
+def _outage_block(result: RunResult, name: str) -> dict[str, float]:
+    """``outage_end_error_m`` / ``outage_max_error_m`` of a system with GNSS outages in the
+    layout and dense truth: the largest over its outages of :func:`bodyfusion.evaluation.metrics.outage_errors`'
+    end and maximum errors (m)."""
+    truth = result.truths.get(name)
+    windows = [(o.start_s, o.duration_s) for o in result.loaded.layout.outages if o.system == name]
+    if truth is None or truth.sparse or not windows:
+        return {}
+    errs = [outage_errors(result.trajectories[name], truth, result.transform, s, d) for s, d in windows]
+    return {"outage_end_error_m": float(np.max([e["end_error_m"] for e in errs])),
+            "outage_max_error_m": float(np.max([e["max_error_m"] for e in errs]))}
+
+
+def metrics_document(result: RunResult, config_label: str, total_wall_s: float) -> dict:
+    """The metrics.json document (CONTRACT.md), plus per-system diagnostics."""
+    layout = result.loaded.layout
+    loop = layout.truth is not None and layout.truth.loop
+    systems: dict[str, dict] = {}
+    for name, system in result.systems.items():
+        traj = result.trajectories[name]
+        block: dict = {"samples": system.samples}
+        score = result.scores.get(name)
+        if score is not None:
+            block.update(score.metrics)
+        else:
+            block["distance_m"] = path_length_m(traj.pos_n)
+        if loop and "loop_closure_m" not in block:
+            block["loop_closure_m"] = loop_closure_m(traj)
+        block.update(_outage_block(result, name))
+        block["diagnostics"] = system.diagnostics()
+        systems[name] = block
+    t = result.transform
+    doc: dict = {
+        "config": config_label,
+        "config_sha256": result.loaded.sha256,
+        "alignment": layout.truth.alignment if result.scores else "none",
+        "evaluation": {
+            "error_epochs": "truth epochs; estimate interpolated linearly to them",
+            "transform": {"rotation_deg": float(np.rad2deg(t.rotation_rad)),
+                          "translation_m": [float(v) for v in t.translation_m],
+                          "vertical_offset_m": float(t.vertical_offset_m)},
+        },
+        "heading_alignment_deg": {k: float(np.rad2deg(v)) for k, v in result.heading_rotations_rad.items()},
+        "systems": systems,
+    }
+    if layout.constraints:
+        rep = result.fuser
+        lam = np.asarray(rep.multipliers)
+        doc["constraints"] = {
+            "method": rep.method, "epochs": rep.epochs, "activations": rep.activations,
+            "solver_fallbacks": rep.solver_fallbacks, "not_converged": rep.not_converged,
+            "max_violation_before_m": rep.max_violation_before_m,
+            "max_violation_after_m": rep.max_violation_after_m,
+            "multipliers": {"mean": float(lam.mean()) if lam.size else 0.0,
+                            "max": float(lam.max()) if lam.size else 0.0},
+            "solve_time_us": _median_p99(rep.solve_times_us),
+        }
+    if result.aiding:  # aiding sources (UWB tags): no trajectory, their diagnostics
+        doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics()} for name, src in result.aiding.items()}
+    inp = result.input_report
+    doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
+                    "notes": inp.notes, "warnings": inp.warnings}
+    samples = result.samples
+    nav_s = result.timings_s["navigation_s"]
+    doc["runtime"] = {"wall_s": total_wall_s, "samples": samples,
+                      "samples_per_s": samples / nav_s if nav_s > 0 else 0.0,
+                      **{k: v for k, v in result.timings_s.items()}}
+    return doc
+
+
+def write_trajectories(path: Path, result: RunResult, decimate: int = 1) -> None:
+    """Long-format trajectories in the navigation frame, before any evaluation alignment."""
+    with path.open("w") as fh:
+        fh.write(TRAJECTORY_HEADER + "\n")
+        for name, traj in result.trajectories.items():
+            block = np.column_stack([traj.t, traj.pos_n, traj.pos_sd])[::decimate]
+            np.savetxt(fh, block, fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
+
+
+def write_geojson(path: Path, result: RunResult, decimate: int = 1) -> None:
+    """track.geojson: one WGS84 LineString per system (lon, lat, height), when the run has a
+    geodetic origin."""
+    from bodyfusion.io.gnss import enu_to_geodetic
+
+    features = []
+    for name, traj in result.trajectories.items():
+        llh = enu_to_geodetic(traj.pos_n[::decimate], result.geodetic_origin)
+        coords = [[round(float(lon), 8), round(float(lat), 8), round(float(h), 3)] for lat, lon, h in llh]
+        features.append({"type": "Feature", "properties": {"system": name},
+                         "geometry": {"type": "LineString", "coordinates": coords}})
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n")
+
+
+def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float) -> None:
+    """metrics.json, trajectories.csv and (unless switched off) the PNG plots."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
+    output = result.loaded.layout.output
+    write_trajectories(out_dir / "trajectories.csv", result, output.decimate)
+    if result.geodetic_origin is not None:
+        write_geojson(out_dir / "track.geojson", result, output.decimate)
+    doc = metrics_document(result, config_label, total_wall_s)
+    (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
+    if output.plots:
+        from bodyfusion.evaluation import plots
+
+        plots.plot_trajectories(out_dir / "trajectory.png", result.trajectories, result.scores or None,
+                                result.transform, result.truths or None)
+        if result.scores:
+            plots.plot_error_vs_time(out_dir / "error_vs_time.png", result.scores)
+            plots.plot_error_cdf(out_dir / "error_cdf.png", result.scores)

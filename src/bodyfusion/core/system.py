@@ -1,0 +1,215 @@
+"""The interface every sensor system (plugin) implements for the fuser.
+
+A system owns its data stream, its nominal navigation state and error-state filter,
+its own aiding, and its history. The fuser drives it forward in time with
+:meth:`SensorSystem.advance` and, at sync epochs, reads its position and covariance
+and hands back a correction with :meth:`SensorSystem.apply_correction`.
+
+An :class:`AidingSource` (a UWB tag) navigates nothing: it gives the fuser scalar
+measurements of one or two systems' positions, which the fuser applies to them through
+the same interface.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from pydantic import BaseModel
+
+from bodyfusion.core.errors import FusionError
+from bodyfusion.core.types import InputReport, Trajectory
+
+
+@dataclass(frozen=True)
+class LayoutContext:
+    """Layout-wide facts a system needs: gravity (m/s^2), latitude (deg), config folder,
+    run seed, the geodetic origin of the ENU frame (lat deg, lon deg, height m; None:
+    not set) and the GNSS outage windows per system ((start s, duration s), ...)."""
+
+    gravity_mps2: float
+    latitude_deg: float
+    base_dir: Path
+    seed: int = 0
+    geodetic_origin: tuple[float, float, float] | None = None
+    outages: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+
+
+class Plugin(ABC):
+    """What every layout entry's class has: ``plugin_name`` (the layout's
+    ``systems.<name>.plugin``), ``Config`` (pydantic model of its section), its name,
+    validated config and the layout context, and what its readers used and dropped."""
+
+    plugin_name: ClassVar[str]
+    Config: ClassVar[type[BaseModel]]
+
+    def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
+        self.name = name
+        self.config = config
+        self.context = context
+
+    @property
+    @abstractmethod
+    def samples(self) -> int:
+        """Number of input samples (or measurements) used."""
+
+    @property
+    @abstractmethod
+    def input_report(self) -> InputReport:
+        """What the readers dropped or reordered."""
+
+    def diagnostics(self) -> dict:
+        """Plugin-specific figures for metrics.json (stance fraction, updates, rejections...)."""
+        return {}
+
+
+class SensorSystem(Plugin):
+    """Base class of a body-worn navigation system.
+
+    Class attribute ``position_indices``: indices of δp in the error state. Frames:
+    positions in the ENU navigation frame, metres.
+    """
+
+    position_indices: ClassVar[slice] = slice(0, 3)
+    error_model: ClassVar[str | None] = None
+    """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
+    :func:`bodyfusion.testing.check_system` can check its Jacobians."""
+
+    # --- time -----------------------------------------------------------------
+    @property
+    def t_start(self) -> float:
+        """Time of the first state (s): the first sample."""
+        return float(self.sample_times()[0])
+
+    @property
+    def t_end(self) -> float:
+        """Time of the last sample (s)."""
+        return float(self.sample_times()[-1])
+
+    @property
+    @abstractmethod
+    def t_now(self) -> float:
+        """Time of the current state (s)."""
+
+    @abstractmethod
+    def advance(self, t: float) -> None:
+        """Propagate and apply own aiding for every sample with time <= t."""
+
+    # --- heading --------------------------------------------------------------
+    @abstractmethod
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        """Azimuth (rad, clockwise from North) of the start-to-here vector once the
+        system has travelled ``distance_m`` horizontally, with the current initial
+        heading; None if it never travels that far. Leaves the system at its start."""
+
+    @abstractmethod
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        """Rotate the initial attitude about Up by ``delta_rad`` (clockwise from North
+        positive, as azimuth) and restart from the first sample."""
+
+    @property
+    @abstractmethod
+    def heading_is_auto(self) -> bool:
+        """True if the layout asks for the heading to be aligned to the other systems."""
+
+    # --- fuser interface ----------------------------------------------------------
+    @abstractmethod
+    def position_n(self) -> np.ndarray:
+        """Current position estimate, ENU (m), shape (3,)."""
+
+    @abstractmethod
+    def covariance(self) -> np.ndarray:
+        """Current error-state covariance, shape (n, n)."""
+
+    @abstractmethod
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """Closed-loop reset: add error-state correction ``dx`` (n,) to the nominal
+        state and replace the covariance with ``P`` (n, n)."""
+
+    def track_transition(self) -> None:
+        """Start accumulating the error-state transition Φ between the fuser's syncs
+        (needed when the fuser tracks cross-covariances between systems)."""
+        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
+
+    def transition_since_sync(self) -> np.ndarray:
+        """Φ (n, n) that maps the error state at the previous call to now (propagation and
+        own updates, x_now = Φ x_then + independent terms); restarts the accumulation."""
+        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
+
+    @abstractmethod
+    def sync_times(self) -> np.ndarray:
+        """Times (s) of events the fuser may sync on (e.g. stance starts)."""
+
+    @abstractmethod
+    def sample_times(self) -> np.ndarray:
+        """Times (s) of every sample the system processes."""
+
+    # --- results ----------------------------------------------------------------
+    @abstractmethod
+    def trajectory(self) -> Trajectory:
+        """History of positions and their one-sigma uncertainty."""
+
+
+@dataclass(frozen=True)
+class ScalarMeasurement:
+    """One scalar measurement of the positions of the systems an aiding source measures.
+
+    ``z``: the measured value; ``predicted``: h(p̂) at the current position estimates;
+    ``H_p``: (m, 3) ∂h/∂p, one row per measured system (in the order of
+    :meth:`AidingSource.measured_systems`), in the unit of z per metre; ``r_var``: noise
+    variance (unit of z squared). The fuser forms the innovation y = z − h(p̂).
+    """
+
+    z: float
+    predicted: float
+    H_p: np.ndarray
+    r_var: float
+
+
+class AidingSource(Plugin):
+    """Base class of a body-worn sensor that aids navigation systems without navigating
+    itself: a UWB tag ranging to anchors and to other tags, for example.
+
+    It owns its data and the measurement model; the fuser owns the update. At each of
+    :meth:`measurement_times` the fuser advances the measured systems to that time, asks
+    :meth:`measure` for z, h(p̂) and ∂h/∂p at their positions, and applies a gated scalar
+    EKF update (Joseph form) on their stacked error states through the generic
+    :class:`SensorSystem` interface (``position_n``, ``covariance``, ``position_indices``,
+    ``apply_correction``), so any host works. It has no trajectory: its figures go to
+    metrics.json ``aiding.<name>`` through :meth:`diagnostics`.
+
+    Frames and units: positions ENU, metres; time s. ``samples`` counts the
+    measurements read, ``diagnostics`` goes to metrics.json ``aiding.<name>``.
+    """
+
+    @classmethod
+    @abstractmethod
+    def system_references(cls, config: BaseModel) -> list[tuple[str, str]]:
+        """(dotted key within the section, system name) of every system the config names;
+        the layout checks that each is a navigation system."""
+
+    @abstractmethod
+    def measurement_times(self) -> np.ndarray:
+        """(K,) times (s) of the measurements, non-decreasing."""
+
+    @abstractmethod
+    def measured_systems(self, k: int) -> tuple[str, ...]:
+        """Names of the systems measurement k relates (one: a range to an anchor; two: a
+        range between two systems)."""
+
+    @abstractmethod
+    def measure(self, k: int, positions_n: list[np.ndarray]) -> ScalarMeasurement:
+        """Measurement k at the measured systems' current positions (ENU m, each (3,))."""
+
+    @property
+    @abstractmethod
+    def gate_nis(self) -> float:
+        """Normalised innovation squared above which a measurement is rejected."""
+
+    @abstractmethod
+    def record(self, k: int, nis: float | None, accepted: bool) -> None:
+        """The fuser's verdict on measurement k (nis None: not applied, e.g. outside the
+        measured systems' data)."""

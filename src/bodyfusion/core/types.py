@@ -1,0 +1,91 @@
+"""Data containers passed between readers, systems, the fuser and scoring.
+
+Frames and units: navigation frame is local East-North-Up (ENU) in metres;
+time in seconds (float64); specific force in m/s^2; angular rate in rad/s.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from bodyfusion.io.imu_checks import ImuChecks
+
+LOG = logging.getLogger("fusion")
+"""The project's logger: warnings about the input and the run go here (and to the console)."""
+
+
+@dataclass
+class InputReport:
+    """What a reader changed in the raw input, by explicit policy, and what looked wrong.
+
+    dropped_samples: samples removed (duplicate or backward timestamps, per policy).
+    reordered_samples: samples moved to restore time order (policy ``sort``).
+    notes: what a policy did. warnings: one line each about input that looks wrong (units,
+    rate, gaps, clipping, a missing still interval...), also logged on :data:`LOG`.
+    """
+
+    dropped_samples: int = 0
+    reordered_samples: int = 0
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def warn(self, message: str) -> None:
+        """Record a one-line warning and log it."""
+        self.warnings.append(message)
+        LOG.warning(message)
+
+    def merge(self, other: "InputReport") -> "InputReport":
+        return InputReport(
+            self.dropped_samples + other.dropped_samples,
+            self.reordered_samples + other.reordered_samples,
+            self.notes + other.notes,
+            self.warnings + other.warnings,
+        )
+
+
+@dataclass
+class ImuStream:
+    """Strictly increasing IMU samples.
+
+    t: (N,) s.  acc_b: (N, 3) specific force, body frame, m/s^2.
+    gyro_b: (N, 3) angular rate, body frame, rad/s.
+    stance: (N,) bool stance labels given with the data, or None.
+    checks: what :func:`bodyfusion.io.imu_checks.check_imu` found (None: not checked).
+    """
+
+    t: np.ndarray
+    acc_b: np.ndarray
+    gyro_b: np.ndarray
+    stance: np.ndarray | None = None
+    source: str = ""
+    report: InputReport = field(default_factory=InputReport)
+    checks: ImuChecks | None = None
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class Trajectory:
+    """Estimated track of one system in the navigation frame (ENU, m).
+
+    t: (N,) s.  pos_n: (N, 3) m.  pos_sd: (N, 3) one-sigma position, m.
+    """
+
+    t: np.ndarray
+    pos_n: np.ndarray
+    pos_sd: np.ndarray
+
+
+@dataclass
+class TruthTrack:
+    """Reference positions of one system, ENU m; ``sparse`` for surveyed points."""
+
+    t: np.ndarray
+    pos_n: np.ndarray
+    sparse: bool = False

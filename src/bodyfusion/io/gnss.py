@@ -1,0 +1,181 @@
+"""GNSS fixes: containers, readers (CSV, NMEA 0183 via pynmea2) and geodetic ↔ ENU.
+
+Geodetic coordinates are WGS84 latitude/longitude (deg) and ellipsoidal height (m);
+the navigation frame is local ENU about an origin, converted with pymap3d.
+Readers skip what cannot be used and count it in the :class:`InputReport`
+(bad checksums, no-fix or empty sentences, coordinates out of range, non-increasing
+time); when nothing usable remains they raise a one-line :class:`InputError`.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pymap3d
+
+from bodyfusion.core.errors import InputError
+from bodyfusion.core.types import InputReport
+
+KNOT = 1852.0 / 3600.0
+"""One knot in m/s."""
+
+
+@dataclass
+class GnssFixes:
+    """Receiver fixes. t (s), lat/lon (deg), height (m), accuracy_m (1-σ horizontal, m;
+    NaN when the receiver gives none), speed (m/s) and course (deg clockwise from North;
+    NaN when unknown)."""
+
+    t: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    height_m: np.ndarray
+    accuracy_m: np.ndarray
+    speed_mps: np.ndarray
+    course_deg: np.ndarray
+    report: InputReport = field(default_factory=InputReport)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def enu(self, origin: tuple[float, float, float]) -> np.ndarray:
+        """(N, 3) positions in the ENU frame about ``origin`` (lat deg, lon deg, height m)."""
+        e, n, u = pymap3d.geodetic2enu(self.lat_deg, self.lon_deg, self.height_m, *origin)
+        return np.column_stack([e, n, u])
+
+    def repeats_previous(self) -> np.ndarray:
+        """(N,) True where a fix repeats the previous fix's latitude, longitude and height
+        exactly: a receiver holding its last solution (phones do while standing still)."""
+        same = (np.diff(self.lat_deg) == 0) & (np.diff(self.lon_deg) == 0) & (np.diff(self.height_m) == 0)
+        return np.concatenate([[False], same])
+
+    def select(self, keep: np.ndarray) -> "GnssFixes":
+        return GnssFixes(self.t[keep], self.lat_deg[keep], self.lon_deg[keep], self.height_m[keep],
+                         self.accuracy_m[keep], self.speed_mps[keep], self.course_deg[keep], self.report)
+
+
+def enu_to_geodetic(pos_n: np.ndarray, origin: tuple[float, float, float]) -> np.ndarray:
+    """(N, 3) ENU positions about ``origin`` → (N, 3) latitude (deg), longitude (deg), height (m)."""
+    lat, lon, h = pymap3d.enu2geodetic(pos_n[:, 0], pos_n[:, 1], pos_n[:, 2], *origin)
+    return np.column_stack([lat, lon, h])
+
+
+def clean_fixes(rows: np.ndarray, path: str | Path, report: InputReport) -> GnssFixes:
+    """Rows (t, lat, lon, h, accuracy, speed, course) → fixes with out-of-range coordinates
+    and non-increasing times dropped and counted."""
+    if rows.size == 0:
+        raise InputError(path, "no usable GNSS fix")
+    ok = (np.abs(rows[:, 1]) <= 90) & (np.abs(rows[:, 2]) <= 180) & np.isfinite(rows[:, :3]).all(axis=1)
+    if (~ok).any():
+        report.dropped_samples += int((~ok).sum())
+        report.notes.append(f"dropped {int((~ok).sum())} GNSS fixes with coordinates out of range")
+    rows = rows[ok]
+    keep, last = [], -np.inf
+    for k, t in enumerate(rows[:, 0]):
+        if t > last:
+            keep.append(k)
+            last = t
+    dropped = len(rows) - len(keep)
+    if dropped:
+        report.dropped_samples += dropped
+        report.notes.append(f"dropped {dropped} GNSS fixes with non-increasing time")
+    rows = rows[keep]
+    if len(rows) == 0:
+        raise InputError(path, "no usable GNSS fix")
+    return GnssFixes(*(np.ascontiguousarray(rows[:, k]) for k in range(7)), report=report)
+
+
+def read_gnss_csv(path: str | Path, *, time_column: str, lat_column: str, lon_column: str,
+                  height_column: str | None = None, accuracy_column: str | None = None,
+                  speed_column: str | None = None, course_column: str | None = None,
+                  delimiter: str = ",") -> GnssFixes:
+    """GNSS fixes from a CSV with named columns (deg, m, m/s, deg)."""
+    from bodyfusion.io.readers import read_table
+
+    optional = [c for c in (height_column, accuracy_column, speed_column, course_column) if c]
+    arrays, _ = read_table(path, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,
+                           allow_missing=optional)
+    n = len(arrays[time_column])
+    col = lambda name: arrays[name] if name else np.full(n, np.nan)  # noqa: E731
+    height = arrays[height_column] if height_column else np.zeros(n)
+    rows = np.column_stack([arrays[time_column], arrays[lat_column], arrays[lon_column], height,
+                            col(accuracy_column), col(speed_column), col(course_column)])
+    return clean_fixes(rows, path, InputReport())
+
+
+def read_nmea(path: str | Path, *, user_range_error_m: float = 5.0) -> GnssFixes:
+    """GNSS fixes from an NMEA 0183 log (GGA for position, RMC for speed and course).
+
+    Time is seconds since the first sentence's UTC midnight (a day is added when the time
+    of day wraps past midnight). Accuracy: HDOP × ``user_range_error_m`` (GGA has no accuracy field).
+    Skipped and counted: bad or missing checksums, unparsable sentences, no-fix GGA (quality 0),
+    void RMC, empty fields.
+    """
+    import pynmea2
+
+    path = Path(path)
+    try:
+        lines = path.read_text(errors="replace").splitlines()
+    except OSError as err:
+        raise InputError(path, f"cannot read: {err.strerror}") from None
+    report = InputReport()
+    counts = {"bad_or_missing_checksum": 0, "unparsable": 0, "no_fix": 0, "other_sentence": 0}
+    gga: list[list[float]] = []
+    rmc: dict[float, tuple[float, float]] = {}
+    clock = _DayClock()
+    for line in lines:
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            msg = pynmea2.parse(line, check=True)
+        except pynmea2.ChecksumError:
+            counts["bad_or_missing_checksum"] += 1
+            continue
+        except (pynmea2.ParseError, ValueError, AttributeError):
+            counts["unparsable"] += 1
+            continue
+        kind = msg.sentence_type
+        try:
+            if kind == "RMC":
+                if msg.status != "A" or msg.timestamp is None:
+                    counts["no_fix"] += 1
+                    continue
+                t = clock(msg.timestamp)
+                rmc[t] = (float(msg.spd_over_grnd or np.nan) * KNOT,
+                          float(msg.true_course) if msg.true_course not in (None, "") else np.nan)
+            elif kind == "GGA":
+                if not msg.gps_qual or int(msg.gps_qual) == 0 or msg.lat in ("", None) or msg.timestamp is None:
+                    counts["no_fix"] += 1
+                    continue
+                t = clock(msg.timestamp)
+                hdop = float(msg.horizontal_dil) if msg.horizontal_dil else np.nan
+                alt = float(msg.altitude or 0.0) + float(msg.geo_sep or 0.0)
+                gga.append([t, float(msg.latitude), float(msg.longitude), alt, hdop * user_range_error_m])
+            else:
+                counts["other_sentence"] += 1
+        except (TypeError, ValueError):
+            counts["unparsable"] += 1
+    skipped = counts["bad_or_missing_checksum"] + counts["unparsable"] + counts["no_fix"]
+    report.dropped_samples += skipped
+    report.notes.append("NMEA: " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v))
+    rows = [row + list(rmc.get(row[0], (np.nan, np.nan))) for row in gga]  # file order
+    return clean_fixes(np.array(rows, dtype=float).reshape(-1, 7), path, report)
+
+
+class _DayClock:
+    """UTC time of day → seconds since the first midnight, counting midnight wraps."""
+
+    def __init__(self) -> None:
+        self.day = 0
+        self.last = None
+
+    def __call__(self, t: dt.time) -> float:
+        sod = t.hour * 3600.0 + t.minute * 60.0 + t.second + t.microsecond * 1e-6
+        if self.last is not None and sod < self.last - 43200.0:
+            self.day += 1
+        self.last = sod
+        return self.day * 86400.0 + sod

@@ -1,0 +1,171 @@
+"""Zero-velocity update under coloured measurement noise (the cKF of the MDC-cKF paper).
+
+During stance the foot is not perfectly still: the zero-velocity pseudo-measurement
+m_k = 0 = H x_k + v_k (H selects the velocity) carries a coloured error
+v_k = α v_{k−1} + ξ_k, ξ_k ~ N(0, R) (paper eq. 4; DESIGN.md "Coloured measurement
+noise"). Differencing consecutive measurements (eq. 5) and substituting the state
+backwards with x_{k−1} = F⁻¹ (x_k − w_k) (the backward-Euler step of eqs. 6–9) gives
+
+    m̄_k = m_k − α m_{k−1} = H̄ x_k + v̄̄_k,   H̄ = H − T̄,   T̄ = α H F⁻¹,
+    v̄̄_k = T̄ w_k + ξ_k,   R̄ = T̄ Q T̄ᵀ + R (eq. 10),   θ = E[w_k v̄̄_kᵀ] = Q T̄ᵀ,
+
+a white measurement whose noise is correlated with the process noise of the same step.
+The filter then uses the gain that accounts for that correlation (eqs. 11–14, the same
+posterior as the de-correlated form with Λ of eqs. 15–18):
+
+    S = H̄ P⁻ H̄ᵀ + R̄ + H̄ θ + θᵀ H̄ᵀ,   K = (P⁻ H̄ᵀ + θ) S⁻¹,
+    P⁺ = (I − K H̄) P⁻ (I − K H̄)ᵀ + K R̄ Kᵀ − (I − K H̄) θ Kᵀ − K θᵀ (I − K H̄)ᵀ.
+
+With the error-state model of :mod:`bodyfusion.nav.error_state` (A nilpotent, A⁴ = 0) the
+velocity rows of F⁻¹ = I − A dt + (A dt)² are exact:
+H F⁻¹ = [0, I, dt [f_n×], dt C_nb, dt² [f_n×] C_nb]. In closed loop the innovation is
+m̄_k − H̄ x̂_k⁻ = α v̂⁺_{k−1} − v̂⁻_k (v̂⁺_{k−1}: the velocity after every update and
+correction at the previous sample). With α = 0 every term reduces to the ordinary ZUPT.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from bodyfusion.nav.error_state import inject, inv3_sym
+
+
+@numba.njit(cache=True)
+def velocity_rows_of_inverse_transition(C: np.ndarray, f_n: np.ndarray, dt: float, out: np.ndarray) -> None:
+    """out (3, 15) = H F⁻¹ = [0, I, dt [f_n×], dt C_nb, dt² [f_n×] C_nb] for the first-order
+    transition F = I + A dt of :mod:`bodyfusion.nav.error_state` (exact: A⁴ = 0)."""
+    for r in range(3):
+        for c in range(15):
+            out[r, c] = 0.0
+        out[r, 3 + r] = 1.0
+    # [f×] rows
+    fx = np.zeros((3, 3))
+    fx[0, 1] = -f_n[2]
+    fx[0, 2] = f_n[1]
+    fx[1, 0] = f_n[2]
+    fx[1, 2] = -f_n[0]
+    fx[2, 0] = -f_n[1]
+    fx[2, 1] = f_n[0]
+    for r in range(3):
+        for c in range(3):
+            out[r, 6 + c] = dt * fx[r, c]
+            out[r, 9 + c] = dt * C[r, c]
+            s = 0.0
+            for k in range(3):
+                s += fx[r, k] * C[k, c]
+            out[r, 12 + c] = dt * dt * s
+
+
+@numba.njit(cache=True)
+def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarray, C: np.ndarray,
+                                  f_n: np.ndarray, dt: float, q_diag: np.ndarray, alpha: float, sigma_v: float,
+                                  gate: float, dx: np.ndarray, phi: np.ndarray) -> float:
+    """The cKF stance update (module docstring) at a stance sample whose previous sample was
+    also updated. x (16,) prior nominal state and P (15, 15) prior covariance are corrected
+    in place; ``v_prev`` (3,) the posterior velocity at the previous sample (m/s); ``C``, ``f_n``
+    and ``dt`` the step's C_nb, mean navigation-frame specific force (m/s^2) and interval (s);
+    ``q_diag`` (15,) the process noise densities² (Q = diag(q_diag) dt); α the colour factor;
+    σ_v (m/s) the standard deviation of the white driving noise ξ. ``phi`` (15, 15), when not
+    empty, is left-multiplied by (I − K H̄). Writes dx (15,); returns the NIS yᵀ S⁻¹ y. With
+    ``gate`` > 0 and NIS > gate nothing is changed (chi-square gate, 3 degrees of freedom)."""
+    T = np.empty((3, 15))
+    velocity_rows_of_inverse_transition(C, f_n, dt, T)
+    Hb = np.zeros((3, 15))
+    for r in range(3):
+        for c in range(15):
+            T[r, c] *= alpha
+            Hb[r, c] = -T[r, c]
+        Hb[r, 3 + r] += 1.0
+    # θ = Q T̄ᵀ (15, 3); R̄ = T̄ θ + R (eq. 10)
+    theta = np.empty((15, 3))
+    for r in range(15):
+        for c in range(3):
+            theta[r, c] = q_diag[r] * dt * T[c, r]
+    Rb = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            s = 0.0
+            for k in range(15):
+                s += T[r, k] * theta[k, c]
+            Rb[r, c] = s
+        Rb[r, r] += sigma_v * sigma_v
+    # G = P H̄ᵀ + θ (15, 3); S = H̄ G + R̄ + θᵀ H̄ᵀ (eq. 13)
+    G = np.empty((15, 3))
+    for r in range(15):
+        for c in range(3):
+            s = theta[r, c]
+            for k in range(15):
+                s += P[r, k] * Hb[c, k]
+            G[r, c] = s
+    S = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            s = Rb[r, c]
+            for k in range(15):
+                s += Hb[r, k] * G[k, c] + theta[k, r] * Hb[c, k]
+            S[r, c] = s
+    for r in range(3):
+        for c in range(r + 1, 3):
+            m = 0.5 * (S[r, c] + S[c, r])
+            S[r, c] = m
+            S[c, r] = m
+    Si = inv3_sym(S)
+    y = np.empty(3)
+    for k in range(3):
+        y[k] = alpha * v_prev[k] - x[3 + k]
+    nis = 0.0
+    for r in range(3):
+        for c in range(3):
+            nis += y[r] * Si[r, c] * y[c]
+    if gate > 0.0 and nis > gate:
+        return nis
+    K = np.empty((15, 3))
+    for r in range(15):
+        for c in range(3):
+            K[r, c] = G[r, 0] * Si[0, c] + G[r, 1] * Si[1, c] + G[r, 2] * Si[2, c]
+    for r in range(15):
+        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
+    # E = I − K H̄
+    E = np.empty((15, 15))
+    for r in range(15):
+        for c in range(15):
+            E[r, c] = (1.0 if r == c else 0.0) - (K[r, 0] * Hb[0, c] + K[r, 1] * Hb[1, c] + K[r, 2] * Hb[2, c])
+    if phi.shape[0] > 0:
+        old = phi.copy()
+        for r in range(15):
+            for c in range(15):
+                s = 0.0
+                for k in range(15):
+                    s += E[r, k] * old[k, c]
+                phi[r, c] = s
+    # P⁺ = W Eᵀ − (E θ − K R̄) Kᵀ with W = E P − K θᵀ
+    W = np.empty((15, 15))
+    for r in range(15):
+        for c in range(15):
+            s = -(K[r, 0] * theta[c, 0] + K[r, 1] * theta[c, 1] + K[r, 2] * theta[c, 2])
+            for k in range(15):
+                s += E[r, k] * P[k, c]
+            W[r, c] = s
+    V = np.empty((15, 3))
+    for r in range(15):
+        for c in range(3):
+            s = -(K[r, 0] * Rb[0, c] + K[r, 1] * Rb[1, c] + K[r, 2] * Rb[2, c])
+            for k in range(15):
+                s += E[r, k] * theta[k, c]
+            V[r, c] = s
+    for r in range(15):
+        for c in range(r, 15):
+            s1 = 0.0
+            for k in range(15):
+                s1 += W[r, k] * E[c, k]
+            s2 = 0.0
+            for k in range(15):
+                s2 += W[c, k] * E[r, k]
+            a = s1 - (V[r, 0] * K[c, 0] + V[r, 1] * K[c, 1] + V[r, 2] * K[c, 2])
+            b = s2 - (V[c, 0] * K[r, 0] + V[c, 1] * K[r, 1] + V[c, 2] * K[r, 2])
+            v = 0.5 * (a + b)
+            P[r, c] = v
+            P[c, r] = v
+    inject(x, dx)
+    return nis

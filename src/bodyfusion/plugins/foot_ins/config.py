@@ -1,0 +1,169 @@
+"""Layout section of a foot-mounted INS (``plugin: foot_ins``)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from bodyfusion.core.layout import DataPath, ImuCsvConfig, KeyedError, PositionFrame, StrictModel
+
+
+ENSEMBLE_KINDS = ("enekf", "cenekf")
+COLOURED_KINDS = ("ckf", "cenekf")
+
+
+class FootFilterConfig(StrictModel):
+    """Error-state filter settings. Noise densities: accelerometer m/s^2/√Hz, gyroscope
+    rad/s/√Hz; bias random walks m/s^3/√Hz and rad/s^2/√Hz; ZUPT σ in m/s, ZARU σ in rad/s."""
+
+    kind: Literal["ekf", "ckf", "enekf", "cenekf"] = "ekf"
+    """Estimator: ``ekf`` (15-state error-state EKF); ``ckf`` (the EKF with the zero-velocity
+    update under coloured measurement noise, MDC-cKF paper eqs. 5–18); ``enekf`` (ensemble EKF
+    whose members carry the attitude quaternion, DC-EnEKF paper eqs. 1–19); ``cenekf`` (the
+    ensemble filter with the coloured noise in an augmented state, eqs. 5–7)."""
+    colour_factor: float = Field(default=0.0, ge=0, lt=1)
+    """Colour factor α of the stance noise v_k = α v_{k−1} + ξ_k, in [0, 1) (ckf, cenekf)."""
+    members: int = Field(default=100, ge=2)
+    """Ensemble size M, at least 2 (enekf, cenekf)."""
+    acc_noise_density: float = Field(default=0.02, gt=0)
+    """Accelerometer white noise, m/s^2/√Hz."""
+    gyro_noise_density: float = Field(default=0.002, gt=0)
+    """Gyroscope white noise, rad/s/√Hz."""
+    acc_bias_random_walk: float = Field(default=1e-4, ge=0)
+    """Accelerometer bias random walk, m/s^3/√Hz."""
+    gyro_bias_random_walk: float = Field(default=1e-5, ge=0)
+    """Gyroscope bias random walk, rad/s^2/√Hz."""
+    zupt_sigma_mps: float = Field(default=0.01, gt=0)
+    """Zero-velocity pseudo-measurement noise, m/s; for ckf and cenekf the σ of the white
+    driving noise ξ of the coloured noise."""
+    zupt_gate_probability: float | None = Field(default=0.999, gt=0, lt=1)
+    """Chi-square gate of every zero-velocity update (ekf, ckf; 3 degrees of freedom): a
+    consistent update passes with this probability; beyond the gate the update is de-weighted
+    to the gate (bounded influence, :mod:`bodyfusion.nav.zupt`) and counted. null: off."""
+    zaru_sigma_radps: float | None = Field(default=None, gt=0)
+    """Zero-angular-rate update noise, rad/s; unset: no ZARU."""
+    earth_rate: bool = False
+    """Include the Earth rotation rate in the mechanisation."""
+
+
+class DetectorConfig(StrictModel):
+    """Zero-velocity detector. ``labels`` uses the data's stance column.
+
+    adaptive (the default): the SHOE statistic with a threshold taken from the recording
+    (:func:`bodyfusion.nav.detectors.adaptive_shoe_threshold`: ``margin_decades`` above the local
+    stance floor, between ``threshold`` (default 3e4) and ``motion_threshold``), window
+    25 ms at the recording's rate unless ``window`` is set; it follows walking, running and
+    stair stances at any rate. shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a
+    (m/s^2), σ_ω (rad/s) and the fixed ``threshold`` γ; magnitude: | ‖f‖ − g | ≤
+    ``threshold`` (m/s^2); axes_band: ``low`` ≤ f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance
+    runs shorter than ``min_stance_s`` and swing gaps shorter than ``min_swing_s`` are removed.
+    """
+
+    kind: Literal["adaptive", "labels", "shoe", "magnitude", "axes_band"] = "adaptive"
+    """adaptive, labels, shoe, magnitude or axes_band."""
+    window: int | None = Field(default=None, ge=1)
+    """Samples per test window (shoe, magnitude, axes_band: default 5; adaptive: 25 ms)."""
+    motion_threshold: float = Field(default=1e5, gt=0)
+    """adaptive: the SHOE statistic above which a sample is never stance."""
+    margin_decades: float = Field(default=1.0, gt=0)
+    """adaptive: how far (decades of the statistic) above the local stance floor stance reaches."""
+    threshold: float | None = Field(default=None, gt=0)
+    sigma_acc: float = Field(default=0.01, gt=0)
+    """SHOE accelerometer noise σ_a, m/s^2."""
+    sigma_gyro: float = Field(default=0.1 * 3.141592653589793 / 180, gt=0)
+    """SHOE gyroscope noise σ_ω, rad/s."""
+    low: float | None = None
+    high: float | None = None
+    min_stance_s: float = Field(default=0.0, ge=0)
+    min_swing_s: float = Field(default=0.0, ge=0)
+
+
+class InitialStateConfig(StrictModel):
+    """Initial state at the first sample: position (ENU m), heading (azimuth of the
+    horizontal projection of the body ``heading_axis``, degrees clockwise from North, or
+    ``auto`` to align with the other systems), and one-sigma uncertainties.
+
+    The IMU is levelled and its gyro bias estimated on the first still interval of the
+    recording (:mod:`bodyfusion.nav.initial_alignment`): at least ``stationary_s`` long, with the
+    spreads of specific force and angular rate within ``still_acc_sd_mps2`` and
+    ``still_gyro_sd_radps``. Motion before it is navigated backward from it to give the
+    state at the first sample. Without any still interval the quietest window is used and
+    the level and gyro-bias σ are inflated to its spreads (a warning says so)."""
+
+    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    heading_deg: float | Literal["auto"] = 0.0
+    heading_axis: Literal["x", "y", "z"] = "x"
+    """Body axis whose heading ``heading_deg`` gives; if it is within 30° of vertical at
+    rest, the most horizontal axis is used instead (a warning says so)."""
+    stationary_s: float = Field(default=0.5, gt=0)
+    """Shortest still interval used for levelling and the gyro bias, s."""
+    still_acc_sd_mps2: float = Field(default=0.2, gt=0)
+    """Largest spread √(Σ var) of the specific force over a still window, m/s^2."""
+    still_gyro_sd_radps: float = Field(default=0.05, gt=0)
+    """Largest spread √(Σ var) of the angular rate over a still window, rad/s."""
+    position_sd_m: float = Field(default=1e-3, gt=0)
+    """Initial position one-sigma, m."""
+    velocity_sd_mps: float = Field(default=1e-2, gt=0)
+    """Initial velocity one-sigma, m/s."""
+    level_sd_deg: float = Field(default=1.0, gt=0)
+    """Initial roll and pitch one-sigma, degrees."""
+    heading_sd_deg: float = Field(default=1.0, gt=0)
+    """Initial heading one-sigma, degrees."""
+    acc_bias_sd_mps2: float = Field(default=0.05, gt=0)
+    """Initial accelerometer bias one-sigma, m/s^2."""
+    gyro_bias_sd_radps: float = Field(default=1e-3, gt=0)
+    """Initial gyroscope bias one-sigma (after the stationary-window estimate), rad/s."""
+
+
+class PositionFixConfig(PositionFrame):
+    """Absolute position fixes (ENU, m) from a CSV: applied at the last IMU sample at or
+    before each fix time, with noise σ (m) and chi-square innovation gating
+    (``gate_probability`` of a consistent fix passing; 3 degrees of freedom).
+    ``frame`` declares the file's axes (``enu``, ``ned`` or a signed axis map)."""
+
+    path: DataPath
+    """CSV file of fixes; relative to the layout file."""
+    columns: tuple[str, str, str]
+    """Header names of the three position columns."""
+    time_column: str | None = None
+    """Column of fix times, multiplied by time_scale to give seconds."""
+    time_scale: float = Field(default=1.0, gt=0)
+    """Factor from the time column to seconds."""
+    rate_hz: float | None = Field(default=None, gt=0)
+    """Fixed fix rate (Hz) when the file has no time column."""
+    delimiter: str = ","
+    """Field separator."""
+    sigma_m: float = Field(default=0.3, gt=0)
+    """Fix noise one-sigma per axis, m."""
+    gate_probability: float = Field(default=0.99, gt=0, lt=1)
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "PositionFixConfig":
+        if (self.time_column is None) == (self.rate_hz is None):
+            raise ValueError("give exactly one of time_column or rate_hz")
+        return self
+
+
+class FootInsConfig(StrictModel):
+    """A foot-mounted IMU with strapdown navigation, ZUPT and a 15-state error filter."""
+
+    plugin: Literal["foot_ins"] = "foot_ins"
+    data: ImuCsvConfig
+    filter: FootFilterConfig = Field(default_factory=FootFilterConfig)
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
+    initial: InitialStateConfig = Field(default_factory=InitialStateConfig)
+    position_fixes: PositionFixConfig | None = None
+
+    @model_validator(mode="after")
+    def _labels_need_a_stance_column(self) -> "FootInsConfig":
+        if self.detector.kind == "labels" and self.data.stance_column is None:
+            raise KeyedError("detector.kind", "labels need data.stance_column")
+        return self
+
+    @model_validator(mode="after")
+    def _colour_needs_a_coloured_kind(self) -> "FootInsConfig":
+        f = self.filter
+        if f.colour_factor != 0.0 and f.kind not in COLOURED_KINDS:
+            raise KeyedError("filter.colour_factor", f"applies to filter.kind ckf or cenekf, not {f.kind}")
+        return self

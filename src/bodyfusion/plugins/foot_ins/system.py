@@ -1,0 +1,518 @@
+"""Foot-mounted INS: strapdown navigation, zero-velocity detection, and the estimator the
+layout's ``filter.kind`` selects: the 15-state error-state EKF (``ekf``), the EKF with the
+coloured-noise zero-velocity update (``ckf``), or the ensemble filters (``enekf``, ``cenekf``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bodyfusion.nav import detectors
+from bodyfusion.core.layout import KeyedError, Layout, apply_axis_map
+from bodyfusion.nav.earth import earth_rate_enu
+from bodyfusion.core.errors import ConfigError, FusionError
+from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force, find_still_interval,
+                                     heading_axis)
+from bodyfusion.nav.measurements import GateCounts, chi2_gate, position_fix_update
+from bodyfusion.nav.attitude import quat_to_dcm
+from bodyfusion.io.readers import read_imu, read_truth_csv
+from bodyfusion.nav.strapdown import NOMINAL_SIZE
+from bodyfusion.core.system import LayoutContext, SensorSystem
+from bodyfusion.core.types import ImuStream, InputReport, Trajectory
+from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, DetectorConfig, FootInsConfig
+from bodyfusion.nav.error_state import (DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, inject, inv3_sym,
+                                rotate_about_up)
+from bodyfusion.plugins.foot_ins.ensemble import Ensemble
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS,
+                                             COUNTERS_SIZE, differenced_samples, run_foot_ins, run_foot_ins_coloured)
+
+MIN_STILL_SAMPLES = 10
+"""Fewest samples in a still window: its spreads must measure the sensor's noise."""
+
+_DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
+
+
+def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
+    """Stance flags (N,) from the configured detector, then debounced (durations in s)."""
+    threshold = cfg.threshold if cfg.threshold is not None else _DEFAULT_THRESHOLDS.get(cfg.kind)
+    window = cfg.window if cfg.window is not None else 5
+    rate = 1.0 / np.median(np.diff(stream.t))
+    if cfg.kind == "labels":  # the config model ensures the data have a stance column
+        stance = stream.stance.copy()
+    elif cfg.kind == "adaptive":
+        if threshold >= cfg.motion_threshold:
+            raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
+        stance, _ = detectors.adaptive_shoe(stream.acc_b, stream.gyro_b, rate, window=cfg.window,
+                                            sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro, gravity=gravity,
+                                            gamma_still=threshold, gamma_motion=cfg.motion_threshold,
+                                            margin_decades=cfg.margin_decades)
+    elif cfg.kind == "shoe":
+        stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
+                                sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity)
+    elif cfg.kind == "magnitude":
+        stance = detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=window)
+    else:
+        low = cfg.low if cfg.low is not None else gravity - 1.0
+        high = cfg.high if cfg.high is not None else gravity + 1.0
+        if not low < high:
+            raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
+        stance = detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=window)
+    if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
+        stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
+                                    min_swing=max(1, round(cfg.min_swing_s * rate)))
+    return np.ascontiguousarray(stance, dtype=np.bool_)
+
+
+class FootIns(SensorSystem):
+    """Foot-mounted IMU navigated by strapdown + ZUPT, closed loop.
+
+    Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`bodyfusion.nav.error_state`.
+    ``filter.kind`` selects the estimator:
+
+    * ``ekf``, ``ckf``: the per-sample loop runs compiled
+      (:func:`bodyfusion.plugins.foot_ins.kernels.run_foot_ins`) in chunks between the fuser's
+      sync epochs; the ckf's stance update is :mod:`bodyfusion.plugins.foot_ins.coloured`. The
+      smoothers rebuild the EKF's covariances with ordinary ZUPTs, so the ckf keeps its
+      covariance after every coloured update for them (15×15 floats, 1.8 kB, per stance sample).
+    * ``enekf``, ``cenekf``: M members (:class:`bodyfusion.plugins.foot_ins.ensemble.Ensemble`);
+      ``x`` is their mean, ``P`` the sample covariance of their error-state deviations (15,
+      or 18 with the cenekf's coloured noise δV), and a correction moves the mean and maps
+      the deviations so that their sample covariance is the one given. Position fixes are
+      applied the same way: a gated Kalman update of the mean and covariance, carried to the
+      members by that correction. Not smoothable, no cross-covariance tracking (refused at
+      validation, :meth:`check_layout`).
+
+    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal (mean) states,
+    ``stance`` (N,) detector output.
+    """
+
+    plugin_name = "foot_ins"
+    Config = FootInsConfig
+    error_model = "strapdown15"
+
+    def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        self.stream = read_imu(config.data)
+        self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
+        self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
+        self._params = self._filter_params()
+        self.still = self._find_still_interval()
+        self._gap_index, self._gap_P = self._gap_inflation()
+        self._fix_index, self._fix_pos_n = self._read_position_fixes()
+        fx = config.position_fixes
+        self._fix_sigma = fx.sigma_m if fx is not None else 0.0
+        self._fix_gate = chi2_gate(fx.gate_probability, 3) if fx is not None else 0.0
+        heading = config.initial.heading_deg
+        self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
+        self._x0, self._P0 = self._initial_state()
+        self.restart()
+
+    @classmethod
+    def check_layout(cls, name: str, config: FootInsConfig, layout: Layout) -> None:
+        """Refuse layout settings this system's estimator cannot serve (KeyedError naming the
+        layout key): the ensemble kinds with a smoother (the smoothers rebuild the 15-state
+        EKF's covariances) or with tracked cross-covariances (no error-state transition Φ)."""
+        kind = config.filter.kind
+        if kind not in ENSEMBLE_KINDS:
+            return
+        if layout.smoother.kind != "none":
+            raise KeyedError("smoother.kind", f"systems.{name}.filter.kind {kind} cannot be smoothed "
+                                              "(the smoothers rebuild the 15-state EKF); use none")
+        constrained = {n for c in layout.constraints for n in c.between}
+        if layout.fuser.cross_covariance and name in constrained and layout.fuser.method != "none":
+            raise KeyedError("fuser.cross_covariance", f"systems.{name}.filter.kind {kind} has no error-state "
+                                                       "transition to carry cross-covariances; use false")
+
+    @property
+    def is_ensemble(self) -> bool:
+        """True for the ensemble estimators (enekf, cenekf)."""
+        return self.config.filter.kind in ENSEMBLE_KINDS
+
+    # --- set-up -------------------------------------------------------------------
+    def _read_position_fixes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fix positions (K, 3) and the index of the last IMU sample at or before each fix."""
+        fx = self.config.position_fixes
+        if fx is None:
+            return np.empty(0, dtype=np.int64), np.empty((0, 3))
+        track = read_truth_csv(fx.path, position_columns={"fix": fx.columns}, time_column=fx.time_column,
+                               time_scale=fx.time_scale, rate_hz=fx.rate_hz, delimiter=fx.delimiter)["fix"]
+        index = np.searchsorted(self.stream.t, track.t, side="right") - 1
+        usable = index >= 1
+        return index[usable].astype(np.int64), apply_axis_map(fx.axes, track.pos_n[usable])
+
+    def _filter_params(self) -> np.ndarray:
+        f = self.config.filter
+        p = np.zeros(PARAMS_SIZE)
+        p[:7] = (f.acc_noise_density, f.gyro_noise_density, f.acc_bias_random_walk, f.gyro_bias_random_walk,
+                 f.zupt_sigma_mps, f.zaru_sigma_radps or 0.0, self.context.gravity_mps2)
+        if f.earth_rate:
+            p[P_EARTH_RATE] = earth_rate_enu(self.context.latitude_deg)
+        if f.zupt_gate_probability is not None:
+            p[P_ZUPT_GATE] = chi2_gate(f.zupt_gate_probability, 3)
+        return p
+
+    def _find_still_interval(self) -> StillInterval:
+        """The first still interval (:func:`bodyfusion.nav.initial_alignment.find_still_interval`);
+        without one, the quietest window, and a warning."""
+        ini = self.config.initial
+        key = f"systems.{self.name}.initial.stationary_s"
+        t = self.stream.t
+        length = round(ini.stationary_s * self._rate_hz)
+        if length < MIN_STILL_SAMPLES:
+            raise ConfigError(key, f"{ini.stationary_s:g} s holds {length} samples at {self._rate_hz:.4g} Hz; "
+                                   f"the noise of a still window needs at least {MIN_STILL_SAMPLES}")
+        if length > len(t):
+            raise ConfigError(key, f"{ini.stationary_s} s is longer than the recording ({t[-1] - t[0]:.3g} s)")
+        still = find_still_interval(self.stream.acc_b, self.stream.gyro_b, length, ini.still_acc_sd_mps2,
+                                    ini.still_gyro_sd_radps)
+        span = f"t = {t[still.start]:.2f}–{t[still.stop - 1]:.2f} s"
+        if not still.still:
+            self.stream.report.warn(
+                f"{self.name}: no still interval of {ini.stationary_s:g} s (spreads ≤ {ini.still_acc_sd_mps2:g} m/s^2, "
+                f"{ini.still_gyro_sd_radps:g} rad/s); levelled on the quietest window {span} (spreads "
+                f"{still.acc_spread_mps2:.2g} m/s^2, {still.gyro_spread_radps:.2g} rad/s), level and gyro-bias "
+                "uncertainty inflated to match")
+        elif still.start > 0:
+            self.stream.report.notes.append(f"{self.name}: levelled on the still interval {span}; the "
+                                            f"{t[still.start] - t[0]:.2f} s before it navigated backward from there")
+        return still
+
+    def _gap_inflation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gap policy: before the step across a gap of Δ missing seconds the covariance grows by
+        an unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
+        σ_ω = rms(‖ω‖): δp += (σ_f Δ²/2)², δv += (σ_f Δ)², δθ += (σ_ω Δ)² per axis. Returns the
+        gap sample indices and the (K, 15, 15) covariance increments."""
+        checks = self.stream.checks
+        if checks is None or checks.gap_index.size == 0:
+            return np.empty(0, dtype=np.int64), np.empty((0, 15, 15))
+        f_dev = np.linalg.norm(self.stream.acc_b, axis=1) - self.context.gravity_mps2
+        sigma_f = float(np.sqrt(np.mean(f_dev**2)))
+        sigma_w = float(np.sqrt(np.mean(np.sum(self.stream.gyro_b**2, axis=1))))
+        dP = np.zeros((checks.gap_index.size, 15, 15))
+        for k, missing in enumerate(checks.gap_missing_s):
+            for block, var in ((DPOS, (sigma_f * missing**2 / 2) ** 2), (DVEL, (sigma_f * missing) ** 2),
+                               (DATT, (sigma_w * missing) ** 2)):
+                dP[k, block, block] = var * np.eye(3)
+        return checks.gap_index, dP
+
+    def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The state at the first sample: levelled (TRIAD on the mean specific force) and the
+        gyro bias (mean angular rate) on the still interval, the heading from the layout; if
+        the interval starts later, navigated backward to the first sample (:meth:`_navigate_back`)."""
+        ini = self.config.initial
+        st = self.still
+        window = slice(st.start, st.stop)
+        f_b = self.stream.acc_b[window].mean(axis=0)
+        self.heading_axis = heading_axis(f_b, ini.heading_axis)
+        if self.heading_axis != ini.heading_axis and ini.heading_deg != "auto" and not hasattr(self, "_x0"):
+            self.stream.report.warn(f"{self.name}: body axis {ini.heading_axis} is near vertical at rest; "
+                                    f"initial.heading_deg is taken as the heading of axis {self.heading_axis}")
+        level_sd = np.deg2rad(ini.level_sd_deg)
+        gyro_bias_sd = ini.gyro_bias_sd_radps
+        if not st.still:  # the mean over a moving window: level and rate errors of the window's spreads
+            level_sd = max(level_sd, st.acc_spread_mps2 / self.context.gravity_mps2)
+            gyro_bias_sd = max(gyro_bias_sd, st.gyro_spread_radps)
+        x = np.zeros(NOMINAL_SIZE)
+        x[6:10] = attitude_from_specific_force(f_b, self._azimuth0, self.heading_axis)
+        x[13:16] = self.stream.gyro_b[window].mean(axis=0)
+        sd = np.concatenate([
+            np.full(3, ini.position_sd_m), np.full(3, ini.velocity_sd_mps),
+            [level_sd, level_sd, np.deg2rad(ini.heading_sd_deg)],
+            np.full(3, ini.acc_bias_sd_mps2), np.full(3, gyro_bias_sd)])
+        P = np.diag(sd**2)
+        self._still_priors = {"level_sd_deg": float(np.degrees(level_sd)), "gyro_bias_sd_radps": float(gyro_bias_sd)}
+        if st.start > 0:
+            x, P = self._navigate_back(x, P, st.start)
+        x[0:3] = ini.position_m
+        return x, P
+
+    def _navigate_back(self, x_s: np.ndarray, P_s: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """From the state at sample s back to sample 0: the forward kernel run on the reversed
+        record (t → −t, ω → −ω, the same specific force; velocity, gyro bias and the Earth
+        rate change sign), with the same gated ZUPTs. The result is turned about Up so that
+        the heading at sample 0 is the layout's, and its covariance doubled: the forward run
+        uses the same zero-velocity updates again (the bound for information counted twice);
+        position restarts from the layout's with its prior σ."""
+        st = self.stream
+        r = np.arange(s + 1)
+        src = np.minimum(s - r + 1, s)  # the sample whose interval is stepped back over (r ≥ 1)
+        params = self._params.copy()
+        params[P_EARTH_RATE] *= -1.0
+        sign = np.ones(15)
+        sign[3:6] = sign[12:15] = -1.0
+        flip = np.outer(sign, sign)
+        xb = x_s.copy()
+        xb[3:6] *= -1.0
+        xb[13:16] *= -1.0
+        Pb = P_s * flip
+        t_r, acc_r, gyro_r = -st.t[s - r], st.acc_b[src], -st.gyro_b[src]
+        stance_r = np.ascontiguousarray(self.stance[s - r])
+        hist_x, hist_var = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 3))
+        self.backward_counters = np.zeros(COUNTERS_SIZE)
+        run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
+                     hist_x, hist_var, self.backward_counters)
+        xb[3:6] *= -1.0
+        xb[13:16] *= -1.0
+        Pb = 2.0 * (Pb * flip)
+        a_n = quat_to_dcm(xb[6:10]) @ AXIS_VECTORS[self.heading_axis]
+        x0, P0 = rotate_about_up(xb, Pb, self._azimuth0 - float(np.arctan2(a_n[0], a_n[1])))
+        P0[DPOS, :] = 0.0
+        P0[:, DPOS] = 0.0
+        P0[DPOS, DPOS] = np.eye(3) * self.config.initial.position_sd_m**2
+        return x0, P0
+
+    def restart(self) -> None:
+        """Back to the initial state at the first sample; history cleared (the ensemble
+        redrawn from the same seed)."""
+        n = len(self.stream)
+        f = self.config.filter
+        self.ensemble: Ensemble | None = None
+        if self.is_ensemble:
+            self.ensemble = Ensemble(f.members, self._x0, self._P0,
+                                     f.colour_factor if f.kind in COLOURED_KINDS else None, f.zupt_sigma_mps,
+                                     self.context.seed, self.name)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = self.ensemble.covariance()
+        else:
+            self.x = self._x0.copy()
+            self.P = self._P0.copy()
+        self.hist_x = np.empty((n, NOMINAL_SIZE))
+        self.hist_pos_var = np.empty((n, 3))
+        self.hist_x[0] = self.x
+        self.hist_pos_var[0] = np.diag(self.P)[:3]
+        self.counters = np.zeros(COUNTERS_SIZE)
+        self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
+        self.mech_memory = np.zeros(6)
+        self.fix_counts = GateCounts()
+        self._next_fix = 0
+        self._next_gap = 0
+        self._i = 0  # index of the sample the state refers to
+        # for the smoother (bodyfusion.plugins.foot_ins.smoothing): covariances left by corrections outside the
+        # compiled loop (fuser constraints, position fixes), and the smoothed result
+        self._override_idx: list[np.ndarray] = []
+        self._override_P: list[np.ndarray] = []
+        self.smoothed_x: np.ndarray | None = None
+        self.smoothed_pos_var: np.ndarray | None = None
+        self.smoothing_diagnostics: dict | None = None
+
+    # --- time ---------------------------------------------------------------------
+    @property
+    def t_now(self) -> float:
+        return float(self.stream.t[self._i])
+
+    def advance(self, t: float) -> None:
+        i1 = int(np.searchsorted(self.stream.t, t, side="right"))
+        while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
+            k = self._fix_index[self._next_fix]
+            self._run_to(k + 1)
+            if self.ensemble is not None:
+                self._ensemble_position_fix(self._fix_pos_n[self._next_fix])
+            else:
+                position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
+                                    self._fix_gate, self.fix_counts, self.phi)
+                self.hist_x[k] = self.x
+                self.hist_pos_var[k] = np.diag(self.P)[:3]
+                self._record_override(k)
+            self._next_fix += 1
+        self._run_to(i1)
+
+    def _run_to(self, i1: int) -> None:
+        """Process samples up to (excluding) index i1 in compiled chunks, split where the gap
+        policy inflates the covariance (recorded for the smoothers)."""
+        i = self._i + 1
+        if i1 <= i:
+            return
+        st = self.stream
+        if self.ensemble is not None:
+            self.ensemble.run(st.t, st.acc_b, st.gyro_b, self.stance, i, i1, self._params, self.hist_x,
+                              self.hist_pos_var, self.counters)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = self.ensemble.covariance()
+        else:
+            gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
+            for a, b in zip([i, *gaps], [*gaps, i1]):
+                if a in gaps:
+                    self.P += self._gap_P[np.searchsorted(self._gap_index, a)]
+                    self._record_override(a - 1)
+                self._run_kernel(a, b)
+        self._i = i1 - 1
+
+    def _run_kernel(self, i0: int, i1: int) -> None:
+        st = self.stream
+        f = self.config.filter
+        if f.kind == "ckf":
+            bound = differenced_samples(self.stance, i0, i1).size
+            post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
+            run_foot_ins_coloured(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
+                                  f.colour_factor, self.mech_memory, self.phi, self.hist_x, self.hist_pos_var,
+                                  self.counters, post_idx, post_P)
+            k = int(self.counters[C_CALL_COLOURED])
+            if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+                self._override_idx.append(post_idx[:k])
+                self._override_P.append(post_P[:k])
+            return
+        run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params, self.mech_memory,
+                     self.phi, self.hist_x, self.hist_pos_var, self.counters)
+
+    # --- heading ------------------------------------------------------------------
+    @property
+    def heading_is_auto(self) -> bool:
+        return self.config.initial.heading_deg == "auto"
+
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        self.restart()
+        chunk_s = 5.0
+        t = self.t_start
+        azimuth = None
+        while self._i < len(self.stream) - 1:
+            t += chunk_s
+            self.advance(t)
+            pos = self.hist_x[: self._i + 1, 0:2]
+            path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pos, axis=0).T))])
+            reached = np.flatnonzero(path >= distance_m)
+            if reached.size:
+                d = pos[reached[0]] - pos[0]
+                azimuth = float(np.arctan2(d[0], d[1]))
+                break
+        self.restart()
+        return azimuth
+
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        self._azimuth0 += delta_rad
+        self._x0, self._P0 = self._initial_state()
+        self.restart()
+
+    # --- fuser interface ------------------------------------------------------------
+    def position_n(self) -> np.ndarray:
+        return self.x[0:3].copy()
+
+    def covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        P = 0.5 * (P + P.T)
+        if self.ensemble is not None:
+            self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
+            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+            self.P = P
+            self.hist_x[self._i] = self.x
+            self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+            return
+        inject(self.x, np.ascontiguousarray(dx, dtype=np.float64))
+        self.P = P
+        self.hist_x[self._i] = self.x
+        self.hist_pos_var[self._i] = np.diag(self.P)[:3]
+        self._record_override(self._i)
+
+    def _ensemble_position_fix(self, z_n: np.ndarray) -> None:
+        """Gated position fix on the ensemble: the Kalman update of the mean and the sample
+        covariance (H selects δp, σ per axis, chi-square gate), applied to the members by
+        :meth:`apply_correction`."""
+        y = z_n - self.x[0:3]
+        r_var = self._fix_sigma**2
+        P = self.P
+        S = P[0:3, 0:3] + r_var * np.eye(3)
+        if float(y @ inv3_sym(np.ascontiguousarray(S)) @ y) > self._fix_gate:
+            self.fix_counts.rejected += 1
+            return
+        K = np.linalg.solve(S, P[0:3, :]).T
+        IKH = np.eye(P.shape[0])
+        IKH[:, 0:3] -= K
+        self.apply_correction(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
+        self.fix_counts.accepted += 1
+
+    def track_transition(self) -> None:
+        if self.ensemble is not None:
+            raise FusionError(f"system {self.name!r} (foot_ins, filter.kind {self.config.filter.kind}) cannot "
+                              "track cross-covariances: set fuser.cross_covariance false")
+        self._tracking = True
+        self.phi = np.eye(15)
+
+    def transition_since_sync(self) -> np.ndarray:
+        phi = self.phi.copy()
+        self.phi = np.eye(15)
+        return phi
+
+    def sync_times(self) -> np.ndarray:
+        starts, _ = detectors.stance_events(self.stance)
+        return self.stream.t[starts]
+
+    def sample_times(self) -> np.ndarray:
+        return self.stream.t
+
+    # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) --------------------------------------------------
+    def _record_override(self, i: int) -> None:
+        self._override_idx.append(np.array([i], dtype=np.int64))
+        self._override_P.append(self.P[None].copy())
+
+    def smoothing_record(self) -> dict:
+        """What the smoother needs to rebuild this filter's run (nothing is copied but the
+        few covariances set outside the compiled loop): IMU samples, stance flags, filter
+        parameters, the recorded nominal history, the initial covariance, and the sample
+        indices (sorted) with the covariance left there by a fuser correction or a fix (and,
+        for the ckf, after every coloured update). Ensemble kinds have no such record."""
+        if self.ensemble is not None:
+            raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
+        n = self._i + 1
+        idx = np.concatenate([np.empty(0, dtype=np.int64), *self._override_idx])
+        Ps = np.concatenate([np.empty((0, 15, 15)), *self._override_P])
+        order = np.argsort(idx, kind="stable")
+        return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
+                "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
+                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[order]),
+                "override_P": np.ascontiguousarray(Ps[order]), "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
+
+    def set_smoothed(self, x: np.ndarray | None, pos_var: np.ndarray | None, diagnostics: dict) -> None:
+        """Store the smoother's result: (n, 16) nominal states and (n, 3) position
+        variances replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
+        self.smoothed_x = x
+        self.smoothed_pos_var = pos_var
+        self.smoothing_diagnostics = diagnostics
+
+    def _initialisation_report(self) -> dict:
+        st, t = self.still, self.stream.t
+        P0 = self._P0
+        report = {"still_interval_s": [float(t[st.start]), float(t[st.stop - 1])], "still": st.still,
+                  "acc_spread_mps2": st.acc_spread_mps2, "gyro_spread_radps": st.gyro_spread_radps,
+                  "heading_axis": self.heading_axis, **self._still_priors,
+                  "first_sample_sd": {"level_deg": float(np.degrees(np.sqrt(max(P0[6, 6], P0[7, 7])))),
+                                      "heading_deg": float(np.degrees(np.sqrt(P0[8, 8]))),
+                                      "gyro_bias_radps": float(np.sqrt(np.max(np.diag(P0)[12:15])))}}
+        if st.start > 0:
+            report["backward_s"] = float(t[st.start] - t[0])
+            report["backward_zupts"] = int(self.backward_counters[C_ZUPTS])
+            report["backward_zupt_gated"] = int(self.backward_counters[C_GATED])
+        return report
+
+    # --- results ----------------------------------------------------------------------
+    def trajectory(self) -> Trajectory:
+        n = self._i + 1
+        if self.smoothed_x is not None and self.smoothed_pos_var is not None:
+            return Trajectory(self.stream.t[:n], self.smoothed_x[:n, 0:3],
+                              np.sqrt(np.maximum(self.smoothed_pos_var[:n], 0.0)))
+        return Trajectory(self.stream.t[:n], self.hist_x[:n, 0:3], np.sqrt(np.maximum(self.hist_pos_var[:n], 0.0)))
+
+    @property
+    def samples(self) -> int:
+        return len(self.stream)
+
+    @property
+    def input_report(self) -> InputReport:
+        return self.stream.report
+
+    def diagnostics(self) -> dict:
+        zupts = int(self.counters[C_ZUPTS])
+        return {
+            "stance_fraction": float(self.stance.mean()),
+            "zupt_updates": zupts,
+            "zaru_updates": int(self.counters[C_ZARUS]),
+            "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
+            "zupt_gated": int(self.counters[C_GATED]),
+            "initialisation": self._initialisation_report(),
+            **({"input_checks": self.stream.checks.to_dict()} if self.stream.checks is not None else {}),
+            "filter_kind": self.config.filter.kind,
+            **({"coloured_updates": int(self.counters[C_COLOURED])} if self.config.filter.kind == "ckf" else {}),
+            **({"members": self.config.filter.members} if self.ensemble is not None else {}),
+            **({"position_fixes_accepted": self.fix_counts.accepted,
+                "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
+            **({"smoothing": self.smoothing_diagnostics} if self.smoothing_diagnostics is not None else {}),
+        }

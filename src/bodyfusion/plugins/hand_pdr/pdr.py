@@ -1,0 +1,90 @@
+"""Pedestrian dead reckoning from a hand-held phone's IMU: steps, step lengths, heading rate.
+
+Frames: phone (body) frame as the IMU reports it; specific force m/s^2, rate rad/s.
+Everything is vectorised over the whole stream (the phone log is read at once); the
+filter then walks the detected steps in time order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import butter, find_peaks, sosfiltfilt
+
+from bodyfusion.plugins.hand_pdr.config import StepConfig
+
+
+def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
+    """Zero-phase 2nd-order Butterworth low-pass along axis 0."""
+    sos = butter(2, min(cutoff_hz / (0.5 * rate_hz), 0.99), output="sos")
+    return sosfiltfilt(sos, x, axis=0)
+
+
+def up_in_body(t: np.ndarray, acc_b: np.ndarray, cutoff_hz: float = 0.3) -> np.ndarray:
+    """(N, 3) unit vector of Up in the phone frame: the low-passed specific force direction."""
+    rate = 1.0 / np.median(np.diff(t))
+    g_b = lowpass(acc_b, rate, cutoff_hz)
+    return g_b / np.linalg.norm(g_b, axis=1, keepdims=True)
+
+
+def pose_change(t: np.ndarray, up_b: np.ndarray, window_s: float) -> np.ndarray:
+    """(N,) angle (rad) by which the Up direction in the phone frame ``up_b`` (N, 3, unit)
+    turned over the last ``window_s`` (0 within the first window): how much the way the phone
+    is held changed (into a pocket, swinging, raised to read)."""
+    j = np.maximum(np.searchsorted(t, t - window_s), 0)
+    return np.arccos(np.clip(np.einsum("ij,ij->i", up_b, up_b[j]), -1.0, 1.0))
+
+
+def held_steadily(t: np.ndarray, up_b: np.ndarray, window_s: float, max_change_rad: float) -> np.ndarray:
+    """(N,) True where the phone has been held steadily for ``window_s``: no :func:`pose_change`
+    above ``max_change_rad`` within the last ``window_s`` (one tip up and back, whose
+    2-s change dips at its top, is one handling, not two)."""
+    moved = np.concatenate([[0], np.cumsum(pose_change(t, up_b, window_s) > max_change_rad)])
+    j = np.maximum(np.searchsorted(t, t - window_s), 0)
+    return moved[1:] - moved[j] == 0
+
+
+def azimuth_increments(t: np.ndarray, gyro_b: np.ndarray, up_b: np.ndarray) -> np.ndarray:
+    """(N,) cumulative change of azimuth (rad, clockwise from North) from the rate about Up:
+    levelled gyro integration, ψ̇ = −ω_b · u_b (trapezoidal; 0 at the first sample)."""
+    yaw_rate = np.einsum("ij,ij->i", gyro_b, up_b)
+    dt = np.diff(t)
+    return np.concatenate([[0.0], np.cumsum(-0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)])
+
+
+def detect_steps(t: np.ndarray, acc_b: np.ndarray, cfg: StepConfig, gravity: float) -> np.ndarray:
+    """Sample indices of steps: peaks of the low-passed ‖f‖ − g above the threshold, at least
+    ``min_interval_s`` apart (debounced)."""
+    rate = 1.0 / np.median(np.diff(t))
+    a = lowpass(np.linalg.norm(acc_b, axis=1) - gravity, rate, cfg.lowpass_hz)
+    peaks, _ = find_peaks(a, height=cfg.threshold_mps2, distance=max(1, int(round(cfg.min_interval_s * rate))))
+    return peaks
+
+
+def weinberg_features(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:
+    """(a_max − a_min)^(1/4) of the low-passed ‖f‖ (m/s^2) over the samples since the previous
+    step (the first step: the same span before it), one per step."""
+    rate = 1.0 / np.median(np.diff(t))
+    a = lowpass(np.linalg.norm(acc_b, axis=1), rate, cfg.lowpass_hz)
+    bounds = np.concatenate([[max(0, steps[0] - (steps[1] - steps[0] if len(steps) > 1 else int(rate)))], steps])
+    out = np.empty(len(steps))
+    for k in range(len(steps)):
+        span = a[bounds[k]:bounds[k + 1] + 1]
+        out[k] = max(span.max() - span.min(), 0.0) ** 0.25
+    return out
+
+
+def step_lengths(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:
+    """Length (m) of each step: Weinberg's K·(a_max − a_min)^(1/4), or constant."""
+    if cfg.length == "constant" or len(steps) == 0:
+        return np.full(len(steps), cfg.constant_m)
+    return cfg.weinberg_k * weinberg_features(t, acc_b, steps, cfg)
+
+
+def calibrate_weinberg_k(t: np.ndarray, acc_b: np.ndarray, distance_m: float, cfg: StepConfig,
+                         gravity: float) -> float:
+    """K such that the steps of a walk of known length ``distance_m`` (m) add up to it."""
+    steps = detect_steps(t, acc_b, cfg, gravity)
+    features = weinberg_features(t, acc_b, steps, cfg)
+    if features.sum() <= 0:
+        raise ValueError("no steps to calibrate on")
+    return float(distance_m / features.sum())

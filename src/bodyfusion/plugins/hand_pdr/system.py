@@ -1,0 +1,643 @@
+"""Hand-held phone: pedestrian dead reckoning corrected by GNSS (PDR/GNSS paper §5).
+
+Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
+clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s), horizontal GNSS
+error β (in units of each fix's correlated σ, first-order Gauss–Markov), step-length scale
+c (1: the step model as configured) and, with the magnetometer, the holding offset o (rad, walking azimuth minus
+the phone's device azimuth). Error state (9):
+[δE, δN, δU, δψ, δS, δb, δβE, δβN, δc], δS the current step's length error (white, σ_S),
+δc the scale error common to every step (a wrong Weinberg K: random walk, initial σ
+``step_scale_sd``; σ 0 gives the paper's model, where step errors are white only).
+
+At each step k (eq. 37, S_k = c s_k):  E += S_k sin ψ_k,  N += S_k cos ψ_k, and (eqs. 38–40)
+    δE' = δE + S cos ψ δψ + sin ψ (δS + s δc),   δN' = δN − S sin ψ δψ + cos ψ (δS + s δc).
+Between events, over Δt:  ψ += Δψ_gyro − b Δt;  δψ' = δψ − Δt δb + w_ψ;
+δb' = e^{−Δt/τ} δb + w_b (first-order Gauss–Markov, τ = 1/α);  δU' = δU + w_U.
+(The paper writes δψ' = δψ + Δt δb for a bias error of the opposite sign; here b is
+subtracted from the azimuth rate, so its error enters with a minus.)
+GNSS (eqs. 41–44, with the correlated error): fix k of per-axis σ_k, position
+z = p_gnss − (p̂ + σ_k √ρ β̂), H = [I3 0 0 0 σ_k √ρ I2], R = σ_k² (1 − ρ) horizontally
+(ρ the correlated share of the variance; (2 σ_k)² vertically); δβ' = e^{−Δt/τ_β} δβ + w_β
+with unit stationary variance. Phone fixes err slowly and by about what they report: on
+the IPIN 2023 logs the error against the surveyed track wanders over tens of seconds
+with a size that follows the reported accuracy (5–10 m at 4–8 m, 30–40 m at 50 m).
+A bias in metres (σ fixed) beside white noise of σ_k lets a minute of fixes count as a
+minute of independent evidence and, when the accuracy swings, is too small or too large.
+Heading from the GNSS course, z = wrap(ψ_gnss − ψ̂), only from a fix taken while the PDR
+detects steps with the phone held steadily, fast enough and accurate enough (a standing
+phone's course is its GNSS jitter). Each update is gated by the chi-square test on its
+innovation. Skipped (and counted): fixes inside a layout outage; a fix that repeats its
+predecessor's position exactly (the receiver holding its solution: no new measurement);
+a fix reporting a ground speed no pedestrian walks at (the receiver's solution moving on
+its own, as while it converges from a cold start).
+
+Start from GNSS (``initial.position_m: gnss``). Receivers report wild first fixes (on
+IPIN 2023 Trial24 the first fix is 2.6 km off, reported at 61 m; with a start σ of 5 m the
+chi-square gate then refused 194 of 195 fixes and the track stayed 2.65 km away); the
+start is the first usable fix that its successor confirms: |p_j+1 − p_j| minus the
+distance the PDR walked between them passes the 2-D chi-square gate of σ_j² + σ_j+1².
+Earlier fixes are skipped. The filter starts at the first IMU sample with a diffuse
+position (σ :data:`DIFFUSE_SD_M`), so the start fix sets the position with its own σ at
+its own time, not a guessed σ at t0. After ``reset_after_rejections`` consecutive
+gated-out fixes the position is forgotten the same way (δp ← fresh, σ diffuse: rows of δp
+in the transition zeroed, diffuse Q) and taken from the fix: a filter whose prior
+excludes every fix never recovers by itself.
+
+Unknown heading (``initial.heading_deg: gnss_track``): a bank of hypotheses
+(:mod:`bodyfusion.plugins.hand_pdr.hypotheses`) spread round the circle, each this filter with a
+small heading σ. Only fixes and magnetometer samples taken while the phone walks, held
+steadily, change their weights: standing, every hypothesis predicts the same displacement
+(none), and the fixes of a standing phone are one correlated error, not independent
+evidence. The bank collapses into one filter once its heading σ is small
+(``heading_resolved_s``). When the phone's pose changes (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`:
+taken out of a pocket, raised to be read) the walking direction relative to the phone is
+lost: once it is held steadily again the bank is spread round the circle anew. While the
+bank is open the fuser sees the mixture's moments, a correction maps every hypothesis
+through the affine map that takes the mixture to the corrected Gaussian, and the
+transition Φ is 0 (the fuser's cross-covariances with this system are dropped).
+
+Magnetometer (``magnetometer.enabled``, unset: on for a phone log with MAGN lines;
+:mod:`bodyfusion.plugins.hand_pdr.magnetometer`): the device azimuth ψ_d (tilt-compensated,
+declination applied) and the walking heading differ by the holding offset o, ψ = ψ_d + o;
+o is a tenth error state δo (random walk), appended last. Update: z = wrap(ψ_d − (ψ̂ − ô)),
+H = [0 0 0 1 0 0 0 0 0 −1], chi-square gated, after the Earth-field check (when the site's
+field is given) and the quasi-static check. With a prior on o (a phone log: 0, the phone
+read while walking) the magnetometer weighs the heading bank like a compass; with
+``offset_deg: auto`` the first accepted sample sets ô = ψ̂ − ψ_d instead: δo ← δψ + v (the
+state's row of the error transition becomes that of δψ, plus the measurement's variance),
+so the fuser's cross-covariances stay exact.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from itertools import pairwise
+
+import numpy as np
+
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
+from bodyfusion.core.heading import wrap_angle
+from bodyfusion.nav.measurements import chi2_gate
+from bodyfusion.io.phone_log import read_getsensordata
+from bodyfusion.io.readers import read_imu_csv
+from bodyfusion.core.system import LayoutContext, SensorSystem
+from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
+from bodyfusion.plugins.hand_pdr.hypotheses import (Hypothesis, affine_map, collapse_if_resolved, mixture_moments,
+                                                normalise, spread_headings)
+from bodyfusion.plugins.hand_pdr.magnetometer import MagneticHeading, read_magnetometer_csv
+from bodyfusion.plugins.hand_pdr.pdr import azimuth_increments, detect_steps, held_steadily, step_lengths, up_in_body
+
+E, N, U, PSI, S, B, BE, BN, C, O = range(10)
+NOMINAL = [E, N, U, PSI, B, BE, BN, C]
+"""Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN, c)."""
+N_ERR = 9
+"""Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
+STEP, GNSS, MAGNETOMETER, STEADY = range(4)
+"""Event kinds, in the order they are processed at one time."""
+DIFFUSE_SD_M = 1e3
+"""One-sigma (m) of a position not known yet: far above any fix error, well inside float64."""
+
+
+class HandPdr(SensorSystem):
+    """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
+    with the magnetometer's holding offset), or a bank of them while the heading is unknown.
+
+    Results: :meth:`trajectory` (one epoch per step, GNSS and magnetometer update), ``step_index``
+    (IMU sample of each detected step), ``step_length_m``, ``gnss_counts`` (see
+    :meth:`diagnostics`), ``mag_counts`` (accepted, rejected by the gate, by the field check,
+    by the quasi-static check), ``geodetic_origin`` (lat, lon, h of the ENU frame),
+    ``start_fix_s`` (time of the fix the position started from), ``heading_resolved_s`` (time
+    the heading bank last collapsed; None if the heading was given, or is open at the end).
+    """
+
+    plugin_name = "hand_pdr"
+    Config = HandPdrConfig
+
+    def __init__(self, name: str, config: HandPdrConfig, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        key = f"systems.{name}"
+        report = InputReport()
+        fixes: GnssFixes | None = None
+        mag = config.magnetometer
+        magn: tuple[np.ndarray, np.ndarray] | None = None
+        if config.phone_log is not None:
+            log = read_getsensordata(config.phone_log)
+            report = log.report
+            self.t = log.acc.t
+            acc = log.acc.xyz
+            gyro = np.column_stack([np.interp(self.t, log.gyro.t, log.gyro.xyz[:, k]) for k in range(3)])
+            if config.gnss is not None and config.gnss.format == "phone_log":
+                fixes = log.gnss
+            if mag.enabled and log.magn is None:
+                raise ConfigError(f"{key}.magnetometer.enabled", f"{config.phone_log} has no MAGN lines")
+            if mag.enabled is not False and log.magn is not None:  # unset: used when the log has it
+                magn = (log.magn.t, log.magn.xyz)  # GetSensorData logs µT
+        else:
+            d = config.imu
+            stream = read_imu_csv(d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns,
+                                  acc_unit=d.acc_unit, gyro_unit=d.gyro_unit, time_column=d.time_column,
+                                  time_scale=d.time_scale, rate_hz=d.rate_hz, skip_rows=d.skip_rows,
+                                  delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
+            report = stream.report
+            self.t, acc, gyro = stream.t, stream.acc_b, stream.gyro_b
+            if mag.enabled:
+                magn = read_magnetometer_csv(d, mag.columns, mag.unit)
+        g = config.gnss
+        if g is not None and g.format == "csv":
+            fixes = read_gnss_csv(g.path, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
+                                  height_column=g.height_column, accuracy_column=g.accuracy_column,
+                                  speed_column=g.speed_column, course_column=g.course_column)
+        elif g is not None and g.format == "nmea":
+            fixes = read_nmea(g.path)
+        if fixes is not None:
+            report = report.merge(fixes.report)
+        self._report = report
+        self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
+        self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
+        self._walked_m = np.concatenate([[0.0], np.cumsum(self.step_length_m)])
+        up_b = up_in_body(self.t, acc)
+        self._azimuth = azimuth_increments(self.t, gyro, up_b)
+        f = config.filter
+        self._steady = held_steadily(self.t, up_b, f.pose_window_s, np.deg2rad(f.pose_change_deg))
+        on = magn is not None
+        self.n_err = N_ERR + on
+        self._nominal = NOMINAL + [O] * on
+        self._angles = [3] + [8] * on  # nominal entries that are angles: ψ, o
+        self._mag = MagneticHeading.of(*magn, self.t, up_b, self._azimuth, mag) if magn is not None else None
+        self.geodetic_origin = context.geodetic_origin
+        self._fix_t = np.empty(0)
+        self._confirmed_fix = -1
+        if fixes is not None and len(fixes):
+            self._set_fixes(fixes, context.outages.get(name, ()))
+        self._events = self._event_list()
+        ini = config.initial
+        self.start_fix_s: float | None = None
+        self._start_fix = 0
+        if ini.position_m == "gnss":
+            if self._confirmed_fix < 0:
+                raise ConfigError(f"{key}.initial.position_m", "no GNSS fix to start from")
+            self._start_fix = self._confirmed_fix
+            self.start_fix_s = float(self._fix_t[self._start_fix])
+            self._p0 = self._fix_pos[self._start_fix].copy()
+        else:
+            self._p0 = np.asarray(ini.position_m, dtype=float)
+        self._psi0 = 0.0 if ini.heading_deg in ("gnss_track", "auto") else float(np.deg2rad(ini.heading_deg))
+        self._gate_pos = chi2_gate(config.filter.gate_probability, 3)
+        self._gate_psi = chi2_gate(config.filter.gate_probability, 1)
+        self._gate_mag = chi2_gate(mag.gate_probability, 1)
+        self.restart()
+
+    # --- set-up -----------------------------------------------------------------
+    def _set_fixes(self, fixes: GnssFixes, outages: tuple[tuple[float, float], ...]) -> None:
+        """Per fix: σ per axis (m), masked by an outage, a held repeat, too fast, taken walking,
+        taken with the phone held steadily; the first confirmed usable fix (``_confirmed_fix``,
+        -1 if no fix is usable) and the fixes' ENU positions about the geodetic origin (the
+        layout's, else that fix)."""
+        f = self.config.filter
+        sd = f.accuracy_to_sigma * fixes.accuracy_m
+        self._fix_sd = np.where(np.isfinite(sd) & (sd > 0), sd, f.default_sigma_m)
+        self._fix_masked = np.zeros(len(fixes), dtype=bool)
+        for start, duration in outages:
+            self._fix_masked |= (fixes.t >= start) & (fixes.t < start + duration)
+        self._fix_held = fixes.repeats_previous()
+        self._fix_fast = fixes.speed_mps > f.max_speed_mps  # NaN speed: not fast
+        usable = np.flatnonzero(~self._fix_masked & ~self._fix_held & ~self._fix_fast)
+        first = (float(fixes.lat_deg[0]), float(fixes.lon_deg[0]), float(fixes.height_m[0]))
+        self._confirmed_fix = self._confirmed(fixes.t, fixes.enu(first), self._fix_sd, usable) if usable.size else -1
+        if self.geodetic_origin is None:
+            j = max(self._confirmed_fix, 0)
+            self.geodetic_origin = (float(fixes.lat_deg[j]), float(fixes.lon_deg[j]), float(fixes.height_m[j]))
+        self._fix_t = fixes.t
+        self._fix_pos = fixes.enu(self.geodetic_origin)
+        self._fix_accuracy = fixes.accuracy_m
+        self._fix_speed = fixes.speed_mps
+        self._fix_course = np.deg2rad(fixes.course_deg)
+        self._fix_walking = self.walking(fixes.t)
+        self._fix_steady = self.held_steadily(fixes.t)
+
+    def walking(self, t: np.ndarray) -> np.ndarray:
+        """(N,) True where the PDR says the phone walks at times ``t`` (s): a step detected in
+        the last ``filter.walking_window_s``."""
+        step_t = self.t[self.step_index]
+        k = np.searchsorted(step_t, t, side="right") - 1
+        return (k >= 0) & (np.asarray(t) - step_t[np.maximum(k, 0)] < self.config.filter.walking_window_s)
+
+    def held_steadily(self, t: np.ndarray) -> np.ndarray:
+        """(N,) True where the phone is held steadily at times ``t`` (s): its Up direction turned
+        by at most ``filter.pose_change_deg`` over any ``filter.pose_window_s`` of the last
+        ``filter.pose_window_s`` (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`)."""
+        return self._steady[np.maximum(np.searchsorted(self.t, t, side="right") - 1, 0)]
+
+    def _walked_between(self, t0: float, t1: float) -> float:
+        """PDR distance (m, step model) walked in (t0, t1]."""
+        k0, k1 = np.searchsorted(self.t[self.step_index], [t0, t1], side="right")
+        return float(self._walked_m[k1] - self._walked_m[k0])
+
+    def _confirmed(self, t: np.ndarray, pos: np.ndarray, sd: np.ndarray, usable: np.ndarray) -> int:
+        """Index of the first of the ``usable`` fixes whose successor confirms it (see the module
+        docstring); the last usable one if none is confirmed (no successor contradicts it)."""
+        gate = chi2_gate(self.config.filter.gate_probability, 2)
+        for a, b in pairwise(usable):
+            gap = max(float(np.hypot(*(pos[b, :2] - pos[a, :2]))) - self._walked_between(t[a], t[b]), 0.0)
+            if gap**2 <= gate * (sd[a] ** 2 + sd[b] ** 2):
+                return int(a)
+        return int(usable[-1])
+
+    def _event_list(self) -> list[tuple[float, int, int]]:
+        """(time, kind, index) of steps, GNSS fixes and magnetometer updates, in time order."""
+        ev = [(float(self.t[i]), STEP, k) for k, i in enumerate(self.step_index)]
+        ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fix_t) if self.t[0] < tf <= self.t[-1]]
+        if self._mag is not None:
+            ev += [(float(tm), MAGNETOMETER, k) for k, tm in enumerate(self._mag.t) if self.t[0] < tm <= self.t[-1]]
+        if self.config.initial.heading_deg == "gnss_track":  # the phone held steadily again
+            again = np.flatnonzero(self._steady[1:] & ~self._steady[:-1]) + 1
+            ev += [(float(self.t[i]), STEADY, int(i)) for i in again]
+        return sorted(ev)
+
+    def _pdr_track(self, psi0: float) -> tuple[np.ndarray, np.ndarray]:
+        """Step times and horizontal PDR positions (from the start, no filter) for heading psi0."""
+        psi = psi0 + self._azimuth[self.step_index]
+        d = np.column_stack([self.step_length_m * np.sin(psi), self.step_length_m * np.cos(psi)])
+        return self.t[self.step_index], np.cumsum(d, axis=0)
+
+    def restart(self) -> None:
+        ini, f, mag = self.config.initial, self.config.filter, self.config.magnetometer
+        x = np.array([*self._p0, self._psi0, 0.0, 0.0, 0.0, 1.0])  # E, N, U, ψ, b, βE, βN, c
+        beta_var = float(f.gnss_correlated_fraction > 0)  # β: unit variance, or none
+        sd_h, sd_u = (DIFFUSE_SD_M, DIFFUSE_SD_M) if ini.position_m == "gnss" else (ini.position_sd_m, ini.height_sd_m)
+        variances = [sd_h**2, sd_h**2, sd_u**2, np.deg2rad(ini.heading_sd_deg) ** 2, f.step_length_sd_m**2,
+                     f.gyro_bias_sd**2, beta_var, beta_var, f.step_scale_sd**2]
+        self._offset_known = mag.offset_deg != "auto"
+        if self._mag is not None:  # the holding offset o, rad (auto: a placeholder until the first sample)
+            x = np.append(x, np.deg2rad(mag.offset_deg) if self._offset_known else 0.0)
+            variances.append(np.deg2rad(mag.offset_sd_deg) ** 2)
+        P = np.diag(variances)
+        self._bank = ([Hypothesis(x, P)] if ini.heading_deg != "gnss_track"
+                      else spread_headings(x, P, ini.heading_hypotheses, 3, PSI))
+        self.heading_resolved_s: float | None = None
+        self.heading_resolutions: list[float] = []
+        self.heading_counts = {"weighted": 0, "unweighted_standing": 0, "unweighted_handling": 0, "reopened": 0}
+        self.mag_counts = {"accepted": 0, "rejected_gate": 0, "rejected_field": 0, "rejected_turning": 0}
+        self._tc = float(self.t[0])  # time the heading and covariance are propagated to
+        self._next = 0
+        self._rejected_in_row = 0
+        self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "held": 0, "too_fast": 0, "before_start": 0,
+                            "position_resets": 0, "heading_accepted": 0, "heading_rejected": 0,
+                            "heading_skipped_standing": 0, "heading_skipped_handling": 0,
+                            "heading_skipped_accuracy": 0}
+        self._hist: list[tuple[float, float, float, float, float, float, float]] = []
+        self._record()
+        self.phi = None
+
+    # --- the state ----------------------------------------------------------------
+    @property
+    def x(self) -> np.ndarray:
+        """Nominal state (the mixture's mean while the heading bank is open)."""
+        return mixture_moments(self._bank, self._nominal, self._angles)[0]
+
+    @property
+    def P(self) -> np.ndarray:
+        """Error-state covariance (the mixture's, moment-matched, while the bank is open)."""
+        return mixture_moments(self._bank, self._nominal, self._angles)[1]
+
+    @property
+    def heading_hypotheses(self) -> int:
+        """Hypotheses of the heading bank still alive (1: one filter)."""
+        return len(self._bank)
+
+    # --- the filter -------------------------------------------------------------
+    def _propagate_to(self, t: float) -> None:
+        dt = t - self._tc
+        if dt <= 0:
+            return
+        f = self.config.filter
+        i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
+        F = np.eye(self.n_err)
+        F[PSI, B] = -dt
+        decay = np.exp(-dt / f.correlation_time_s)
+        F[B, B] = decay
+        beta_decay = np.exp(-dt / f.gnss_bias_time_s)
+        F[BE, BE] = F[BN, BN] = beta_decay
+        for h in self._bank:
+            h.x[3] += self._azimuth[i1] - self._azimuth[i0] - h.x[4] * dt
+            h.x[5:7] *= beta_decay
+        Q = np.zeros(self.n_err)
+        Q[PSI] = f.heading_noise_density**2 * dt
+        Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
+        Q[U] = f.height_noise_density**2 * dt
+        Q[BE] = Q[BN] = float(f.gnss_correlated_fraction > 0) * (1.0 - beta_decay**2)
+        Q[C] = f.step_scale_random_walk**2 * dt
+        if self._mag is not None:
+            Q[O] = np.deg2rad(self.config.magnetometer.offset_random_walk) ** 2 * dt
+        self._transition(F, Q)
+        self._tc = t
+
+    def _transition(self, F: np.ndarray | list[np.ndarray], Q: np.ndarray | list[np.ndarray]) -> None:
+        """P ← F P Fᵀ + Q for every hypothesis (F, Q one for all or one each; Q a full matrix
+        or its diagonal); the fuser's Φ ← F Φ (one filter) or 0 (a bank)."""
+        count = len(self._bank)
+        Fs = F if isinstance(F, list) else [F] * count
+        Qs = Q if isinstance(Q, list) else [Q] * count
+        for h, Fi, Qi in zip(self._bank, Fs, Qs):
+            h.P = Fi @ h.P @ Fi.T + (np.diag(Qi) if Qi.ndim == 1 else Qi)
+            h.P = 0.5 * (h.P + h.P.T)
+        self._chain(Fs[0])
+
+    def _chain(self, A: np.ndarray) -> None:
+        """Φ ← A Φ when tracked; a bank has no linear transition: Φ = 0 (see the module docstring)."""
+        if self.phi is not None:
+            self.phi = A @ self.phi if len(self._bank) == 1 else np.zeros_like(self.phi)
+
+    def _step(self, k: int) -> None:
+        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
+        s_model = self.step_length_m[k]
+        fresh = np.eye(self.n_err)
+        fresh[S, S] = 0.0  # the previous step's δS does not carry over
+        Qs = np.zeros(self.n_err)
+        Qs[S] = self.config.filter.step_length_sd_m**2
+        Fs, Qs_ = [], []
+        for h in self._bank:
+            psi, s = h.x[3], h.x[7] * s_model
+            F = np.eye(self.n_err)
+            F[E, PSI], F[E, S], F[E, C] = s * np.cos(psi), np.sin(psi), s_model * np.sin(psi)
+            F[N, PSI], F[N, S], F[N, C] = -s * np.sin(psi), np.cos(psi), s_model * np.cos(psi)
+            h.x[0] += s * np.sin(psi)
+            h.x[1] += s * np.cos(psi)
+            Fs.append(F @ fresh)
+            Qs_.append(F @ np.diag(Qs) @ F.T)
+        self._transition(Fs, Qs_)
+
+    def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
+                weigh: bool) -> bool:
+        """Gated Kalman update (Joseph form) of every hypothesis, closed-loop reset; y = residual(x).
+        Rejected (False) when the innovation fails the chi-square gate of every hypothesis. With
+        ``weigh`` the log-weights gain log N(y; 0, S) (see :mod:`~bodyfusion.plugins.hand_pdr.hypotheses`)."""
+        ys = [residual(h.x) for h in self._bank]
+        Ss = [H @ h.P @ H.T + R for h in self._bank]
+        nis = [float(y @ np.linalg.solve(S_, y)) for y, S_ in zip(ys, Ss)]
+        if min(nis) > gate:
+            return False
+        IKH = None
+        for h, y, S_, q in zip(self._bank, ys, Ss, nis):
+            K = h.P @ H.T @ np.linalg.inv(S_)
+            h.x += (K @ y)[self._nominal]  # δS is white: nothing to feed back
+            IKH = np.eye(self.n_err) - K @ H
+            h.P = IKH @ h.P @ IKH.T + K @ R @ K.T
+            h.P = 0.5 * (h.P + h.P.T)
+            if weigh:
+                h.log_w -= 0.5 * (q + np.linalg.slogdet(S_)[1])
+        self._chain(IKH)
+        if len(self._bank) > 1:
+            self._settle_bank()
+        return True
+
+    def _settle_bank(self) -> None:
+        """Normalise and prune the weights; collapse the bank once its heading is resolved."""
+        self._bank = collapse_if_resolved(normalise(self._bank), self._nominal, self._angles, PSI,
+                                          np.deg2rad(self.config.initial.heading_resolved_sd_deg))
+        if len(self._bank) == 1:
+            self.heading_resolved_s = self._tc
+            self.heading_resolutions.append(self._tc)
+            self._chain(np.zeros((self.n_err, self.n_err)))
+
+    def _reopen_heading(self) -> None:
+        """The phone is held steadily again after being handled: the walking direction relative to
+        it is unknown, so the bank is spread round the circle again from the mixture's moments;
+        so is the holding offset: back to its prior (δo ← fresh, σ ``offset_sd_deg``), or, if
+        ``auto``, taken afresh from the next accepted sample."""
+        x, P = mixture_moments(self._bank, self._nominal, self._angles)
+        mag = self.config.magnetometer
+        if self._mag is not None:
+            self._offset_known = mag.offset_deg != "auto"
+            x[8] = np.deg2rad(mag.offset_deg) if self._offset_known else x[8]
+            P[O, :] = P[:, O] = 0.0
+            P[O, O] = np.deg2rad(mag.offset_sd_deg) ** 2
+        self._bank = spread_headings(x, P, self.config.initial.heading_hypotheses, 3, PSI)
+        self._chain(np.zeros((self.n_err, self.n_err)))
+        self.heading_resolved_s = None
+        self.heading_counts["reopened"] += 1
+
+    def _forget_position(self) -> None:
+        """δp ← fresh with σ :data:`DIFFUSE_SD_M` (rows of δp in the transition zeroed)."""
+        F = np.eye(self.n_err)
+        F[[E, N, U]] = 0.0
+        Q = np.zeros(self.n_err)
+        Q[[E, N, U]] = DIFFUSE_SD_M**2
+        self._transition(F, Q)
+
+    def _gnss(self, j: int) -> None:
+        counts = self.gnss_counts
+        if self._fix_masked[j]:
+            counts["masked"] += 1
+            return
+        if j < self._start_fix:
+            counts["before_start"] += 1
+            return
+        if self._fix_held[j]:
+            counts["held"] += 1
+            return
+        if self._fix_fast[j]:
+            counts["too_fast"] += 1
+            return
+        f = self.config.filter
+        walking, steady = bool(self._fix_walking[j]), bool(self._fix_steady[j])
+        sd, rho = self._fix_sd[j], f.gnss_correlated_fraction
+        H = np.zeros((3, self.n_err))
+        H[0, E] = H[1, N] = H[2, U] = 1.0
+        H[0, BE] = H[1, BN] = sd * np.sqrt(rho)
+        R = np.diag([sd**2 * (1.0 - rho), sd**2 * (1.0 - rho), (2.0 * sd) ** 2])
+
+        def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
+            return self._fix_pos[j] - H[:, self._nominal] @ x
+
+        ok = self._update(H, residual, R, self._gate_pos, walking and steady)
+        self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
+        if not ok and 0 < f.reset_after_rejections <= self._rejected_in_row:
+            self._forget_position()
+            ok = self._update(H, residual, R, self._gate_pos, False)
+            counts["position_resets"] += 1
+            self._rejected_in_row = 0
+        counts["accepted" if ok else "rejected"] += 1
+        if len(self._bank) > 1:
+            self.heading_counts["unweighted_standing" if not walking else
+                                "unweighted_handling" if not steady else "weighted"] += 1
+        if not (ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps):
+            return
+        if not walking:
+            counts["heading_skipped_standing"] += 1
+        elif not steady:
+            counts["heading_skipped_handling"] += 1
+        elif self._fix_accuracy[j] > f.max_accuracy_for_heading_m:
+            counts["heading_skipped_accuracy"] += 1
+        else:
+            Hp = np.zeros((1, self.n_err))
+            Hp[0, PSI] = 1.0
+            okh = self._update(Hp, lambda x: np.array([wrap_angle(self._fix_course[j] - x[3])]),
+                               np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi, True)
+            counts["heading_accepted" if okh else "heading_rejected"] += 1
+
+    def _magnetometer(self, k: int) -> None:
+        """Heading update from the k-th decimated magnetometer sample (see the module docstring)."""
+        if not self._mag.earth_like[k]:
+            self.mag_counts["rejected_field"] += 1
+            return
+        if not self._mag.quasi_static[k]:
+            self.mag_counts["rejected_turning"] += 1
+            return
+        r = np.deg2rad(self.config.magnetometer.sigma_deg) ** 2
+        psi_d = self._mag.psi_d[k]
+        if not self._offset_known:  # δo ← δψ + v
+            F = np.eye(self.n_err)
+            F[O] = 0.0
+            F[O, PSI] = 1.0
+            Q = np.zeros(self.n_err)
+            Q[O] = r
+            for h in self._bank:
+                h.x[8] = wrap_angle(h.x[3] - psi_d)
+            self._transition(F, Q)
+            self._offset_known = True
+            self.mag_counts["accepted"] += 1
+            return
+        H = np.zeros((1, self.n_err))
+        H[0, PSI], H[0, O] = 1.0, -1.0
+        tm = np.array([self._mag.t[k]])
+        ok = self._update(H, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), np.array([[r]]),
+                          self._gate_mag, bool(self.walking(tm)[0] and self.held_steadily(tm)[0]))
+        self.mag_counts["accepted" if ok else "rejected_gate"] += 1
+
+    def _record(self) -> None:
+        """History row: time, position (m), position one-sigma (m)."""
+        x, P = mixture_moments(self._bank, self._nominal, self._angles)
+        self._hist.append((self._tc, *x[:3], *np.sqrt(np.maximum(np.diag(P)[:3], 0.0))))
+
+    # --- time -------------------------------------------------------------------
+    @property
+    def t_now(self) -> float:
+        return self._tc
+
+    def advance(self, t: float) -> None:
+        while self._next < len(self._events) and self._events[self._next][0] <= t:
+            te, kind, idx = self._events[self._next]
+            self._propagate_to(te)
+            if kind == STEP:
+                self._step(idx)
+            elif kind == GNSS:
+                self._gnss(idx)
+            elif kind == MAGNETOMETER:
+                self._magnetometer(idx)
+            else:
+                self._reopen_heading()
+            self._record()
+            self._next += 1
+        i = int(np.searchsorted(self.t, t, side="right")) - 1
+        if i >= 0:
+            self._propagate_to(float(self.t[i]))  # the state refers to the last sample at or before t
+        if t >= self.t_end and self._hist[-1][0] < self._tc:
+            self._record()  # the trajectory covers the whole data span
+
+    # --- heading ------------------------------------------------------------------
+    @property
+    def heading_is_auto(self) -> bool:
+        return self.config.initial.heading_deg == "auto"
+
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        """As :meth:`SensorSystem.initial_travel_azimuth`; None while the initial heading is
+        unknown (``gnss_track``): such a phone cannot serve as the heading reference."""
+        if self.config.initial.heading_deg == "gnss_track":
+            return None
+        ts, track = self._pdr_track(self._psi0)
+        far = np.flatnonzero(np.hypot(*track.T) >= distance_m)
+        return None if far.size == 0 else float(np.arctan2(*track[far[0]]))
+
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        self._psi0 += delta_rad
+        self.restart()
+
+    # --- fuser interface ------------------------------------------------------------
+    def position_n(self) -> np.ndarray:
+        return self.x[:3].copy()
+
+    def covariance(self) -> np.ndarray:
+        return self.P.copy()
+
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """Closed-loop reset. A bank: every hypothesis i goes through the affine map that takes
+        the mixture N(x̄, P̄) to N(x̄ + dx, P): x_i ← x̄ + dx + T d_i, P_i ← T P_i Tᵀ, with
+        T P̄ Tᵀ = P (:func:`~bodyfusion.plugins.hand_pdr.hypotheses.affine_map`), d_i = x_i − x̄."""
+        x_bar, P_bar = mixture_moments(self._bank, self._nominal, self._angles)
+        changed = bool(np.any(dx)) or not np.array_equal(P, P_bar)
+        if len(self._bank) == 1:
+            self._bank[0].x += dx[self._nominal]
+            self._bank[0].P = 0.5 * (P + P.T)
+        elif changed:
+            T = affine_map(P_bar, P)
+            for h in self._bank:
+                d = np.zeros(self.n_err)
+                d[self._nominal] = h.x - x_bar
+                d[PSI] = wrap_angle(d[PSI])
+                if self._mag is not None:
+                    d[O] = wrap_angle(d[O])
+                h.x = x_bar + (dx + T @ d)[self._nominal]
+                TPT = T @ h.P @ T.T
+                h.P = 0.5 * (TPT + TPT.T)
+        if self._hist[-1][0] == self._tc:  # corrected at an event: that record shows it
+            self._hist.pop()
+            self._record()
+        elif changed:
+            self._record()
+
+    def track_transition(self) -> None:
+        self.phi = np.eye(self.n_err)
+
+    def transition_since_sync(self) -> np.ndarray:
+        phi, self.phi = self.phi, np.eye(self.n_err)
+        return phi
+
+    def sync_times(self) -> np.ndarray:
+        return self.t[self.step_index]
+
+    def sample_times(self) -> np.ndarray:
+        return self.t
+
+    # --- results ----------------------------------------------------------------------
+    def trajectory(self) -> Trajectory:
+        h = np.array(self._hist)
+        # several records at one time (an update right after a step): keep the last
+        last = np.concatenate([h[1:, 0] > h[:-1, 0], [True]])
+        h = h[last]
+        return Trajectory(h[:, 0], h[:, 1:4], h[:, 4:7])
+
+    @property
+    def samples(self) -> int:
+        return len(self.t)
+
+    @property
+    def input_report(self) -> InputReport:
+        return self._report
+
+    def diagnostics(self) -> dict:
+        """Counts for metrics.json. ``start_fix_s``: the fix the position started from.
+        ``gnss``: fixes accepted, rejected by the gate, masked by an outage, held (a repeat of
+        the previous position), too fast, before the start fix; position resets after
+        rejections in a row; course updates accepted, rejected, skipped while standing, while
+        the phone was handled, for the fix's accuracy. ``heading``: ``given`` or ``gnss_track``
+        with the bank's size, the hypotheses alive at the end, the times it resolved
+        (``resolutions_s``; ``resolved_s`` the last, None if open at the end), how often
+        handling the phone re-opened it, and the fixes that weighed the hypotheses or did
+        not (the phone standing or handled). ``magnetometer``: its counts and offset (deg)."""
+        x = self.x
+        heading: dict = {"initial": "given" if self.config.initial.heading_deg != "gnss_track" else "gnss_track"}
+        if heading["initial"] == "gnss_track":
+            heading.update(hypotheses=self.config.initial.heading_hypotheses, alive=len(self._bank),
+                           resolved_s=self.heading_resolved_s, resolutions_s=list(self.heading_resolutions),
+                           **self.heading_counts)
+        return {"steps": len(self.step_index),
+                "mean_step_length_m": float(x[7] * self.step_length_m.mean()) if len(self.step_length_m) else None,
+                "step_scale": float(x[7]),
+                "start_fix_s": self.start_fix_s,
+                "gnss": dict(self.gnss_counts),
+                "heading": heading,
+                **({"magnetometer": {**self.mag_counts, "offset_deg": float(np.rad2deg(wrap_angle(x[8])))}}
+                   if self._mag is not None else {})}

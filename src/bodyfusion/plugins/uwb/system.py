@@ -1,0 +1,156 @@
+"""UWB tag: two-way ranges to fixed anchors and to tags on other body-worn systems.
+
+Measurement model (positions ENU, m). The tag's antenna is at p_h + l_h, the host's
+navigated position plus a constant lever arm in the navigation frame.
+
+* Anchor a at a_n:  r = ‖p_h + l_h − a_n‖ + v,  ∂r/∂p_h = uᵀ,  u = (p_h + l_h − a_n) / r.
+* Peer tag on system j (lever arm l_j):  r = ‖(p_h + l_h) − (p_j + l_j)‖ + v,
+  ∂r/∂p_h = uᵀ, ∂r/∂p_j = −uᵀ, u the unit vector from the peer's antenna to the host's.
+
+v ~ N(0, σ²) in line of sight. Non-line-of-sight ranges are longer than the geometric
+distance (the signal goes round or through the body): the fuser's chi-square gate on
+the innovation rejects those whose excess is large against √(H P Hᵀ + σ²).
+The tag has no state: the fuser applies each range to the measured systems' error
+states (:mod:`bodyfusion.core.fuser`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bodyfusion.nav.measurements import chi2_gate
+from bodyfusion.core.system import AidingSource, LayoutContext, ScalarMeasurement
+from bodyfusion.core.types import InputReport
+from bodyfusion.plugins.uwb.config import UwbConfig
+from bodyfusion.plugins.uwb.ranges import read_ranges
+
+UNUSED, ACCEPTED, REJECTED, NOT_APPLIED = 0, 1, 2, 3
+"""Fate of each range, as the fuser recorded it."""
+
+
+def range_and_jacobian(a_n: np.ndarray, b_n: np.ndarray) -> tuple[float, np.ndarray]:
+    """‖a_n − b_n‖ (m) and its gradient with respect to a_n (the unit vector from b to a;
+    the gradient with respect to b_n is its negative)."""
+    d = a_n - b_n
+    r = float(np.sqrt(d @ d))
+    return r, d / max(r, 1e-9)
+
+
+class UwbTag(AidingSource):
+    """A UWB tag on the system ``host`` (see :class:`bodyfusion.plugins.uwb.config.UwbConfig`).
+
+    Ranges come from the layout's CSV (:func:`bodyfusion.plugins.uwb.ranges.read_ranges`);
+    ``fate`` (K,) records what the fuser did with each (:data:`ACCEPTED`, :data:`REJECTED`
+    by the gate, :data:`NOT_APPLIED`: outside the measured systems' data) and ``nis`` (K,)
+    its normalised innovation squared.
+    """
+
+    plugin_name = "uwb"
+    Config = UwbConfig
+
+    def __init__(self, name: str, config: UwbConfig, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        self.ids = [*config.anchors, *config.peers]
+        self.n_anchors = len(config.anchors)
+        rc = config.ranges
+        self.log = read_ranges(rc.path, self.ids, time_column=rc.time_column, id_column=rc.id_column,
+                               range_column=rc.range_column, nlos_column=rc.nlos_column, delimiter=rc.delimiter)
+        self._anchor_n = np.array(list(config.anchors.values()), dtype=float).reshape(-1, 3)
+        self._peer_lever_n = np.array(list(config.peers.values()), dtype=float).reshape(-1, 3)
+        self._lever_n = np.asarray(config.lever_arm_m, dtype=float)
+        self._systems = [(config.host,) if k < self.n_anchors else (config.host, self.ids[k])
+                         for k in range(len(self.ids))]
+        self._gate = chi2_gate(config.gate_probability, 1)
+        self.fate = np.full(len(self.log), UNUSED, dtype=np.int8)
+        self.nis = np.full(len(self.log), np.nan)
+
+    @classmethod
+    def system_references(cls, config: UwbConfig) -> list[tuple[str, str]]:
+        return [("host", config.host), *((f"peers.{name}", name) for name in config.peers)]
+
+    # --- measurements ----------------------------------------------------------------
+    def measurement_times(self) -> np.ndarray:
+        return self.log.t
+
+    def measured_systems(self, k: int) -> tuple[str, ...]:
+        return self._systems[self.log.end[k]]
+
+    def measure(self, k: int, positions_n: list[np.ndarray]) -> ScalarMeasurement:
+        end = int(self.log.end[k])
+        antenna_n = positions_n[0] + self._lever_n
+        if end < self.n_anchors:
+            r, u = range_and_jacobian(antenna_n, self._anchor_n[end])
+            H_p = u[None, :]
+        else:
+            r, u = range_and_jacobian(antenna_n, positions_n[1] + self._peer_lever_n[end - self.n_anchors])
+            H_p = np.vstack([u, -u])
+        return ScalarMeasurement(float(self.log.range_m[k]), r, H_p, self.config.sigma_m ** 2)
+
+    @property
+    def gate_nis(self) -> float:
+        return self._gate
+
+    def record(self, k: int, nis: float | None, accepted: bool) -> None:
+        self.fate[k] = NOT_APPLIED if nis is None else (ACCEPTED if accepted else REJECTED)
+        self.nis[k] = np.nan if nis is None else nis
+
+    def jacobian_cases(self) -> list:
+        """The range Jacobians (anchor and peer) at a few geometries, for the conformance check."""
+        from bodyfusion.testing import JacobianCase
+
+        rng = np.random.default_rng(0)
+        lever = self._lever_n
+        cases = []
+        for k in range(3):
+            p, q = rng.normal(0, 10, 3), rng.normal(0, 10, 3)
+            a = self._anchor_n[k % len(self._anchor_n)] if len(self._anchor_n) else rng.normal(0, 10, 3)
+            _, u = range_and_jacobian(p + lever, a)
+            cases.append(JacobianCase(f"anchor range at {np.round(p, 2).tolist()}",
+                                      lambda x, a=a: np.array([np.linalg.norm(x + lever - a)]), p, u[None, :]))
+            peer_lever = rng.normal(0, 0.2, 3)
+            _, u = range_and_jacobian(p + lever, q + peer_lever)
+            cases.append(JacobianCase(
+                f"peer range at {np.round(p, 2).tolist()} / {np.round(q, 2).tolist()}",
+                lambda x, pl=peer_lever: np.array([np.linalg.norm(x[:3] + lever - x[3:] - pl)]),
+                np.concatenate([p, q]), np.concatenate([u, -u])[None, :]))
+        return cases
+
+    # --- results -----------------------------------------------------------------------
+    @property
+    def samples(self) -> int:
+        return len(self.log)
+
+    @property
+    def input_report(self) -> InputReport:
+        return self.log.report
+
+    def _counts(self, mask: np.ndarray) -> dict:
+        fate = self.fate[mask]
+        nis = self.nis[mask & (self.fate == ACCEPTED)]
+        return {"ranges": int(mask.sum()), "accepted": int((fate == ACCEPTED).sum()),
+                "rejected_by_gate": int((fate == REJECTED).sum()), "not_applied": int((fate == NOT_APPLIED).sum()),
+                "mean_nis_accepted": float(nis.mean()) if nis.size else None}
+
+    def diagnostics(self) -> dict:
+        """Per end (anchor or peer) and for anchors and peers together: ranges, accepted,
+        rejected by the gate, not applied (outside the measured systems' data), mean NIS
+        of the accepted; the reader's drops; with a truth NLOS column, the gate's
+        confusion counts."""
+        end = self.log.end
+        out: dict = {"plugin": self.plugin_name, "host": self.config.host,
+                     "gate_nis": self._gate, "sigma_m": self.config.sigma_m,
+                     "dropped": dict(self.log.dropped)}
+        if self.n_anchors:
+            out["anchor_ranges"] = self._counts(end < self.n_anchors)
+        if len(self.ids) > self.n_anchors:
+            out["peer_ranges"] = self._counts(end >= self.n_anchors)
+        out["per_end"] = {name: self._counts(end == k) for k, name in enumerate(self.ids)}
+        if self.log.nlos is not None:
+            nlos, applied = self.log.nlos, (self.fate == ACCEPTED) | (self.fate == REJECTED)
+            rejected = self.fate == REJECTED
+            out["gate_vs_truth"] = {
+                "nlos_rejected": int((applied & nlos & rejected).sum()),
+                "nlos_accepted": int((applied & nlos & ~rejected).sum()),
+                "los_rejected": int((applied & ~nlos & rejected).sum()),
+                "los_accepted": int((applied & ~nlos & ~rejected).sum())}
+        return out
