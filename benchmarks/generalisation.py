@@ -143,7 +143,7 @@ def _zupt_nis(result, name: str) -> float | None:
 
 def pyshoe_row(trial: Path, overrides: list[str]) -> list[Row]:
     from bodyfusion.evaluation.metrics import score_systems
-    from bodyfusion.io.readers import read_truth_csv
+    from bodyfusion.io.truth import read_truth_csv
     from bodyfusion.core.types import Trajectory
 
     result = _run(pyshoe_layout(trial), overrides)

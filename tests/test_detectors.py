@@ -191,7 +191,7 @@ def test_debounce_properties(bits, min_stance, min_swing):
 @pytest.mark.skipif(not VICON.exists(), reason="shared Vicon data not available")
 @pytest.mark.parametrize("side,bound", [("Left", 0.90), ("Right", 0.85)])
 def test_shoe_agrees_with_vicon_labels(side, bound):
-    from bodyfusion.io.readers import read_imu_csv
+    from bodyfusion.io.imu import read_imu_csv
 
     s = read_imu_csv(
         VICON / f"imuMeas{side}.csv", time_column="time_index", time_scale=1 / 60,

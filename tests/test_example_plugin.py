@@ -49,7 +49,6 @@ def registry_with_barometer(monkeypatch):
     pm.register(bodyfusion_barometer)
     registry = plugins.Registry(pm)
     monkeypatch.setattr(plugins, "get_registry", lambda: registry)
-    monkeypatch.setattr(run, "get_registry", lambda: registry)
     return registry
 
 

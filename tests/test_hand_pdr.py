@@ -99,7 +99,7 @@ def test_gnss_calibrates_the_step_scale_of_an_uncalibrated_step_model(tmp_path):
 def test_weinberg_k_calibrated_on_one_walk_measures_another_to_three_percent(tmp_path):
     """Calibrate K on a walk of known length (seed 0), then measure a different walk (seed 1,
     other noise, other hand sway): mean step length within 3 % of the true 0.70 m."""
-    from bodyfusion.io.readers import read_imu_csv
+    from bodyfusion.io.imu import read_imu_csv
     from bodyfusion.plugins.hand_pdr.config import StepConfig
     from bodyfusion.plugins.hand_pdr.pdr import calibrate_weinberg_k, detect_steps, step_lengths
 

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from bodyfusion.io.imu_checks import check_imu
-from bodyfusion.io.readers import read_imu_csv
+from bodyfusion.io.imu import read_imu_csv
 
 RATE = 100.0
 

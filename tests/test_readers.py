@@ -10,15 +10,9 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.errors import InputError
-from bodyfusion.io.readers import (
-    ACC_UNITS,
-    GYRO_UNITS,
-    TIMESTAMP_POLICIES,
-    apply_timestamp_policy,
-    read_imu_csv,
-    read_table,
-    read_truth_csv,
-)
+from bodyfusion.io.imu import ACC_UNITS, GYRO_UNITS, read_imu_csv
+from bodyfusion.io.tables import TIMESTAMP_POLICIES, apply_timestamp_policy, read_table
+from bodyfusion.io.truth import read_truth_csv
 
 DATA = Path("/work/shared/data")
 XIO = DATA / "single_foot_loop_xio" / "long_walk.csv"

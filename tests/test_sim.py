@@ -12,7 +12,7 @@ import yaml
 from bodyfusion.core.layout import Layout, validate_section
 from bodyfusion.core.errors import ConfigError
 from bodyfusion.nav.attitude import azimuth_pitch_roll
-from bodyfusion.io.readers import read_imu_csv
+from bodyfusion.io.imu import read_imu_csv
 from bodyfusion.core.seeding import stable_hash
 from bodyfusion.sim import simulate
 from bodyfusion.sim.gait import GaitConfig, plan_gait

@@ -12,11 +12,12 @@ import hashlib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import numpy as np
 import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
 
 from bodyfusion.core.errors import ConfigError
+from bodyfusion.core import registry as plugin_registry
+from bodyfusion.nav.frames import NAMED_FRAMES, AxisMap, AxisSigns
 
 
 def _resolve_path(value: Path, info: ValidationInfo) -> Path:
@@ -29,55 +30,6 @@ def _resolve_path(value: Path, info: ValidationInfo) -> Path:
 
 DataPath = Annotated[Path, AfterValidator(_resolve_path)]
 """A file path; relative paths resolve against the folder of the layout file."""
-
-
-def _right_handed(signs: tuple[int, int, int]) -> tuple[int, int, int]:
-    if any(v not in (-1, 1) for v in signs):
-        raise ValueError("each axis sign must be 1 or -1")
-    if signs[0] * signs[1] * signs[2] != 1:
-        raise ValueError("these signs mirror the frame (their product must be +1 for a right-handed ENU)")
-    return signs
-
-
-AxisSigns = Annotated[tuple[int, int, int], AfterValidator(_right_handed)]
-"""Signs (+1/−1) turning a file's x, y, z position axes into east, north, up; e.g.
-``[1, -1, -1]`` for a right-handed frame whose z points down (a rotation of 180° about x).
-Kept for older layouts: :data:`AxisMap` (``frame:``) says the same and more."""
-
-_AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
-
-
-def _signed_axis_map(axes: tuple[str, str, str]) -> tuple[str, str, str]:
-    seen = []
-    for entry in axes:
-        name = entry.strip().lstrip("+-")
-        if name not in _AXIS_INDEX or entry.strip().count("-") > 1:
-            raise ValueError(f"each entry must be one of x, y, z, -x, -y, -z; got {entry!r}")
-        seen.append(name)
-    if sorted(seen) != ["x", "y", "z"]:
-        raise ValueError(f"each of x, y, z must appear once, got {list(axes)}")
-    return tuple(a.strip().lstrip("+") for a in axes)  # type: ignore[return-value]
-
-
-AxisMap = Annotated[tuple[str, str, str], AfterValidator(_signed_axis_map)]
-"""A signed axis map: entry k names the file axis (``x``, ``-y``, ...) that becomes axis k of
-the project's frame. ``[x, -y, -z]``: a frame with z down turned 180° about x; ``[y, x, -z]``:
-north-east-down to east-north-up. Any signed permutation (a map that mirrors is allowed: the
-file's frame may be left-handed)."""
-
-NAMED_FRAMES: dict[str, tuple[str, str, str]] = {"enu": ("x", "y", "z"), "ned": ("y", "x", "-z")}
-"""Position frames by name, as axis maps into east, north, up."""
-
-
-def apply_axis_map(axes: tuple[str, str, str], v_file: np.ndarray) -> np.ndarray:
-    """Vectors (N, 3) in the file's axes → (N, 3) in the project's frame by a signed axis map
-    (:data:`AxisMap`); a column that is NaN in the file (absent height) stays NaN only where
-    it is used."""
-    v_file = np.asarray(v_file, dtype=float)
-    out = np.empty_like(v_file)
-    for k, entry in enumerate(axes):
-        out[:, k] = v_file[:, _AXIS_INDEX[entry.lstrip("-")]] * (-1.0 if entry.startswith("-") else 1.0)
-    return out
 
 
 class StrictModel(BaseModel):
@@ -460,13 +412,11 @@ class LoadedLayout:
 
 def load_layout(path: str | Path, overrides: list[str] | None = None, registry: Any = None) -> LoadedLayout:
     """Read, override, and validate a layout file (both stages)."""
-    from bodyfusion.core.registry import get_registry
-
     path = Path(path)
     raw = apply_overrides(read_yaml(path), overrides or [])
     base_dir = path.resolve().parent
     layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
-    registry = registry or get_registry()
+    registry = registry or plugin_registry.get_registry()
     system_configs: dict[str, BaseModel] = {}
     for name, section in raw["systems"].items():
         system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
@@ -484,10 +434,8 @@ def load_layout(path: str | Path, overrides: list[str] | None = None, registry: 
 def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel], registry: Any, path: Path) -> None:
     """Aiding sources (:class:`bodyfusion.core.system.AidingSource`) name navigation systems, and
     constraints and the heading reference name navigation systems, not aiding sources."""
-    from bodyfusion.core.system import AidingSource
-
     classes = {name: registry.system_class(cfg.plugin) for name, cfg in system_configs.items()}
-    aiding = {name for name, cls in classes.items() if issubclass(cls, AidingSource)}
+    aiding = {name for name, cls in classes.items() if not cls.navigates}
     navigators = sorted(set(system_configs) - aiding)
     if not navigators:
         raise ConfigError("systems", "no navigation system: aiding sources need a host", path)
@@ -503,46 +451,3 @@ def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel
                                   path)
     if layout.heading_alignment.reference in aiding:
         raise ConfigError("heading_alignment.reference", "an aiding source has no heading", path)
-
-
-class ImuCsvConfig(StrictModel):
-    """An IMU recorded as CSV: column names, units and time base (see :func:`bodyfusion.io.readers.read_imu_csv`)."""
-
-    path: DataPath
-    """CSV file; relative to the layout file."""
-    acc_columns: tuple[str, str, str]
-    """Header names of the accelerometer x, y, z columns (body frame)."""
-    gyro_columns: tuple[str, str, str]
-    """Header names of the gyroscope x, y, z columns (body frame)."""
-    stance_column: str | None = None
-    """Optional 0/1 stance labels given with the data."""
-    acc_unit: Literal["m/s^2", "g"] = "m/s^2"
-    """Unit of the accelerometer columns: m/s^2 or g (9.80665 m/s^2)."""
-    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
-    """Unit of the gyroscope columns: rad/s or deg/s."""
-    time_column: str | None = None
-    """Column of sample times, multiplied by time_scale to give seconds."""
-    time_scale: float = Field(default=1.0, gt=0)
-    """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
-    rate_hz: float | None = Field(default=None, gt=0)
-    """Sample rate (Hz): the time base when the file has no time column; with one, the
-    nominal rate the timestamps are checked against."""
-    skip_rows: int = Field(default=0, ge=0)
-    """Lines before the header line."""
-    delimiter: str = ","
-    """Field separator."""
-    timestamp_policy: Literal["drop", "sort", "error"] = "drop"
-    """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
-    axes: AxisMap = ("x", "y", "z")
-    """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
-    whose z points down at rest into one whose z points up."""
-    max_step_samples: float = Field(default=5.0, gt=1)
-    """A time step longer than this many nominal sample periods is a gap (reported, and
-    handled by the navigation system's gap policy)."""
-
-    @model_validator(mode="after")
-    def _time_source(self) -> "ImuCsvConfig":
-        if self.time_column is None and self.rate_hz is None:
-            raise ValueError("give time_column or rate_hz")
-        return self
-

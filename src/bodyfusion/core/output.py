@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from bodyfusion.core.errors import FusionError
+from bodyfusion.core.result import RunResult
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
+from bodyfusion.io.gnss import enu_to_geodetic
 
-if TYPE_CHECKING:
-    from bodyfusion.core.run import RunResult
 
 TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
 
@@ -93,6 +91,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
                             "max": float(lam.max()) if lam.size else 0.0},
             "solve_time_us": _median_p99(rep.solve_times_us),
         }
+    if result.smoothed_constraints is not None:
+        doc.setdefault("constraints", {})["smoothed"] = result.smoothed_constraints
     if result.aiding:  # aiding sources (UWB tags): no trajectory, their diagnostics
         doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics()} for name, src in result.aiding.items()}
     inp = result.input_report
@@ -118,8 +118,6 @@ def write_trajectories(path: Path, result: RunResult, decimate: int = 1) -> None
 def write_geojson(path: Path, result: RunResult, decimate: int = 1) -> None:
     """track.geojson: one WGS84 LineString per system (lon, lat, height), when the run has a
     geodetic origin."""
-    from bodyfusion.io.gnss import enu_to_geodetic
-
     features = []
     for name, traj in result.trajectories.items():
         llh = enu_to_geodetic(traj.pos_n[::decimate], result.geodetic_origin)
@@ -142,7 +140,7 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     if output.plots:
-        from bodyfusion.evaluation import plots
+        from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
         plots.plot_trajectories(out_dir / "trajectory.png", result.trajectories, result.scores or None,
                                 result.transform, result.truths or None)

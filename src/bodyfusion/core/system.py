@@ -21,6 +21,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from bodyfusion.core.errors import FusionError
+from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.core.types import InputReport, Trajectory
 
 
@@ -45,6 +46,9 @@ class Plugin(ABC):
 
     plugin_name: ClassVar[str]
     Config: ClassVar[type[BaseModel]]
+    navigates: ClassVar[bool]
+    """True for a navigation system (it has a position and a trajectory), False for an aiding
+    source that only measures the navigation systems."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         self.name = name
@@ -73,7 +77,11 @@ class SensorSystem(Plugin):
     positions in the ENU navigation frame, metres.
     """
 
+    navigates = True
     position_indices: ClassVar[slice] = slice(0, 3)
+    geodetic_origin: tuple[float, float, float] | None = None
+    """Latitude (deg), longitude (deg), height (m) of the ENU origin this system set (e.g. its
+    first GNSS fix) when the layout gives none; None: it sets none."""
     error_model: ClassVar[str | None] = None
     """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
     :func:`bodyfusion.testing.check_system` can check its Jacobians."""
@@ -147,6 +155,13 @@ class SensorSystem(Plugin):
     def sample_times(self) -> np.ndarray:
         """Times (s) of every sample the system processes."""
 
+    # --- smoothing ----------------------------------------------------------------
+    def smooth(self, cfg: SmootherConfig) -> dict | None:
+        """Smooth the run once the fuser is done (the layout's ``smoother`` section); afterwards
+        :meth:`trajectory` returns the smoothed track. Returns the smoother's diagnostics, or
+        None for a system that is not smoothed (the default)."""
+        return None
+
     # --- results ----------------------------------------------------------------
     @abstractmethod
     def trajectory(self) -> Trajectory:
@@ -184,6 +199,8 @@ class AidingSource(Plugin):
     Frames and units: positions ENU, metres; time s. ``samples`` counts the
     measurements read, ``diagnostics`` goes to metrics.json ``aiding.<name>``.
     """
+
+    navigates = False
 
     @classmethod
     @abstractmethod

@@ -93,7 +93,7 @@ def read_gnss_csv(path: str | Path, *, time_column: str, lat_column: str, lon_co
                   speed_column: str | None = None, course_column: str | None = None,
                   delimiter: str = ",") -> GnssFixes:
     """GNSS fixes from a CSV with named columns (deg, m, m/s, deg)."""
-    from bodyfusion.io.readers import read_table
+    from bodyfusion.io.tables import read_table
 
     optional = [c for c in (height_column, accuracy_column, speed_column, course_column) if c]
     arrays, _ = read_table(path, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,

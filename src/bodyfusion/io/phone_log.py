@@ -23,7 +23,7 @@ import numpy as np
 
 from bodyfusion.core.errors import InputError
 from bodyfusion.io.gnss import GnssFixes, clean_fixes
-from bodyfusion.io.readers import apply_timestamp_policy
+from bodyfusion.io.tables import apply_timestamp_policy
 from bodyfusion.core.types import InputReport
 
 USED_TYPES = {"ACCE": 5, "GYRO": 5, "MAGN": 5, "GNSS": 10, "POSI": 6}

@@ -6,7 +6,8 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.core.layout import DataPath, ImuCsvConfig, KeyedError, PositionFrame, StrictModel
+from bodyfusion.core.layout import DataPath, KeyedError, PositionFrame, StrictModel
+from bodyfusion.io.imu import ImuCsvConfig
 
 
 ENSEMBLE_KINDS = ("enekf", "cenekf")

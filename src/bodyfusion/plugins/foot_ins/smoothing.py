@@ -1,7 +1,8 @@
 """Smoothing of foot-mounted INS runs: RTS, forward–backward (FB) and FB-RTS.
 
-Runs after the fuser (``smoother.kind`` in the layout, :class:`bodyfusion.core.layout.SmootherConfig`)
-on every system that offers ``smoothing_record()`` / ``set_smoothed()`` (the foot INS).
+Runs after the fuser (``smoother.kind`` in the layout, :class:`bodyfusion.core.layout.SmootherConfig`):
+the core calls :meth:`bodyfusion.plugins.foot_ins.system.FootIns.smooth`, which hands its
+:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.smoothing_record` to :func:`smooth_record`.
 The filter keeps no N×15×15 history: the smoother rebuilds the forward filter's
 covariances block by block from the recorded nominal states (``hist_x``), the IMU
 samples, the stance flags and the few covariances set outside the compiled loop (fuser
@@ -50,8 +51,8 @@ Choices where the paper is vague (documented here, stated in the report):
   correction left. The record does not hold the other feet or the fixes, so they are
   not recomputed for the re-run state.
 * Constraints: the fuser applies them in the forward pass (``fuser.method``); with
-  ``smoother.constrain_smoothed`` they are applied again, in position space with the
-  smoothed position variances, at every sample where the smoothed tracks violate them.
+  ``smoother.constrain_smoothed`` the core applies them again to the smoothed tracks
+  (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
 
 Streaming. FB and FB-RTS run segment by segment in time order and need only the
 segment's samples, the previous segment's fused end state and the filter's corrections
@@ -70,13 +71,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from bodyfusion.nav import detectors
-from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
+from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, backward_block, forward_block, forward_rerun_block, fuse_block,
                                      rts_block)
 
@@ -254,68 +254,3 @@ def smooth_system(system, cfg: SmootherConfig) -> SmoothingResult:
     result.diagnostics["wall_s"] = time.perf_counter() - t0
     system.set_smoothed(result.x, result.pos_var, result.diagnostics)
     return result
-
-
-def constrain_smoothed(systems: Mapping[str, object], constraints: list[ConstraintConfig],
-                       fuser: FuserConfig) -> dict:
-    """Apply the layout's distance constraints to the smoothed position tracks: on the
-    first constrained system's sample times, at every sample where they are violated,
-    the position-space solve (the fuser's solver, projection when the fuser is off) with
-    each track's smoothed position variances; corrections interpolated back to each
-    system's times. Returns counts for the diagnostics."""
-    from bodyfusion.core.constraints import violations
-    from bodyfusion.core.fuser import SOLVERS, distance_constraints
-
-    order = list(dict.fromkeys(name for c in constraints for name in c.between))
-    members = [systems[name] for name in order]
-    if any(getattr(s, "smoothed_x", None) is None for s in members):
-        return {"constrained_samples": 0, "skipped": "not every constrained system was smoothed"}
-    cons = distance_constraints(constraints, order)
-    method = fuser.method if fuser.method != "none" else "projection"
-    solver = SOLVERS[method](len(members), cons, tol_m=fuser.tolerance_m, max_iter=fuser.max_iterations)
-    trajs = [s.trajectory() for s in members]
-    grid = trajs[0].t
-    m = len(members)
-    pos = np.empty((grid.size, 3 * m))
-    var = np.empty((grid.size, 3 * m))
-    for k, tr in enumerate(trajs):
-        for ax in range(3):
-            pos[:, 3 * k + ax] = np.interp(grid, tr.t, tr.pos_n[:, ax])
-            var[:, 3 * k + ax] = np.interp(grid, tr.t, tr.pos_sd[:, ax] ** 2)
-    corr = np.zeros_like(pos)
-    count = 0
-    for i in range(grid.size):
-        if np.max(violations(pos[i], cons), initial=0.0) <= fuser.tolerance_m:
-            continue
-        sol = solver.solve(pos[i], np.diag(np.maximum(var[i], 1e-12)))
-        corr[i] = sol.p - pos[i]
-        count += 1
-    for k, s in enumerate(members):
-        tr = trajs[k]
-        n = tr.t.size
-        for ax in range(3):
-            s.smoothed_x[:n, ax] += np.interp(tr.t, grid, corr[:, 3 * k + ax])
-    return {"constrained_samples": count, "method": method}
-
-
-def smooth_systems(systems: Mapping[str, object], cfg: SmootherConfig,
-                   constraints: list[ConstraintConfig] | None = None, fuser: FuserConfig | None = None) -> dict:
-    """Smooth every system that supports it (``smoothing_record``); with
-    ``cfg.constrain_smoothed`` apply the constraints on the smoothed tracks too.
-    Returns {system: diagnostics}."""
-    if cfg.kind == "none":
-        return {}
-    out = {}
-    for name, s in systems.items():
-        if hasattr(s, "smoothing_record") and hasattr(s, "set_smoothed"):
-            out[name] = smooth_system(s, cfg).diagnostics
-    if cfg.constrain_smoothed and constraints and fuser is not None:
-        try:
-            rep = constrain_smoothed(systems, constraints, fuser)
-        except Exception as err:  # never fail the run
-            rep = {"constrained_samples": 0, "error": f"{type(err).__name__}: {err}"}
-            log.warning("constraints on the smoothed tracks failed: %s", err)
-        for name in dict.fromkeys(n for c in constraints for n in c.between):
-            if name in out:
-                out[name]["smoothed_constraints"] = rep
-    return out

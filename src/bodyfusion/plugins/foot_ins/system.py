@@ -7,14 +7,16 @@ from __future__ import annotations
 import numpy as np
 
 from bodyfusion.nav import detectors
-from bodyfusion.core.layout import KeyedError, Layout, apply_axis_map
+from bodyfusion.core.layout import KeyedError, Layout, SmootherConfig
+from bodyfusion.nav.frames import apply_axis_map
 from bodyfusion.nav.earth import earth_rate_enu
 from bodyfusion.core.errors import ConfigError, FusionError
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force, find_still_interval,
                                      heading_axis)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate, position_fix_update
 from bodyfusion.nav.attitude import quat_to_dcm
-from bodyfusion.io.readers import read_imu, read_truth_csv
+from bodyfusion.io.imu import read_imu
+from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.core.types import ImuStream, InputReport, Trajectory
@@ -22,6 +24,7 @@ from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, D
 from bodyfusion.nav.error_state import (DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, inject, inv3_sym,
                                 rotate_about_up)
 from bodyfusion.plugins.foot_ins.ensemble import Ensemble
+from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS,
                                              COUNTERS_SIZE, differenced_samples, run_foot_ins, run_foot_ins_coloured)
 
@@ -460,6 +463,12 @@ class FootIns(SensorSystem):
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
                 "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[order]),
                 "override_P": np.ascontiguousarray(Ps[order]), "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
+
+    def smooth(self, cfg: SmootherConfig) -> dict | None:
+        """RTS, FB or FB-RTS over this run (:mod:`bodyfusion.plugins.foot_ins.smoothing`);
+        afterwards :meth:`trajectory` is the smoothed track. The ensemble kinds are refused at
+        validation (:meth:`check_layout`)."""
+        return smooth_system(self, cfg).diagnostics
 
     def set_smoothed(self, x: np.ndarray | None, pos_var: np.ndarray | None, diagnostics: dict) -> None:
         """Store the smoother's result: (n, 16) nominal states and (n, 3) position

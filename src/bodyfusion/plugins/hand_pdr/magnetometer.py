@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyfusion.core.layout import ImuCsvConfig
+from bodyfusion.io.imu import ImuCsvConfig
 from bodyfusion.core.errors import InputError
-from bodyfusion.io.readers import apply_timestamp_policy, read_table
+from bodyfusion.io.tables import apply_timestamp_policy, read_table
 from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig, QuasiStaticConfig
 
 MAG_UNITS: dict[str, float] = {"uT": 1.0, "nT": 1e-3, "G": 100.0}

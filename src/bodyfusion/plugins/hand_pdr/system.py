@@ -80,7 +80,7 @@ from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.io.phone_log import read_getsensordata
-from bodyfusion.io.readers import read_imu_csv
+from bodyfusion.io.imu import read_imu_csv
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.core.types import InputReport, Trajectory
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig

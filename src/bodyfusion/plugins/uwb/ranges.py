@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.core.errors import InputError
-from bodyfusion.io.readers import _clean, _read_lines, _split
+from bodyfusion.io.tables import clean_cell, read_lines, split_line
 from bodyfusion.core.types import InputReport
 
 
@@ -48,10 +48,10 @@ def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_
                 range_column: str = "range_m", nlos_column: str | None = None, delimiter: str = ",") -> RangeLog:
     """Read a range log; ``ids`` are the ends the layout names (anchors, then peers)."""
     path = Path(path)
-    lines = _read_lines(path)
+    lines = read_lines(path)
     if not lines or not lines[0].strip():
         raise InputError(path, "empty file: no header line", 1)
-    header = [_clean(h) for h in _split(lines[0], delimiter)]
+    header = [clean_cell(h) for h in split_line(lines[0], delimiter)]
     wanted = [time_column, id_column, range_column] + ([nlos_column] if nlos_column else [])
     cols = []
     for name in wanted:
@@ -66,17 +66,17 @@ def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_
     for line_no, text in enumerate(lines[1:], start=2):
         if not text.strip():
             continue
-        cells = _split(text, delimiter)
+        cells = split_line(text, delimiter)
         if len(cells) <= max(cols):
             raise InputError(path, f"row has {len(cells)} fields, the header has {len(header)}", line_no)
-        ti = _number(path, _clean(cells[cols[0]]), time_column, line_no)
+        ti = _number(path, clean_cell(cells[cols[0]]), time_column, line_no)
         if not math.isfinite(ti):
             raise InputError(path, f"non-finite time {ti!r}", line_no)
-        who = _clean(cells[cols[1]])
+        who = clean_cell(cells[cols[1]])
         if who not in lookup:
             raise InputError(path, f"id {who!r} is neither an anchor nor a peer of this tag "
                                    f"(the layout names {', '.join(ids)})", line_no)
-        cell = _clean(cells[cols[2]])
+        cell = clean_cell(cells[cols[2]])
         ri = math.nan if cell == "" else _number(path, cell, range_column, line_no)
         if math.isinf(ri):
             raise InputError(path, f"infinite value in column {range_column!r}", line_no)
@@ -94,7 +94,7 @@ def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_
         end.append(lookup[who])
         rng.append(ri)
         if nlos_column:
-            nlos.append(_number(path, _clean(cells[cols[3]]), nlos_column, line_no) != 0)
+            nlos.append(_number(path, clean_cell(cells[cols[3]]), nlos_column, line_no) != 0)
     total = sum(dropped.values())
     notes = [f"{path.name}: dropped {dropped['failed']} failed rangings (empty/NaN), {dropped['negative']} negative, "
              f"{dropped['out_of_order']} out of time order"] if total else []

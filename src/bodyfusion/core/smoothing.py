@@ -1,0 +1,69 @@
+"""Smoothing after the fuser: each system's own smoother, then (optionally) the layout's distance
+constraints on the smoothed tracks.
+
+The core knows no smoother: it calls every system's :meth:`~bodyfusion.core.system.SensorSystem.smooth`
+hook with the layout's ``smoother`` section, and a system that smooths (the foot INS: RTS, FB,
+FB-RTS) returns its diagnostics, one that does not returns None. With
+``smoother.constrain_smoothed`` the constraints are applied once more to the smoothed trajectories
+(:func:`constrain_trajectories`), in position space, with the fuser's solver.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Set
+
+import numpy as np
+
+from bodyfusion.core.constraints import violations
+from bodyfusion.core.fuser import SOLVERS, distance_constraints
+from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
+from bodyfusion.core.system import SensorSystem
+from bodyfusion.core.types import LOG, Trajectory
+
+
+def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:
+    """Smooth every system that smooths; returns {system: its smoothing diagnostics}."""
+    out = {}
+    for name, system in systems.items():
+        diagnostics = system.smooth(cfg)
+        if diagnostics is not None:
+            out[name] = diagnostics
+    return out
+
+
+def constrain_trajectories(trajectories: Mapping[str, Trajectory], smoothed: Set[str],
+                           constraints: list[ConstraintConfig], fuser: FuserConfig) -> tuple[dict[str, Trajectory], dict]:
+    """The smoothed tracks with the layout's distance constraints enforced: on the first
+    constrained system's sample times, at every sample where they are violated, the
+    position-space solve (the fuser's solver, projection when the fuser is off) with each
+    track's position variances (m²); corrections interpolated back to each system's times.
+    Every constrained system must be among ``smoothed`` (else nothing is done). Returns the
+    trajectories (constrained ones replaced) and counts for metrics.json. Never fails a run:
+    a solver error is counted and the tracks are left as they were."""
+    order = list(dict.fromkeys(name for c in constraints for name in c.between))
+    out = dict(trajectories)
+    if any(name not in smoothed for name in order):
+        return out, {"constrained_samples": 0, "skipped": "not every constrained system was smoothed"}
+    method = fuser.method if fuser.method != "none" else "projection"
+    try:
+        cons = distance_constraints(constraints, order)
+        solver = SOLVERS[method](len(order), cons, tol_m=fuser.tolerance_m, max_iter=fuser.max_iterations)
+        trajs = [trajectories[name] for name in order]
+        grid = trajs[0].t
+        pos = np.column_stack([np.interp(grid, tr.t, tr.pos_n[:, ax]) for tr in trajs for ax in range(3)])
+        var = np.column_stack([np.interp(grid, tr.t, tr.pos_sd[:, ax] ** 2) for tr in trajs for ax in range(3)])
+        corr = np.zeros_like(pos)
+        count = 0
+        for i in range(grid.size):
+            if np.max(violations(pos[i], cons), initial=0.0) <= fuser.tolerance_m:
+                continue
+            corr[i] = solver.solve(pos[i], np.diag(np.maximum(var[i], 1e-12))).p - pos[i]
+            count += 1
+    except Exception as err:  # noqa: BLE001 - a post-processing step never fails the run
+        LOG.warning("constraints on the smoothed tracks failed: %s", err)
+        return out, {"constrained_samples": 0, "error": f"{type(err).__name__}: {err}"}
+    for k, name in enumerate(order):
+        tr = trajectories[name]
+        dp = np.column_stack([np.interp(tr.t, grid, corr[:, 3 * k + ax]) for ax in range(3)])
+        out[name] = Trajectory(tr.t, tr.pos_n + dp, tr.pos_sd)
+    return out, {"constrained_samples": count, "method": method}

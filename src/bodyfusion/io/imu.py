@@ -1,0 +1,176 @@
+"""IMU recordings: the layout section that describes a CSV (:class:`ImuCsvConfig`) and the reader
+that turns it into an :class:`~bodyfusion.core.types.ImuStream` in SI units and the body frame,
+checked by :func:`bodyfusion.io.imu_checks.check_imu`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from bodyfusion.core.errors import InputError
+from bodyfusion.core.layout import DataPath, StrictModel
+from bodyfusion.core.types import ImuStream
+from bodyfusion.io.imu_checks import check_imu
+from bodyfusion.io.tables import (TIMESTAMP_POLICIES, apply_timestamp_policy, check_columns, check_time_source,
+                                  read_table, sample_times)
+from bodyfusion.nav.earth import STANDARD_GRAVITY
+from bodyfusion.nav.frames import AxisMap, apply_axis_map
+
+ACC_UNITS: dict[str, float] = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
+GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+
+
+class ImuCsvConfig(StrictModel):
+    """An IMU recorded as CSV: column names, units and time base (see :func:`bodyfusion.io.readers.read_imu_csv`)."""
+
+    path: DataPath
+    """CSV file; relative to the layout file."""
+    acc_columns: tuple[str, str, str]
+    """Header names of the accelerometer x, y, z columns (body frame)."""
+    gyro_columns: tuple[str, str, str]
+    """Header names of the gyroscope x, y, z columns (body frame)."""
+    stance_column: str | None = None
+    """Optional 0/1 stance labels given with the data."""
+    acc_unit: Literal["m/s^2", "g"] = "m/s^2"
+    """Unit of the accelerometer columns: m/s^2 or g (9.80665 m/s^2)."""
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    """Unit of the gyroscope columns: rad/s or deg/s."""
+    time_column: str | None = None
+    """Column of sample times, multiplied by time_scale to give seconds."""
+    time_scale: float = Field(default=1.0, gt=0)
+    """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
+    rate_hz: float | None = Field(default=None, gt=0)
+    """Sample rate (Hz): the time base when the file has no time column; with one, the
+    nominal rate the timestamps are checked against."""
+    skip_rows: int = Field(default=0, ge=0)
+    """Lines before the header line."""
+    delimiter: str = ","
+    """Field separator."""
+    timestamp_policy: Literal["drop", "sort", "error"] = "drop"
+    """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
+    axes: AxisMap = ("x", "y", "z")
+    """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
+    whose z points down at rest into one whose z points up."""
+    max_step_samples: float = Field(default=5.0, gt=1)
+    """A time step longer than this many nominal sample periods is a gap (reported, and
+    handled by the navigation system's gap policy)."""
+
+    @model_validator(mode="after")
+    def _time_source(self) -> "ImuCsvConfig":
+        if self.time_column is None and self.rate_hz is None:
+            raise ValueError("give time_column or rate_hz")
+        return self
+
+
+def read_imu_csv(
+    path: str | Path,
+    *,
+    acc_columns: Sequence[str],
+    gyro_columns: Sequence[str],
+    stance_column: str | None = None,
+    acc_unit: str = "m/s^2",
+    gyro_unit: str = "rad/s",
+    time_column: str | None = None,
+    time_scale: float = 1.0,
+    rate_hz: float | None = None,
+    skip_rows: int = 0,
+    delimiter: str = ",",
+    timestamp_policy: str = "drop",
+    min_samples: int = 10,
+    axes: Sequence[str] = ("x", "y", "z"),
+    declared_rate_hz: float | None = None,
+    max_step_samples: float = 5.0,
+) -> ImuStream:
+    """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units.
+
+    Time is ``time_column`` × ``time_scale`` seconds (e.g. a sample-number column
+    with ``time_scale=1/60``) or ``i / rate_hz``; exactly one must be given.
+    Accelerometer units: ``ACC_UNITS`` (``"g"`` is 9.80665 m/s^2); gyroscope
+    units: ``GYRO_UNITS``.  ``stance_column`` holds 0/1 labels (1 = stance).
+    ``axes`` (a signed axis map, :data:`bodyfusion.core.layout.AxisMap`) turns the file's
+    axes into the body frame.  Non-increasing timestamps are handled by
+    ``timestamp_policy`` (see :func:`apply_timestamp_policy`); what was changed is
+    in ``stream.report``.  The stream is then checked
+    (:func:`bodyfusion.io.imu_checks.check_imu`, against ``declared_rate_hz`` and with gaps
+    longer than ``max_step_samples`` periods): ``stream.checks``, and one warning
+    each in ``stream.report``.
+    """
+    path = Path(path)
+    if acc_unit not in ACC_UNITS:
+        raise InputError(path, f"unknown acc_unit {acc_unit!r}; allowed: " + ", ".join(ACC_UNITS))
+    if gyro_unit not in GYRO_UNITS:
+        raise InputError(path, f"unknown gyro_unit {gyro_unit!r}; allowed: " + ", ".join(GYRO_UNITS))
+    if timestamp_policy not in TIMESTAMP_POLICIES:
+        raise InputError(
+            path, f"unknown timestamp policy {timestamp_policy!r}; allowed: " + ", ".join(TIMESTAMP_POLICIES)
+        )
+    check_time_source(path, time_column, time_scale, rate_hz)
+    acc_cols = check_columns(path, "acc_columns", acc_columns)
+    gyro_cols = check_columns(path, "gyro_columns", gyro_columns)
+    min_samples = max(int(min_samples), 1)
+
+    cols: list[str] = []
+    for c in ([time_column] if time_column is not None else []) + acc_cols + gyro_cols + (
+        [stance_column] if stance_column is not None else []
+    ):
+        if c not in cols:
+            cols.append(c)
+    arrays, line_no = read_table(path, cols, skip_rows=skip_rows, delimiter=delimiter)
+    n = line_no.size
+    if n < min_samples:
+        raise InputError(path, f"only {n} data rows; at least {min_samples} are needed")
+
+    stance = None
+    if stance_column is not None:
+        s = arrays[stance_column]
+        bad = np.flatnonzero((s != 0.0) & (s != 1.0))
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(
+                path, f"stance column {stance_column!r} must be 0 or 1, got {s[i]:g}", int(line_no[i])
+            )
+        stance = s == 1.0
+
+    t = sample_times(arrays, n, time_column, time_scale, rate_hz)
+    kept, report = apply_timestamp_policy(t, timestamp_policy, path, lines=line_no)
+    if kept.size < min_samples:
+        raise InputError(
+            path, f"only {kept.size} samples left after timestamp policy {timestamp_policy!r}; "
+            f"at least {min_samples} are needed"
+        )
+
+    acc = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in acc_cols]) * ACC_UNITS[acc_unit])
+    gyro = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in gyro_cols]) * GYRO_UNITS[gyro_unit])
+    stream = ImuStream(
+        t=np.ascontiguousarray(t[kept]),
+        acc_b=np.ascontiguousarray(acc[kept]),
+        gyro_b=np.ascontiguousarray(gyro[kept]),
+        stance=None if stance is None else np.ascontiguousarray(stance[kept]),
+        source=str(path),
+        report=report,
+    )
+    stream.checks = check_imu(stream.t, stream.acc_b, stream.gyro_b, source=path.name, acc_unit=acc_unit,
+                              gyro_unit=gyro_unit, declared_rate_hz=declared_rate_hz,
+                              max_step_samples=max_step_samples)
+    for message in stream.checks.warnings:
+        report.warn(message)
+    return stream
+
+
+def read_imu(section: ImuCsvConfig) -> ImuStream:
+    """The stream a layout's IMU section describes, in SI units and the body frame, checked
+    (:func:`read_imu_csv`; with both a time column and ``rate_hz``, the rate is the nominal
+    one the timestamps are checked against)."""
+    timed = section.time_column is not None
+    return read_imu_csv(
+        section.path, acc_columns=section.acc_columns, gyro_columns=section.gyro_columns,
+        stance_column=section.stance_column, acc_unit=section.acc_unit, gyro_unit=section.gyro_unit,
+        time_column=section.time_column, time_scale=section.time_scale, rate_hz=None if timed else section.rate_hz,
+        skip_rows=section.skip_rows, delimiter=section.delimiter, timestamp_policy=section.timestamp_policy,
+        axes=section.axes, declared_rate_hz=section.rate_hz if timed else None,
+        max_step_samples=section.max_step_samples)

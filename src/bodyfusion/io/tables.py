@@ -1,0 +1,293 @@
+"""Delimited text tables and time stamps: the layer every file reader stands on.
+
+Every problem with an input file raises :class:`bodyfusion.core.errors.InputError`
+naming the file and, when the problem is one cell or one row, the 1-based
+line number of the file (as an editor shows it).
+
+Parsing strategy: the rows are first handed to ``numpy.loadtxt`` (C parser,
+fast); only when that fails, or when a column may hold missing cells, are the
+rows parsed one by one in Python, which is also what locates the offending
+line for the error message.  A 28 000-row IMU file reads in a few tens of ms.
+
+Timestamps are never silently integrated with a zero or negative step: see
+:func:`apply_timestamp_policy`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Collection, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from bodyfusion.core.errors import InputError
+from bodyfusion.core.types import InputReport
+
+TIMESTAMP_POLICIES = ("drop", "sort", "error")
+
+_QUOTES = "\"'"
+
+
+def clean_cell(cell: str) -> str:
+    """Strip surrounding whitespace and one level of surrounding quotes."""
+    cell = cell.strip()
+    if len(cell) >= 2 and cell[0] == cell[-1] and cell[0] in _QUOTES:
+        cell = cell[1:-1].strip()
+    return cell
+
+
+def split_line(line: str, delimiter: str) -> list[str]:
+    if '"' in line or "'" in line:
+        return next(csv.reader([line], delimiter=delimiter, skipinitialspace=True))
+    return line.split(delimiter)
+
+
+def read_lines(path: Path) -> list[str]:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(path, "file not found") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a directory, not a file") from None
+    except OSError as err:
+        raise InputError(path, f"cannot read file: {err.strerror or err}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise InputError(path, "not a UTF-8 text file", line) from None
+    lines = text.split("\n")
+    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+
+
+def _slow_parse(
+    path: Path,
+    rows: list[str],
+    line_no: np.ndarray,
+    idx: list[int],
+    names: Sequence[str],
+    delimiter: str,
+    allow_missing: Collection[str],
+    n_header: int,
+) -> np.ndarray:
+    """Row-by-row parse; raises at the first bad cell with its line number."""
+    out = np.empty((len(rows), len(idx)), dtype=np.float64)
+    need = max(idx) + 1
+    for r, line in enumerate(rows):
+        cells = split_line(line, delimiter)
+        if len(cells) < need:
+            raise InputError(
+                path,
+                f"row has {len(cells)} fields, the header has {n_header} "
+                f"(column {names[int(np.argmax(np.asarray(idx) >= len(cells)))]!r} is missing)",
+                int(line_no[r]),
+            )
+        for c, (j, name) in enumerate(zip(idx, names)):
+            cell = clean_cell(cells[j])
+            if cell == "":
+                if name in allow_missing:
+                    out[r, c] = np.nan
+                    continue
+                raise InputError(path, f"empty cell in column {name!r}", int(line_no[r]))
+            try:
+                out[r, c] = float(cell)
+            except ValueError:
+                raise InputError(
+                    path, f"non-numeric value {cell!r} in column {name!r}", int(line_no[r])
+                ) from None
+    return out
+
+
+def read_table(
+    path: str | Path,
+    columns: Sequence[str],
+    *,
+    skip_rows: int = 0,
+    delimiter: str = ",",
+    allow_missing: Collection[str] = (),
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Read named numeric columns of a delimited text file.
+
+    The header is the first line after ``skip_rows`` lines; header names are
+    matched exactly after stripping surrounding whitespace and quotes.  Blank
+    lines are ignored (but counted for line numbers).
+
+    Returns ``(arrays, line_no)``: one float64 array per requested column and
+    the 1-based file line number of every data row.
+
+    Cells must be finite numbers.  For columns listed in ``allow_missing`` an
+    empty cell or NaN is accepted and returned as NaN (motion-capture drop-outs);
+    infinity is an error in every column.
+    """
+    path = Path(path)
+    columns = list(columns)
+    if skip_rows < 0:
+        raise InputError(path, f"skip_rows must be >= 0, got {skip_rows}")
+    if not delimiter:
+        raise InputError(path, "delimiter must not be empty")
+    lines = read_lines(path)
+    if len(lines) <= skip_rows or all(not ln.strip() for ln in lines[skip_rows:]):
+        raise InputError(path, "empty file: no header line" + (f" after skipping {skip_rows} rows" if skip_rows else ""))
+    header_line = skip_rows + 1
+    header_text = lines[skip_rows]
+    if not header_text.strip():
+        raise InputError(path, "header line is empty", header_line)
+    header = [clean_cell(h) for h in split_line(header_text, delimiter)]
+
+    idx: list[int] = []
+    for name in columns:
+        hits = [j for j, h in enumerate(header) if h == name]
+        if not hits:
+            raise InputError(
+                path,
+                f"missing column {name!r}; the header has: " + ", ".join(repr(h) for h in header),
+                header_line,
+            )
+        if len(hits) > 1:
+            raise InputError(path, f"column {name!r} appears {len(hits)} times in the header", header_line)
+        idx.append(hits[0])
+
+    body = lines[skip_rows + 1 :]
+    keep = [i for i, ln in enumerate(body) if ln.strip()]
+    rows = [body[i] for i in keep]
+    line_no = np.asarray(keep, dtype=np.int64) + header_line + 1
+    if not rows:
+        raise InputError(path, "no data rows after the header", header_line)
+
+    data: np.ndarray | None = None
+    if not columns:
+        data = np.empty((len(rows), 0))
+    elif not allow_missing:
+        try:
+            data = np.loadtxt(
+                rows, delimiter=delimiter, usecols=idx, dtype=np.float64, ndmin=2,
+                quotechar='"', comments=None,
+            )
+        except (ValueError, IndexError):
+            data = None
+        if data is not None and data.shape != (len(rows), len(idx)):
+            data = None
+    if data is None:
+        data = _slow_parse(path, rows, line_no, idx, columns, delimiter, set(allow_missing), len(header))
+
+    # Non-finite cells: NaN allowed only where asked for; inf never.
+    bad = ~np.isfinite(data)
+    if bad.any():
+        allowed = np.array([c in allow_missing for c in columns], dtype=bool)
+        bad &= ~(np.isnan(data) & allowed[None, :])
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            what = "NaN" if np.isnan(data[r, c]) else "infinite value"
+            raise InputError(path, f"{what} in column {columns[c]!r}", int(line_no[r]))
+
+    arrays = {name: np.ascontiguousarray(data[:, c]) for c, name in enumerate(columns)}
+    return arrays, line_no
+
+
+def apply_timestamp_policy(
+    t: np.ndarray,
+    policy: str,
+    path: str | Path,
+    *,
+    lines: np.ndarray | None = None,
+) -> tuple[np.ndarray, InputReport]:
+    """Make time strictly increasing by an explicit policy.
+
+    Returns ``(kept, report)``: ``kept`` are indices into ``t`` of the samples
+    to keep, in output order, so ``t[kept]`` is strictly increasing.
+
+    - ``"drop"``: keep a sample only if its time is strictly greater than that of
+      the last kept sample; the others count as ``dropped_samples``.
+    - ``"sort"``: stable sort by time; ``reordered_samples`` counts the samples
+      whose position changed; then exact duplicate times are dropped (the first
+      in file order is kept) and counted as ``dropped_samples``.
+    - ``"error"``: raise :class:`InputError` at the first sample whose time is not
+      strictly greater than the previous one.
+
+    ``lines`` (optional): the file line number of each sample, for messages.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    n = t.shape[0]
+    if policy not in TIMESTAMP_POLICIES:
+        raise InputError(
+            path, f"unknown timestamp policy {policy!r}; allowed: " + ", ".join(TIMESTAMP_POLICIES)
+        )
+
+    def where(i: int) -> int | None:
+        return None if lines is None else int(lines[i])
+
+    nonfinite = np.flatnonzero(~np.isfinite(t))
+    if nonfinite.size:
+        i = int(nonfinite[0])
+        raise InputError(path, f"non-finite time {float(t[i])!r}" + ("" if lines is not None else f" at sample {i}"), where(i))
+
+    report = InputReport()
+    if n == 0:
+        return np.arange(0, dtype=np.int64), report
+
+    if policy == "error":
+        bad = np.flatnonzero(np.diff(t) <= 0.0)
+        if bad.size:
+            i = int(bad[0]) + 1
+            kind = "duplicate timestamp" if t[i] == t[i - 1] else "backward timestamp"
+            at = "" if lines is not None else f" at sample {i}"
+            raise InputError(
+                path, f"{kind}{at}: t = {float(t[i])!r} s after t = {float(t[i - 1])!r} s (timestamp policy 'error')", where(i)
+            )
+        return np.arange(n, dtype=np.int64), report
+
+    if policy == "drop":
+        # The max over kept samples before i equals the max over all samples before i.
+        prev_max = np.empty(n)
+        prev_max[0] = -np.inf
+        np.maximum.accumulate(t[:-1], out=prev_max[1:])
+        keep = t > prev_max
+        kept = np.flatnonzero(keep).astype(np.int64)
+        dropped = n - kept.size
+        report.dropped_samples = dropped
+        if dropped:
+            report.notes.append(f"dropped {dropped} samples with non-increasing time (timestamp policy 'drop')")
+        return kept, report
+
+    # sort
+    order = np.argsort(t, kind="stable").astype(np.int64)
+    moved = int(np.count_nonzero(order != np.arange(n)))
+    ts = t[order]
+    keep = np.ones(n, dtype=bool)
+    keep[1:] = ts[1:] > ts[:-1]
+    kept = order[keep]
+    dropped = n - kept.size
+    report.reordered_samples = moved
+    report.dropped_samples = dropped
+    if moved:
+        report.notes.append(f"reordered {moved} samples to restore time order (timestamp policy 'sort')")
+    if dropped:
+        report.notes.append(f"dropped {dropped} samples with duplicate time (timestamp policy 'sort')")
+    return kept, report
+
+
+def check_time_source(path: Path, time_column: str | None, time_scale: float, rate_hz: float | None) -> None:
+    if (time_column is None) == (rate_hz is None):
+        raise InputError(path, "give exactly one of time_column and rate_hz")
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(path, f"rate_hz must be a positive finite number, got {rate_hz!r}")
+    if not (math.isfinite(time_scale) and time_scale > 0):
+        raise InputError(path, f"time_scale must be a positive finite number, got {time_scale!r}")
+
+
+def check_columns(path: Path, what: str, cols: Sequence[str], counts: tuple[int, ...] = (3,)) -> list[str]:
+    if isinstance(cols, str) or len(cols) not in counts:
+        need = " or ".join(map(str, counts))
+        raise InputError(path, f"{what} must name {need} columns (x, y, z), got {cols!r}")
+    return list(cols)
+
+
+def sample_times(
+    arrays: dict[str, np.ndarray], n: int, time_column: str | None, time_scale: float, rate_hz: float | None
+) -> np.ndarray:
+    if time_column is not None:
+        return arrays[time_column] * time_scale
+    assert rate_hz is not None
+    return np.arange(n, dtype=np.float64) / rate_hz

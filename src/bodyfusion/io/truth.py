@@ -1,0 +1,162 @@
+"""Reference (truth) tracks, and the registry of truth file formats a layout may name.
+
+``truth.format`` selects a reader from :data:`TRUTH_FORMATS`; each turns the layout's truth
+section into one :class:`~bodyfusion.core.types.TruthTrack` per scored system, positions in
+the navigation frame (ENU, m): ``wide`` (one row per epoch, columns per system, in the file's
+declared frame), ``long`` (``system,t,east_m,north_m,up_m``, what ``fusion simulate``
+writes), ``phone_log`` (the surveyed points of a GetSensorData log, about the layout's
+geodetic origin). A new format is one function added to the registry.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Collection, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pymap3d
+
+from bodyfusion.core.errors import ConfigError, InputError
+from bodyfusion.core.layout import TruthConfig
+from bodyfusion.core.types import TruthTrack
+from bodyfusion.io.phone_log import read_getsensordata
+from bodyfusion.io.tables import (apply_timestamp_policy, check_columns, check_time_source, clean_cell, read_lines,
+                                  read_table, sample_times, split_line)
+from bodyfusion.nav.frames import apply_axis_map
+
+
+def read_truth_csv(
+    path: str | Path,
+    *,
+    position_columns: Mapping[str, Sequence[str]],
+    time_column: str | None = None,
+    time_scale: float = 1.0,
+    rate_hz: float | None = None,
+    skip_rows: int = 0,
+    delimiter: str = ",",
+    sparse: bool = False,
+    timestamp_policy: str = "error",
+) -> dict[str, TruthTrack]:
+    """Read reference positions, one :class:`TruthTrack` per system.
+
+    ``position_columns`` maps a system name to its three columns (x, y, z of the
+    file's frame, metres) or two (horizontal truth: z is returned as NaN).  A row
+    whose cells for one system are empty or NaN (e.g. a motion-capture marker
+    drop-out) is skipped for that system only; that is not an error and is not
+    counted.  Time rows must be strictly increasing unless ``timestamp_policy``
+    says otherwise.
+    """
+    path = Path(path)
+    if not position_columns:
+        raise InputError(path, "position_columns is empty: name at least one system")
+    check_time_source(path, time_column, time_scale, rate_hz)
+    systems = {name: check_columns(path, f"position_columns[{name!r}]", cols, (2, 3))
+               for name, cols in position_columns.items()}
+
+    cols: list[str] = [time_column] if time_column is not None else []
+    pos_cols: list[str] = []
+    for triplet in systems.values():
+        for c in triplet:
+            if c not in cols:
+                cols.append(c)
+                pos_cols.append(c)
+    arrays, line_no = read_table(path, cols, skip_rows=skip_rows, delimiter=delimiter, allow_missing=pos_cols)
+    n = line_no.size
+    t = sample_times(arrays, n, time_column, time_scale, rate_hz)
+    kept, _ = apply_timestamp_policy(t, timestamp_policy, path, lines=line_no)
+
+    out: dict[str, TruthTrack] = {}
+    for name, triplet in systems.items():
+        pos = np.column_stack([arrays[c] for c in triplet])[kept]
+        ok = ~np.isnan(pos).any(axis=1)
+        if not ok.any():
+            raise InputError(path, f"system {name!r} has no row with all of {triplet} present")
+        if pos.shape[1] == 2:
+            pos = np.column_stack([pos, np.full(len(pos), np.nan)])
+        out[name] = TruthTrack(
+            t=np.ascontiguousarray(t[kept][ok]), pos_n=np.ascontiguousarray(pos[ok]), sparse=sparse
+        )
+    return out
+
+
+LONG_TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
+
+
+def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, TruthTrack]:
+    """Read truth in the long format ``system,t,east_m,north_m,up_m`` (what ``fusion simulate``
+    writes), one :class:`TruthTrack` per system; each system's times must increase strictly."""
+    path = Path(path)
+    lines = read_lines(path)
+    if not lines:
+        raise InputError(path, "empty file")
+    header = [clean_cell(c) for c in split_line(lines[0], ",")]
+    missing = [c for c in LONG_TRUTH_COLUMNS if c not in header]
+    if missing:
+        raise InputError(path, f"missing column(s) {missing}; the header has {header}", line=1)
+    idx = [header.index(c) for c in LONG_TRUTH_COLUMNS]
+    rows: dict[str, list[tuple[int, list[float]]]] = {}
+    for k, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        cells = split_line(line, ",")
+        if len(cells) < len(header):
+            raise InputError(path, f"expected {len(header)} fields, found {len(cells)}", line=k)
+        name = clean_cell(cells[idx[0]])
+        try:
+            values = [float(cells[i]) for i in idx[1:]]
+        except ValueError:
+            raise InputError(path, "non-numeric cell in t/east_m/north_m/up_m", line=k) from None
+        if not all(map(math.isfinite, values)):
+            raise InputError(path, "NaN or inf cell", line=k)
+        rows.setdefault(name, []).append((k, values))
+    out: dict[str, TruthTrack] = {}
+    for name, items in rows.items():
+        line_no = np.array([k for k, _ in items])
+        data = np.array([v for _, v in items])
+        kept, _ = apply_timestamp_policy(data[:, 0], "error", path, lines=line_no)
+        out[name] = TruthTrack(t=np.ascontiguousarray(data[kept, 0]), pos_n=np.ascontiguousarray(data[kept, 1:4]),
+                               sparse=sparse)
+    if not out:
+        raise InputError(path, "no data rows")
+    return out
+
+
+def _wide(truth: TruthConfig, origin: tuple[float, float, float] | None,
+          systems: Collection[str]) -> dict[str, TruthTrack]:
+    tracks = read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
+                            time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
+                            delimiter=truth.delimiter, sparse=truth.sparse)
+    return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n), tr.sparse) for name, tr in tracks.items()}
+
+
+def _long(truth: TruthConfig, origin: tuple[float, float, float] | None,
+          systems: Collection[str]) -> dict[str, TruthTrack]:
+    tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
+    return {name: tr for name, tr in tracks.items() if name in systems}
+
+
+def _phone_log(truth: TruthConfig, origin: tuple[float, float, float] | None,
+               systems: Collection[str]) -> dict[str, TruthTrack]:
+    """The log's surveyed points (POSI lines), sparse truth for ``truth.score_systems``."""
+    ref = read_getsensordata(truth.path).reference
+    if ref is None:
+        raise ConfigError("truth.path", "the log has no POSI lines")
+    if origin is None:
+        raise ConfigError("geodetic_origin", "surveyed truth needs a geodetic origin")
+    e, n, _ = pymap3d.geodetic2enu(ref.lat_deg, ref.lon_deg, np.full(len(ref.t), origin[2]), *origin)
+    pos = np.column_stack([e, n, np.zeros(len(ref.t))])
+    return {name: TruthTrack(ref.t, pos, sparse=True) for name in truth.score_systems}
+
+
+TruthReader = Callable[[TruthConfig, "tuple[float, float, float] | None", Collection[str]], dict[str, TruthTrack]]
+TRUTH_FORMATS: dict[str, TruthReader] = {"wide": _wide, "long": _long, "phone_log": _phone_log}
+"""``truth.format`` → reader(truth section, geodetic origin or None, the layout's system names)."""
+
+
+def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,
+               systems: Collection[str]) -> dict[str, TruthTrack]:
+    """The truth tracks a layout's truth section describes (empty without a path)."""
+    if truth.path is None:
+        return {}
+    return TRUTH_FORMATS[truth.format](truth, origin, systems)
