@@ -16,7 +16,7 @@ from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.run import build_systems, layout_context, run, run_layout
 from bodyfusion.core.seeding import system_seed
 from bodyfusion.sim import simulate
-from bodyfusion.sim.uwb import NlosConfig, nlos_states
+from bodyfusion.plugins.uwb.simulation import NlosConfig, nlos_states
 from bodyfusion.testing import check_system, default_context, with_value
 from bodyfusion.plugins.uwb import UwbTag
 from bodyfusion.plugins.uwb.ranges import read_ranges

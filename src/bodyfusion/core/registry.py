@@ -37,6 +37,12 @@ class FusionHookSpec:
         (``systems.<name>.plugin``) and validates its section with its ``Config`` model.
         """
 
+    @hookspec
+    def fusion_simulation_kinds(self) -> list[Any]:
+        """Return the scenario system kinds this plugin simulates
+        (:class:`bodyfusion.sim.context.SystemKind`: the ``kind`` name, its scenario section
+        model, the function that simulates it and writes this plugin's layout section)."""
+
 
 @dataclass(frozen=True)
 class PluginInfo:
@@ -69,6 +75,16 @@ class Registry:
     @property
     def names(self) -> list[str]:
         return sorted(self._classes)
+
+    def simulation_kinds(self) -> dict[str, Any]:
+        """Every plugin's simulated system kinds by ``kind`` name (a scenario's ``systems.<name>.kind``)."""
+        kinds: dict[str, Any] = {}
+        for batch in self.pm.hook.fusion_simulation_kinds():
+            for kind in batch:
+                if kind.kind in kinds:
+                    raise ConfigError("plugins", f"two plugins simulate kind {kind.kind!r}")
+                kinds[kind.kind] = kind
+        return kinds
 
     def system_class(self, name: str, *, key: str = "plugin", path: str | Path | None = None) -> Any:
         try:

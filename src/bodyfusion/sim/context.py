@@ -1,18 +1,24 @@
-"""What a simulated system kind is given and what it returns (:mod:`bodyfusion.sim.scenario`
-runs the kinds; each kind's module builds on these)."""
+"""What a simulated system kind is given and what it returns.
+
+A *kind* (``systems.<name>.kind`` in a scenario file) is owned by the plugin whose layout
+section it writes (MaRS-style: each sensor's folder holds its whole model, simulation
+included): the plugin returns :class:`SystemKind` objects from its
+``fusion_simulation_kinds`` hook, and :mod:`bodyfusion.sim.scenario` runs them with a
+:class:`SimContext`. Each kind builds its layout section with its plugin's own config model,
+so a renamed config field breaks the simulation at once, not the run that reads it.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+from pydantic import BaseModel
 
-from bodyfusion.sim.gait import GaitPlan
-
-if TYPE_CHECKING:
-    from bodyfusion.sim.scenario import Scenario
+from bodyfusion.sim.gait import GaitConfig, GaitPlan
 
 DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
 """Latitude (deg), longitude (deg), ellipsoidal height (m) of the ENU frame when a scenario gives none."""
@@ -20,21 +26,19 @@ DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
 
 @dataclass
 class SimContext:
-    """What every system kind sees: the scenario, the walk, the seed and the output folder."""
+    """What every system kind sees: the scenario's rate (Hz), gravity (m/s^2) and gait, the
+    planned walk and its sample times (s), the seed, the output folder, the geodetic origin
+    of the ENU frame, and the systems simulated so far (aiding kinds read their hosts' truth)."""
 
-    scenario: Scenario
+    rate_hz: float
+    gravity_mps2: float
+    gait: GaitConfig
     plan: GaitPlan
     t: np.ndarray
     seed: int
     out_dir: Path
+    geodetic_origin: tuple[float, float, float] = DEFAULT_GEODETIC_ORIGIN
     outputs: dict[str, SystemOutput] = field(default_factory=dict)
-    """Systems simulated so far (aiding kinds such as ``uwb_tag`` read their hosts' truth)."""
-
-    @property
-    def geodetic_origin(self) -> tuple[float, float, float]:
-        """The scenario's geodetic origin, or :data:`DEFAULT_GEODETIC_ORIGIN`."""
-        origin = self.scenario.geodetic_origin
-        return tuple(float(v) for v in (origin if origin is not None else DEFAULT_GEODETIC_ORIGIN))  # type: ignore[return-value]
 
 
 @dataclass
@@ -50,3 +54,23 @@ class SystemOutput:
     """Entries for the layout's ``outages`` list (system, start_s, duration_s)."""
     uses_geodetic_origin: bool = False
     """The system's data is geodetic (GNSS): the layout needs the scenario's origin."""
+
+
+@dataclass(frozen=True)
+class SystemKind:
+    """A ``systems.<name>.kind``: its scenario section model, its simulation function
+    (name, validated section, context) → :class:`SystemOutput`, and the plugin whose layout
+    section it writes. ``aids``: an aiding kind (a UWB tag), simulated after the systems
+    whose truth it needs."""
+
+    kind: str
+    config: type[BaseModel]
+    simulate: Callable[[str, Any, SimContext], SystemOutput]
+    plugin: str
+    aids: bool = False
+
+
+def layout_section(config: BaseModel) -> dict[str, Any]:
+    """A plugin config model as the plain layout section written into config.yaml: the
+    fields that were set, JSON types (paths as strings, tuples as lists)."""
+    return config.model_dump(mode="json", exclude_unset=True)

@@ -107,7 +107,8 @@ from pydantic import Field, model_validator
 
 from bodyfusion.core.layout import StrictModel
 from bodyfusion.core.errors import ConfigError
-from bodyfusion.sim.imu import STANDARD_GRAVITY, MotionState, quat_multiply
+from bodyfusion.nav.earth import STANDARD_GRAVITY
+from bodyfusion.sim.imu import MotionState, quat_multiply
 from bodyfusion.sim.paths import BodyPath, direction, left_normal
 
 __all__ = ["FlightConfig", "FootMotion", "FootTrack", "GAIT_KINDS", "GaitConfig", "GaitPlan", "Impact", "ImpactConfig",

@@ -41,12 +41,13 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
-
-from bodyfusion.core.seeding import system_seed
 from pydantic import Field
 from scipy.signal import lfilter
 
+from bodyfusion.core.seeding import system_seed
+
 from bodyfusion.core.layout import StrictModel
+from bodyfusion.nav.earth import STANDARD_GRAVITY
 
 __all__ = [
     "ERROR_TERMS",
@@ -62,7 +63,6 @@ __all__ = [
     "quat_multiply",
 ]
 
-STANDARD_GRAVITY = 9.80665
 _DEG = math.pi / 180.0
 
 
@@ -336,3 +336,14 @@ def corrupt(ideal: np.ndarray, rate_hz: float, errors: SensorErrors,
     if errors.noise_density > 0:
         out += errors.noise_density * math.sqrt(rate_hz) * r["white"].standard_normal((n, 3))
     return out
+
+
+def measured_imu(motion: Motion, t: np.ndarray, rate_hz: float, gravity_mps2: float, imu: ImuErrorConfig,
+                 seed: int, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """What the IMU of system ``name`` riding ``motion`` reports at times ``t`` (s): the
+    ideal specific force (m/s^2) and angular rate (rad/s) corrupted by its error model
+    from its own random streams (:func:`error_generators`)."""
+    acc, gyro = ideal_imu(motion, t, gravity_mps2)
+    errors = imu.resolve()
+    rngs = error_generators(seed, name)
+    return corrupt(acc, rate_hz, errors.acc, rngs, "acc"), corrupt(gyro, rate_hz, errors.gyro, rngs, "gyro")

@@ -228,7 +228,7 @@ class MagnetometerConfig(StrictModel):
 class HandPdrConfig(StrictModel):
     """A phone held in the hand: PDR from its IMU, corrected by GNSS.
 
-    Data: either ``imu`` (a CSV, see :class:`bodyfusion.core.layout.ImuCsvConfig`) or ``phone_log``
+    Data: either ``imu`` (a CSV, see :class:`bodyfusion.io.imu.ImuCsvConfig`) or ``phone_log``
     (a GetSensorData log: its ACCE/GYRO lines, its GNSS lines with ``gnss.format:
     phone_log`` and its MAGN lines for the ``magnetometer``). ``geodetic_origin``: (lat
     deg, lon deg, height m) of the ENU frame; default the layout's origin, else the first

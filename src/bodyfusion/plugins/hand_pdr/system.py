@@ -80,7 +80,7 @@ from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.io.phone_log import read_getsensordata
-from bodyfusion.io.imu import read_imu_csv
+from bodyfusion.io.imu import read_imu
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.core.types import InputReport, Trajectory
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
@@ -136,10 +136,7 @@ class HandPdr(SensorSystem):
                 magn = (log.magn.t, log.magn.xyz)  # GetSensorData logs µT
         else:
             d = config.imu
-            stream = read_imu_csv(d.path, acc_columns=d.acc_columns, gyro_columns=d.gyro_columns,
-                                  acc_unit=d.acc_unit, gyro_unit=d.gyro_unit, time_column=d.time_column,
-                                  time_scale=d.time_scale, rate_hz=d.rate_hz, skip_rows=d.skip_rows,
-                                  delimiter=d.delimiter, timestamp_policy=d.timestamp_policy)
+            stream = read_imu(d)
             report = stream.report
             self.t, acc, gyro = stream.t, stream.acc_b, stream.gyro_b
             if mag.enabled:

@@ -20,7 +20,8 @@ Errors, per link (anchor or peer), each from its own random stream:
 
 Written: ``<name>_ranges.csv`` with ``t,id,range_m,nlos`` (``nlos``: the truth flag, for
 evaluation; the generated layout names it ``ranges.nlos_column``), and a
-``plugin: uwb`` layout section. A tag has no truth track of its own.
+``plugin: uwb`` layout section built with :class:`~bodyfusion.plugins.uwb.config.UwbConfig`.
+A tag has no truth track of its own.
 
 Random numbers: ``system_seed(seed, name + "#uwb")`` spawned into one stream per link,
 in the order anchors then peers.
@@ -35,13 +36,15 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from bodyfusion.core.layout import KeyedError, StrictModel
 from bodyfusion.core.errors import ConfigError
+from bodyfusion.core.layout import KeyedError, StrictModel
 from bodyfusion.core.seeding import system_seed
-from bodyfusion.sim.context import SimContext, SystemOutput
+from bodyfusion.plugins.uwb.config import RangeFileConfig, UwbConfig
+from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
 
 
-__all__ = ["NlosConfig", "RANGE_COLUMNS", "UwbTagSystem", "link_ranges", "nlos_states", "simulate_uwb_tag"]
+__all__ = ["NlosConfig", "RANGE_COLUMNS", "SIMULATION_KINDS", "UwbTagSystem", "link_ranges", "nlos_states",
+           "simulate_uwb_tag"]
 
 RANGE_COLUMNS = ("t", "id", "range_m", "nlos")
 Vector3 = tuple[float, float, float]
@@ -143,7 +146,7 @@ def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOut
         out = ctx.outputs.get(ref)
         if out is None or out.truth_t.size == 0:
             raise ConfigError(f"{key}.{ref_key}", f"{ref!r} is not a simulated navigation system")
-    rate = ctx.scenario.rate_hz
+    rate = ctx.rate_hz
     step = rate / cfg.rate_hz
     if abs(step - round(step)) > 1e-9:
         raise ConfigError(f"{key}.rate_hz", f"must divide the scenario's rate_hz {rate:g} (rangings at IMU samples)")
@@ -166,13 +169,11 @@ def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOut
         ranges[:, j], nlos[:, j] = link_ranges(np.linalg.norm(tag - other, axis=1), 1.0 / cfg.rate_hz, cfg, rng)
     path = ctx.out_dir / f"{name}_ranges.csv"
     write_ranges_csv(path, t, ids, ranges, nlos)
-    section = {
-        "plugin": "uwb",
-        "host": cfg.host,
-        "lever_arm_m": [float(v) for v in cfg.lever_arm_m],
-        "anchors": {a: [float(v) for v in p] for a, p in cfg.anchors.items()},
-        "peers": {p: [float(v) for v in lever] for p, lever in cfg.peers.items()},
-        "ranges": {"path": path.name, "nlos_column": "nlos"},
-        "sigma_m": float(cfg.sigma_m),
-    }
-    return SystemOutput(np.empty(0), np.empty((0, 3)), section, int(ranges.size), [path])
+    section = UwbConfig(plugin="uwb", host=cfg.host, lever_arm_m=cfg.lever_arm_m, anchors=cfg.anchors,
+                        peers=cfg.peers, ranges=RangeFileConfig(path=Path(path.name), nlos_column="nlos"),
+                        sigma_m=cfg.sigma_m)
+    return SystemOutput(np.empty(0), np.empty((0, 3)), layout_section(section), int(ranges.size), [path])
+
+
+SIMULATION_KINDS = [SystemKind("uwb_tag", UwbTagSystem, simulate_uwb_tag, "uwb", aids=True)]
+"""What this plugin simulates (returned by its ``fusion_simulation_kinds`` hook)."""
