@@ -147,7 +147,7 @@ def test_ensemble_same_seed_same_bits_other_seed_differs(vicon_slice, kind):
 
     a, b, c = run(3), run(3), run(4)
     assert a.hist_x[: a._i + 1].tobytes() == b.hist_x[: b._i + 1].tobytes()
-    assert a.ensemble.ens.tobytes() == b.ensemble.ens.tobytes()
+    assert a.filter.ensemble.ens.tobytes() == b.filter.ensemble.ens.tobytes()
     assert a.hist_x[: a._i + 1].tobytes() != c.hist_x[: c._i + 1].tobytes()
 
 
@@ -155,7 +155,7 @@ def test_ensemble_same_seed_same_bits_other_seed_differs(vicon_slice, kind):
 def test_ensemble_quaternions_stay_unit(vicon_slice, kind):
     s = left_foot(vicon_slice, kind_overrides(kind))
     s.advance(s.t_end)
-    q_members = s.ensemble.ens[:, 6:10]
+    q_members = s.filter.ensemble.ens[:, 6:10]
     assert np.max(np.abs(np.linalg.norm(q_members, axis=1) - 1.0)) < 1e-12
     assert np.max(np.abs(np.linalg.norm(s.hist_x[:, 6:10], axis=1) - 1.0)) < 1e-12
     assert s.P.shape == ((18, 18) if kind == "cenekf" else (15, 15))
@@ -181,9 +181,9 @@ def test_ensemble_correction_moves_the_mean_and_sets_the_covariance(vicon_slice,
     np.testing.assert_array_equal(s.position_n(), x0[0:3] + dx[0:3])
     np.testing.assert_array_equal(s.covariance(), 0.5 * (P_new + P_new.T))
     # the members themselves: their mean at x + dx, their sample covariance P
-    mean = s.ensemble.ens.mean(axis=0)
+    mean = s.filter.ensemble.ens.mean(axis=0)
     np.testing.assert_allclose(mean[0:6], x0[0:6] + dx[0:6], rtol=0, atol=1e-12)
-    P_members = s.ensemble.covariance()
+    P_members = s.filter.ensemble.covariance()
     scale = np.sqrt(np.outer(np.diag(P_new), np.diag(P_new)))
     assert np.max(np.abs(P_members - P_new) / scale) < 1e-6
 

@@ -6,27 +6,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from bodyfusion.nav import detectors
-from bodyfusion.core.layout import KeyedError, Layout, SmootherConfig
-from bodyfusion.nav.frames import apply_axis_map
-from bodyfusion.nav.earth import earth_rate_enu
 from bodyfusion.core.errors import ConfigError, FusionError
-from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force, find_still_interval,
-                                     heading_axis)
-from bodyfusion.nav.measurements import GateCounts, chi2_gate, position_fix_update
-from bodyfusion.nav.attitude import quat_to_dcm
-from bodyfusion.io.imu import read_imu
-from bodyfusion.io.truth import read_truth_csv
-from bodyfusion.nav.strapdown import NOMINAL_SIZE
+from bodyfusion.core.layout import KeyedError, Layout, SmootherConfig
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.core.types import ImuStream, InputReport, Trajectory
-from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, ENSEMBLE_KINDS, DetectorConfig, FootInsConfig
-from bodyfusion.nav.error_state import (DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, inject, inv3_sym,
-                                rotate_about_up)
-from bodyfusion.plugins.foot_ins.ensemble import Ensemble
+from bodyfusion.io.imu import read_imu
+from bodyfusion.io.truth import read_truth_csv
+from bodyfusion.nav import detectors
+from bodyfusion.nav.attitude import quat_to_dcm
+from bodyfusion.nav.earth import earth_rate_enu
+from bodyfusion.nav.error_state import DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, rotate_about_up
+from bodyfusion.nav.frames import apply_axis_map
+from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
+                                              find_still_interval, heading_axis)
+from bodyfusion.nav.measurements import GateCounts, chi2_gate
+from bodyfusion.nav.strapdown import NOMINAL_SIZE
+from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
+from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
+from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
+                                                 run_foot_ins)
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
-from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS,
-                                             COUNTERS_SIZE, differenced_samples, run_foot_ins, run_foot_ins_coloured)
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
@@ -112,23 +111,18 @@ class FootIns(SensorSystem):
     @classmethod
     def check_layout(cls, name: str, config: FootInsConfig, layout: Layout) -> None:
         """Refuse layout settings this system's estimator cannot serve (KeyedError naming the
-        layout key): the ensemble kinds with a smoother (the smoothers rebuild the 15-state
-        EKF's covariances) or with tracked cross-covariances (no error-state transition Φ)."""
+        layout key): a smoother for an estimator the smoothers cannot rebuild, tracked
+        cross-covariances for one without an error-state transition (the ensemble kinds)."""
         kind = config.filter.kind
-        if kind not in ENSEMBLE_KINDS:
-            return
-        if layout.smoother.kind != "none":
+        estimator = ESTIMATORS[kind]
+        if layout.smoother.kind != "none" and not estimator.smoothable:
             raise KeyedError("smoother.kind", f"systems.{name}.filter.kind {kind} cannot be smoothed "
                                               "(the smoothers rebuild the 15-state EKF); use none")
         constrained = {n for c in layout.constraints for n in c.between}
-        if layout.fuser.cross_covariance and name in constrained and layout.fuser.method != "none":
+        if (layout.fuser.cross_covariance and name in constrained and layout.fuser.method != "none"
+                and not estimator.tracks_transition):
             raise KeyedError("fuser.cross_covariance", f"systems.{name}.filter.kind {kind} has no error-state "
                                                        "transition to carry cross-covariances; use false")
-
-    @property
-    def is_ensemble(self) -> bool:
-        """True for the ensemble estimators (enekf, cenekf)."""
-        return self.config.filter.kind in ENSEMBLE_KINDS
 
     # --- set-up -------------------------------------------------------------------
     def _read_position_fixes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -264,38 +258,47 @@ class FootIns(SensorSystem):
         return x0, P0
 
     def restart(self) -> None:
-        """Back to the initial state at the first sample; history cleared (the ensemble
+        """Back to the initial state at the first sample; history cleared (an ensemble
         redrawn from the same seed)."""
         n = len(self.stream)
-        f = self.config.filter
-        self.ensemble: Ensemble | None = None
-        if self.is_ensemble:
-            self.ensemble = Ensemble(f.members, self._x0, self._P0,
-                                     f.colour_factor if f.kind in COLOURED_KINDS else None, f.zupt_sigma_mps,
-                                     self.context.seed, self.name)
-            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
-            self.P = self.ensemble.covariance()
-        else:
-            self.x = self._x0.copy()
-            self.P = self._P0.copy()
-        self.hist_x = np.empty((n, NOMINAL_SIZE))
-        self.hist_pos_var = np.empty((n, 3))
-        self.hist_x[0] = self.x
-        self.hist_pos_var[0] = np.diag(self.P)[:3]
-        self.counters = np.zeros(COUNTERS_SIZE)
+        self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
+                                                                     self.context.seed, self.name)
+        self.run_data = RunData(self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
+                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 3)), np.zeros(COUNTERS_SIZE))
+        self.run_data.hist_x[0] = self.x
+        self.run_data.hist_pos_var[0] = np.diag(self.P)[:3]
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
-        self.mech_memory = np.zeros(6)
         self.fix_counts = GateCounts()
         self._next_fix = 0
-        self._next_gap = 0
         self._i = 0  # index of the sample the state refers to
-        # for the smoother (bodyfusion.plugins.foot_ins.smoothing): covariances left by corrections outside the
-        # compiled loop (fuser constraints, position fixes), and the smoothed result
-        self._override_idx: list[np.ndarray] = []
-        self._override_P: list[np.ndarray] = []
         self.smoothed_x: np.ndarray | None = None
         self.smoothed_pos_var: np.ndarray | None = None
         self.smoothing_diagnostics: dict | None = None
+
+    @property
+    def x(self) -> np.ndarray:
+        """Nominal state (16,): position ENU m, velocity m/s, q_nb, accelerometer and gyro biases."""
+        return self.filter.x
+
+    @property
+    def P(self) -> np.ndarray:
+        """Error-state covariance (15, 15; 18, 18 for the cenekf)."""
+        return self.filter.P
+
+    @property
+    def hist_x(self) -> np.ndarray:
+        """(N, 16) nominal state after each sample."""
+        return self.run_data.hist_x
+
+    @property
+    def hist_pos_var(self) -> np.ndarray:
+        """(N, 3) position variances after each sample, m²."""
+        return self.run_data.hist_pos_var
+
+    @property
+    def counters(self) -> np.ndarray:
+        """The kernels' counters (layout ``C_*`` of :mod:`bodyfusion.plugins.foot_ins.kernels`)."""
+        return self.run_data.counters
 
     # --- time ---------------------------------------------------------------------
     @property
@@ -307,14 +310,9 @@ class FootIns(SensorSystem):
         while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
             k = self._fix_index[self._next_fix]
             self._run_to(k + 1)
-            if self.ensemble is not None:
-                self._ensemble_position_fix(self._fix_pos_n[self._next_fix])
-            else:
-                position_fix_update(self.x, self.P, self._fix_pos_n[self._next_fix], self._fix_sigma,
-                                    self._fix_gate, self.fix_counts, self.phi)
-                self.hist_x[k] = self.x
-                self.hist_pos_var[k] = np.diag(self.P)[:3]
-                self._record_override(k)
+            self.filter.position_fix(self._fix_pos_n[self._next_fix], self._fix_sigma, self._fix_gate,
+                                     self.fix_counts, self.phi)
+            self._record_state(k)
             self._next_fix += 1
         self._run_to(i1)
 
@@ -324,37 +322,15 @@ class FootIns(SensorSystem):
         i = self._i + 1
         if i1 <= i:
             return
-        st = self.stream
-        if self.ensemble is not None:
-            self.ensemble.run(st.t, st.acc_b, st.gyro_b, self.stance, i, i1, self._params, self.hist_x,
-                              self.hist_pos_var, self.counters)
-            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
-            self.P = self.ensemble.covariance()
-        else:
-            gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
-            for a, b in zip([i, *gaps], [*gaps, i1]):
-                if a in gaps:
-                    self.P += self._gap_P[np.searchsorted(self._gap_index, a)]
-                    self._record_override(a - 1)
-                self._run_kernel(a, b)
+        gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
+        for a, b in zip([i, *gaps], [*gaps, i1]):
+            if a in gaps:
+                dP = np.zeros_like(self.P)
+                dP[:15, :15] = self._gap_P[np.searchsorted(self._gap_index, a)]
+                self._i = a - 1
+                self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
+            self.filter.run(self.run_data, a, b, self.phi)
         self._i = i1 - 1
-
-    def _run_kernel(self, i0: int, i1: int) -> None:
-        st = self.stream
-        f = self.config.filter
-        if f.kind == "ckf":
-            bound = differenced_samples(self.stance, i0, i1).size
-            post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
-            run_foot_ins_coloured(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params,
-                                  f.colour_factor, self.mech_memory, self.phi, self.hist_x, self.hist_pos_var,
-                                  self.counters, post_idx, post_P)
-            k = int(self.counters[C_CALL_COLOURED])
-            if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
-                self._override_idx.append(post_idx[:k])
-                self._override_P.append(post_P[:k])
-            return
-        run_foot_ins(self.x, self.P, st.t, st.acc_b, st.gyro_b, self.stance, i0, i1, self._params, self.mech_memory,
-                     self.phi, self.hist_x, self.hist_pos_var, self.counters)
 
     # --- heading ------------------------------------------------------------------
     @property
@@ -392,39 +368,20 @@ class FootIns(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        P = 0.5 * (P + P.T)
-        if self.ensemble is not None:
-            self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
-            self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
-            self.P = P
-            self.hist_x[self._i] = self.x
-            self.hist_pos_var[self._i] = np.diag(self.P)[:3]
-            return
-        inject(self.x, np.ascontiguousarray(dx, dtype=np.float64))
-        self.P = P
-        self.hist_x[self._i] = self.x
-        self.hist_pos_var[self._i] = np.diag(self.P)[:3]
-        self._record_override(self._i)
+        self.filter.correct(dx, 0.5 * (P + P.T))
+        self._record_state(self._i)
 
-    def _ensemble_position_fix(self, z_n: np.ndarray) -> None:
-        """Gated position fix on the ensemble: the Kalman update of the mean and the sample
-        covariance (H selects δp, σ per axis, chi-square gate), applied to the members by
-        :meth:`apply_correction`."""
-        y = z_n - self.x[0:3]
-        r_var = self._fix_sigma**2
-        P = self.P
-        S = P[0:3, 0:3] + r_var * np.eye(3)
-        if float(y @ inv3_sym(np.ascontiguousarray(S)) @ y) > self._fix_gate:
-            self.fix_counts.rejected += 1
-            return
-        K = np.linalg.solve(S, P[0:3, :]).T
-        IKH = np.eye(P.shape[0])
-        IKH[:, 0:3] -= K
-        self.apply_correction(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
-        self.fix_counts.accepted += 1
+    def _record_state(self, i: int) -> None:
+        """History row i after a correction outside the compiled loop (fuser, fix, gap); the
+        covariance left there is recorded for the smoothers."""
+        self.hist_x[i] = self.x
+        self.hist_pos_var[i] = np.diag(self.P)[:3]
+        if self.filter.smoothable:
+            self.run_data.override_idx.append(np.array([i], dtype=np.int64))
+            self.run_data.override_P.append(self.P[None].copy())
 
     def track_transition(self) -> None:
-        if self.ensemble is not None:
+        if not self.filter.tracks_transition:
             raise FusionError(f"system {self.name!r} (foot_ins, filter.kind {self.config.filter.kind}) cannot "
                               "track cross-covariances: set fuser.cross_covariance false")
         self._tracking = True
@@ -442,22 +399,18 @@ class FootIns(SensorSystem):
     def sample_times(self) -> np.ndarray:
         return self.stream.t
 
-    # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) --------------------------------------------------
-    def _record_override(self, i: int) -> None:
-        self._override_idx.append(np.array([i], dtype=np.int64))
-        self._override_P.append(self.P[None].copy())
-
+    # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) ---------------------------------------------
     def smoothing_record(self) -> dict:
         """What the smoother needs to rebuild this filter's run (nothing is copied but the
         few covariances set outside the compiled loop): IMU samples, stance flags, filter
         parameters, the recorded nominal history, the initial covariance, and the sample
         indices (sorted) with the covariance left there by a fuser correction or a fix (and,
         for the ckf, after every coloured update). Ensemble kinds have no such record."""
-        if self.ensemble is not None:
+        if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
-        idx = np.concatenate([np.empty(0, dtype=np.int64), *self._override_idx])
-        Ps = np.concatenate([np.empty((0, 15, 15)), *self._override_P])
+        idx = np.concatenate([np.empty(0, dtype=np.int64), *self.run_data.override_idx])
+        Ps = np.concatenate([np.empty((0, 15, 15)), *self.run_data.override_P])
         order = np.argsort(idx, kind="stable")
         return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
@@ -520,7 +473,7 @@ class FootIns(SensorSystem):
             **({"input_checks": self.stream.checks.to_dict()} if self.stream.checks is not None else {}),
             "filter_kind": self.config.filter.kind,
             **({"coloured_updates": int(self.counters[C_COLOURED])} if self.config.filter.kind == "ckf" else {}),
-            **({"members": self.config.filter.members} if self.ensemble is not None else {}),
+            **({"members": self.config.filter.members} if isinstance(self.filter, EnsembleEkf) else {}),
             **({"position_fixes_accepted": self.fix_counts.accepted,
                 "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
             **({"smoothing": self.smoothing_diagnostics} if self.smoothing_diagnostics is not None else {}),

@@ -1,0 +1,152 @@
+"""The foot INS's estimators, one class per ``filter.kind``, chosen once when the system is built.
+
+Each holds the nominal state ``x`` (16,) and the error-state covariance ``P`` and knows how to
+process a chunk of samples, take a closed-loop correction from the fuser and apply a position
+fix; :class:`~bodyfusion.plugins.foot_ins.system.FootIns` owns the data, the history, the gap
+policy and the record the smoothers rebuild from, and never asks which kind it runs.
+
+* :class:`ErrorStateEkf` (``ekf``): the 15-state error-state EKF, compiled per-sample loop
+  (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`) with the gated ZUPT.
+* :class:`ColouredEkf` (``ckf``): the same with the zero-velocity update under coloured noise
+  ([Xu2024] eqs. 5–18); the smoothers rebuild ordinary ZUPTs, so it keeps its covariance after
+  every coloured update for them.
+* :class:`EnsembleEkf` (``enekf``, ``cenekf``): M members carrying the attitude quaternion
+  ([Deng2026] eqs. 1–19); ``x`` is their mean, ``P`` the sample covariance of their error-state
+  deviations (15, or 18 with the coloured noise δV). Not smoothable, no error-state transition
+  for the fuser's cross-covariances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from bodyfusion.nav.error_state import inject, inv3_sym
+from bodyfusion.nav.measurements import GateCounts, position_fix_update
+from bodyfusion.nav.strapdown import NOMINAL_SIZE
+from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
+from bodyfusion.plugins.foot_ins.ensemble import Ensemble
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, differenced_samples, run_foot_ins,
+                                                 run_foot_ins_coloured)
+
+
+@dataclass
+class RunData:
+    """What every estimator reads and writes: the samples (t s, specific force m/s^2, rate
+    rad/s, stance flags), the filter parameters, the per-sample history rows it fills
+    (nominal state, position variances m²), the counters, and the covariances it leaves
+    outside the plain EKF recursion (sample index, covariance) for the smoothers."""
+
+    t: np.ndarray
+    acc_b: np.ndarray
+    gyro_b: np.ndarray
+    stance: np.ndarray
+    params: np.ndarray
+    hist_x: np.ndarray
+    hist_pos_var: np.ndarray
+    counters: np.ndarray
+    override_idx: list[np.ndarray] = field(default_factory=list)
+    override_P: list[np.ndarray] = field(default_factory=list)
+
+
+class Estimator:
+    """A foot INS estimator: state ``x`` (16,), covariance ``P`` (n, n)."""
+
+    smoothable: ClassVar[bool] = True
+    """The smoothers can rebuild its covariances (the 15-state EKF recursion)."""
+    tracks_transition: ClassVar[bool] = True
+    """It can accumulate the error-state transition Φ for the fuser's cross-covariances."""
+
+    def __init__(self, x0: np.ndarray, P0: np.ndarray, cfg: FootFilterConfig, seed: int, name: str) -> None:
+        self.x = x0.copy()
+        self.P = P0.copy()
+        self.cfg = cfg
+        self.mech_memory = np.zeros(6)
+
+    def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
+        """Process samples i0 ≤ i < i1; ``phi`` accumulates the transition ((0, 0): off)."""
+        run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
+                     self.mech_memory, phi, data.hist_x, data.hist_pos_var, data.counters)
+
+    def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """Closed-loop reset: inject dx (n,) into the nominal state, take P (n, n)."""
+        inject(self.x, np.ascontiguousarray(dx[:15], dtype=np.float64))
+        self.P = P
+
+    def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
+                     phi: np.ndarray) -> None:
+        """Gated absolute position fix (ENU, m; σ per axis; chi-square ``gate``, 3 dof)."""
+        position_fix_update(self.x, self.P, z_n, sigma_m, gate, counts, phi)
+
+
+class ErrorStateEkf(Estimator):
+    """``ekf``: the 15-state error-state EKF."""
+
+
+class ColouredEkf(Estimator):
+    """``ckf``: the EKF with the zero-velocity update under coloured noise of colour factor
+    ``filter.colour_factor``; records the covariance after each coloured update."""
+
+    def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
+        bound = differenced_samples(data.stance, i0, i1).size
+        post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
+        run_foot_ins_coloured(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
+                              self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_var,
+                              data.counters, post_idx, post_P)
+        k = int(data.counters[C_CALL_COLOURED])
+        if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+            data.override_idx.append(post_idx[:k])
+            data.override_P.append(post_P[:k])
+
+
+class EnsembleEkf(Estimator):
+    """``enekf``, ``cenekf``: the ensemble filter (:class:`~bodyfusion.plugins.foot_ins.ensemble.Ensemble`),
+    its members drawn from the run's seed; corrections move the mean and map the deviations
+    so that their sample covariance is the one given."""
+
+    smoothable = False
+    tracks_transition = False
+
+    def __init__(self, x0: np.ndarray, P0: np.ndarray, cfg: FootFilterConfig, seed: int, name: str) -> None:
+        super().__init__(x0, P0, cfg, seed, name)
+        alpha = cfg.colour_factor if cfg.kind in COLOURED_KINDS else None
+        self.ensemble = Ensemble(cfg.members, x0, P0, alpha, cfg.zupt_sigma_mps, seed, name)
+        self._sync()
+
+    def _sync(self) -> None:
+        self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+        self.P = self.ensemble.covariance()
+
+    def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
+        self.ensemble.run(data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params, data.hist_x,
+                          data.hist_pos_var, data.counters)
+        self._sync()
+
+    def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
+        self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
+        self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
+        self.P = P
+
+    def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
+                     phi: np.ndarray) -> None:
+        """The Kalman update of the mean and the sample covariance (H selects δp), gated,
+        carried to the members by :meth:`correct`."""
+        y = z_n - self.x[0:3]
+        r_var = sigma_m**2
+        P = self.P
+        S = P[0:3, 0:3] + r_var * np.eye(3)
+        if float(y @ inv3_sym(np.ascontiguousarray(S)) @ y) > gate:
+            counts.rejected += 1
+            return
+        K = np.linalg.solve(S, P[0:3, :]).T
+        IKH = np.eye(P.shape[0])
+        IKH[:, 0:3] -= K
+        self.correct(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
+        counts.accepted += 1
+
+
+ESTIMATORS: dict[str, type[Estimator]] = {"ekf": ErrorStateEkf, "ckf": ColouredEkf, "enekf": EnsembleEkf,
+                                          "cenekf": EnsembleEkf}
+"""``filter.kind`` → its estimator class."""
