@@ -24,6 +24,8 @@ from bodyfusion.core.constraints import (
     solve_projection,
     violations,
 )
+from bodyfusion.core.constraints import kernels as fk
+from bodyfusion.core.constraints import qp as fq
 
 TOL = 1e-6
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -426,7 +428,7 @@ def test_qp_certifies_with_osqp(monkeypatch):
     assert len(calls) == 1 and sol.iterations == 1 and sol.method == "qp" and not sol.fallback
     assert 0.0 < np.max(np.abs(sol.p - exact.p)) <= TOL  # OSQP's point, not a copy
 
-    certify_start, projection = fc._qp_start_pair, fc._projection
+    certify_start, projection = fq._qp_start_pair, fq.project
 
     def start_off(*args):
         out = certify_start(*args)
@@ -438,8 +440,8 @@ def test_qp_certifies_with_osqp(monkeypatch):
         ref.p = ref.p + 1e-3
         return ref, dirs
 
-    monkeypatch.setattr(fc, "_qp_start_pair", start_off)
-    monkeypatch.setattr(fc, "_projection", projection_off)
+    monkeypatch.setattr(fq, "_qp_start_pair", start_off)
+    monkeypatch.setattr(fq, "project", projection_off)
     calls.clear()
     sol = qp.solve(p_hat, sigma)
     assert sol.method == "qp" and not sol.fallback and sol.converged
@@ -457,7 +459,7 @@ def test_symmetric_eigen_kernel(dim):
         S = np.zeros((3, 3))
         S[:dim, :dim] = (q * ev) @ q.T
         w, Q = np.empty(3), np.empty((3, 3))
-        fc._sym_eig(S, dim, w, Q)
+        fk._sym_eig(S, dim, w, Q)
         w, Q = w[:dim], Q[:dim, :dim]
         np.testing.assert_allclose(w, np.sort(ev)[::-1], rtol=0, atol=1e-14)
         assert np.all(np.diff(w) <= 0.0)
