@@ -1,0 +1,185 @@
+"""A study's rows on disk: resumable part files, results.parquet, and the summary table.
+
+``results.parquet`` holds one row per run: :data:`HEAD_COLUMNS`, ``param.<path>`` per
+parameter, the ``outage.*`` errors, metrics.json flattened with dots and the ``runtime.*``
+columns. Finished rows go to ``parts/`` in small Parquet files, each written whole and
+renamed into place, and are compacted into ``results.parquet`` (deduplicated by run key)
+at the end: a study killed at any moment loses no saved row, duplicates none, and
+resumes. A failed run is saved too (``status`` ``failed``, ``error``) and, being
+deterministic, is not retried on resume. ``summary.csv`` (:func:`summarise`) gives the
+statistics of the outage errors and RMSEs per layout, parameter values and outage duration.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from bodyfusion.core.errors import FusionError
+
+HEAD_COLUMNS: dict[str, pa.DataType] = {
+    "run_key": pa.string(),
+    "layout": pa.string(),
+    "source": pa.string(),
+    "config": pa.string(),
+    "seed": pa.int64(),
+    "outage.system": pa.string(),
+    "outage.start_s": pa.float64(),
+    "outage.duration_s": pa.float64(),
+    "status": pa.string(),
+    "error": pa.string(),
+}
+"""The first columns of every row and their types (``param.<path>`` columns follow)."""
+
+TIMING_PREFIXES = ("runtime.", "constraints.solve_time_us.")
+"""Columns that measure time: they differ between runs of the same key; every other column
+is a deterministic function of the run key."""
+
+SUMMARY_METRICS = ("outage.end_error_m", "outage.max_error_m")
+"""Summarised for every study with outages; each system's horizontal RMSE is added."""
+
+RESULTS_FILE = "results.parquet"
+SUMMARY_FILE = "summary.csv"
+PARTS_DIR = "parts"
+
+
+def is_timing_column(name: str) -> bool:
+    """Whether a results column is a timing (see :data:`TIMING_PREFIXES`)."""
+    return name.startswith(TIMING_PREFIXES)
+
+
+# --------------------------------------------------------------------------- storage
+
+
+def _table(rows: list[dict[str, Any]]) -> pa.Table:
+    """Rows → a table: head columns with fixed types, the others inferred, missing cells null."""
+    names = list(HEAD_COLUMNS)
+    for row in rows:
+        names.extend(k for k in row if k not in names)
+    arrays = []
+    for name in names:
+        cells = [row.get(name) for row in rows]
+        arrays.append(pa.array(cells, type=HEAD_COLUMNS.get(name)))
+    return pa.Table.from_arrays(arrays, names=names)
+
+
+def _write_atomic(table: pa.Table, path: Path) -> None:
+    """Write whole, fsync, then rename into place: a reader sees the old file or the new one."""
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    with tmp.open("wb") as fh:
+        pq.write_table(table, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+class ResultStore:
+    """The rows of a study folder: ``parts/`` (one file per batch) and ``results.parquet``."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.out_dir = Path(out_dir)
+        self.parts_dir = self.out_dir / PARTS_DIR
+        self.results_path = self.out_dir / RESULTS_FILE
+        self._seq = 0
+        try:
+            self.parts_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise FusionError(f"{self.out_dir}: cannot create output folder: {err.strerror}") from None
+
+    def _files(self) -> list[Path]:
+        """Saved files, oldest first: results.parquet, then the parts by name (time-stamped)."""
+        for stale in self.parts_dir.glob(".*.tmp"):  # half-written by a killed study
+            stale.unlink(missing_ok=True)
+        parts = sorted(self.parts_dir.glob("part-*.parquet"))
+        return ([self.results_path] if self.results_path.is_file() else []) + parts
+
+    def keys(self) -> set[str]:
+        """Run keys already saved."""
+        return {k for f in self._files() for k in pq.read_table(f, columns=["run_key"]).column(0).to_pylist()}
+
+    def append(self, rows: list[dict[str, Any]]) -> None:
+        """Save a batch of rows as one new part file."""
+        if not rows:
+            return
+        self._seq += 1
+        stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+        _write_atomic(_table(rows), self.parts_dir / f"part-{stamp}-{os.getpid()}-{self._seq:06d}.parquet")
+
+    def compact(self, order: dict[str, int]) -> pa.Table:
+        """Merge every saved file into results.parquet: one row per run key (the first saved),
+        sorted by ``order`` (run key → grid index; other keys last), timing columns last;
+        then remove the merged parts."""
+        files = self._files()
+        if not files:
+            return _table([])
+        table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="permissive")
+        keys = table.column("run_key").to_pylist()
+        first: dict[str, int] = {}
+        for i, k in enumerate(keys):
+            first.setdefault(k, i)
+        rank = sorted(first, key=lambda k: (order.get(k, len(order)), k))
+        table = table.take(pa.array([first[k] for k in rank], type=pa.int64()))
+        names = table.column_names
+        head = [n for n in names if n in HEAD_COLUMNS or n.startswith("param.")]
+        rest = [n for n in names if n not in head and not is_timing_column(n)]
+        table = table.select(head + rest + [n for n in names if is_timing_column(n)])
+        _write_atomic(table, self.results_path)
+        for f in files:
+            if f != self.results_path:
+                f.unlink(missing_ok=True)
+        return table
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def _group_key(row: dict[str, Any], params: list[str]) -> tuple:
+    return (row["layout"], *(row.get(p) for p in params), row.get("outage.duration_s"))
+
+
+def summarise(rows: list[dict[str, Any]], params: list[str]) -> list[dict[str, Any]]:
+    """Per layout, parameter values and outage duration, per metric (:data:`SUMMARY_METRICS`
+    and every ``systems.<name>.horizontal_error_m.rmse``): runs, failed, mean, sd (n − 1),
+    p50, p90 of the finite values of the runs that succeeded (m)."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(_group_key(row, params), []).append(row)
+    out = []
+    for key, members in groups.items():
+        ok = [r for r in members if r["status"] == "ok"]
+        rmse = sorted({k for r in ok for k in r if k.startswith("systems.") and k.endswith(".horizontal_error_m.rmse")})
+        metrics = [m for m in [*SUMMARY_METRICS, *rmse] if any(r.get(m) is not None for r in ok)]
+        for metric in metrics:
+            v = np.array([r.get(metric) for r in ok], dtype=float)
+            v = v[np.isfinite(v)]
+            stats = {"mean": float(np.mean(v)), "sd": float(np.std(v, ddof=1)) if v.size > 1 else float("nan"),
+                     "p50": float(np.percentile(v, 50)), "p90": float(np.percentile(v, 90))} if v.size else \
+                dict.fromkeys(("mean", "sd", "p50", "p90"), float("nan"))
+            first = members[0]
+            out.append({"layout": key[0], **{p: first.get(p) for p in params},
+                        "outage_system": first.get("outage.system"), "outage_start_s": first.get("outage.start_s"),
+                        "outage_duration_s": key[-1], "metric": metric, "runs": int(v.size),
+                        "failed": len(members) - len(ok), **stats})
+    return out
+
+
+def write_summary(path: Path, summary: list[dict[str, Any]]) -> None:
+    """Write :func:`summarise`'s records as CSV (NaN and None as empty cells; no rows: an empty file)."""
+    if not summary:
+        path.write_text("")
+        return
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(summary[0]))
+        writer.writeheader()
+        for rec in summary:
+            writer.writerow({k: ("" if v is None or (isinstance(v, float) and math.isnan(v)) else v)
+                             for k, v in rec.items()})

@@ -1,0 +1,119 @@
+"""Running a study end to end: :func:`run_study`.
+
+Validate the study file, expand its grid, skip the runs already saved in the output
+folder, execute the others (:mod:`bodyfusion.study.executors`) with a progress bar on a
+terminal, save the finished rows in batches, then compact them into ``results.parquet``
+and write ``summary.csv``, the plots and ``study.json`` (counts and throughput).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from bodyfusion.core.errors import ConfigError
+from bodyfusion.study.executors import Executor, run_dask, run_local
+from bodyfusion.study.grid import expand_grid
+from bodyfusion.study.plots import write_plots
+from bodyfusion.study.results import SUMMARY_FILE, ResultStore, summarise, write_summary
+from bodyfusion.study.validation import load_study
+
+
+@dataclass
+class StudyReport:
+    """What a study did: counts, wall time (s), throughput of the runs executed (runs/s), files."""
+
+    out_dir: Path
+    total: int
+    done: int = 0
+    failed: int = 0
+    skipped: int = 0
+    wall_s: float = 0.0
+    executor: str = "local"
+    workers: int = 1
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def runs_per_s(self) -> float:
+        executed = self.done + self.failed
+        return executed / self.wall_s if self.wall_s > 0 else 0.0
+
+
+def _progress(total: int) -> Progress:
+    console = Console(stderr=True)
+    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                    TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[skipped]} "
+                               "skipped"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                    console=console, disable=not sys.stderr.isatty(), transient=False)
+
+
+def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | str = Executor.local,
+              workers: int | None = None, scheduler: str | None = None, batch_rows: int = 16,
+              flush_s: float = 5.0) -> StudyReport:
+    """Validate the study, run every run not yet saved in ``out_dir``, compact, summarise, plot.
+
+    ``workers``: processes (local pool or LocalCluster; default all cores); ``scheduler``: a
+    Dask scheduler address (``tcp://host:port``; only with ``executor='dask'``). Finished rows
+    are saved every ``batch_rows`` rows or ``flush_s`` seconds, whichever comes first.
+    """
+    executor = Executor(executor)
+    workers = workers if workers is not None else os.cpu_count() or 1
+    if workers < 1:
+        raise ConfigError("--workers", f"must be >= 1, got {workers}")
+    if scheduler is not None and executor is not Executor.dask:
+        raise ConfigError("--scheduler", "only with --executor dask")
+    study = load_study(study_path)
+    grid = expand_grid(study)
+    order = {s.key: i for i, s in enumerate(grid)}
+    store = ResultStore(Path(out_dir))
+    saved = store.keys()
+    todo = [s for s in grid if s.key not in saved]
+    report = StudyReport(Path(out_dir), len(grid), skipped=len(grid) - len(todo), executor=executor.value,
+                         workers=workers)
+    pending: list[dict[str, Any]] = []
+    last_flush = time.monotonic()
+    t0 = time.perf_counter()
+    with _progress(len(grid)) as progress:
+        task = progress.add_task(study.name, total=len(grid), completed=report.skipped, done=0, failed=0,
+                                 skipped=report.skipped)
+
+        def on_row(row: dict[str, Any]) -> None:
+            nonlocal last_flush
+            pending.append(row)
+            if row["status"] == "ok":
+                report.done += 1
+            else:
+                report.failed += 1
+            progress.update(task, advance=1, done=report.done, failed=report.failed)
+            if len(pending) >= batch_rows or time.monotonic() - last_flush >= flush_s:
+                store.append(pending)
+                pending.clear()
+                last_flush = time.monotonic()
+
+        try:
+            if todo and executor is Executor.local:
+                run_local(todo, min(workers, len(todo)), on_row)
+            elif todo:
+                run_dask(todo, workers, scheduler, on_row)
+        finally:
+            store.append(pending)  # also when interrupted: nothing finished is lost
+    report.wall_s = time.perf_counter() - t0
+    table = store.compact(order)
+    in_grid = [r for r in table.to_pylist() if r["run_key"] in order]
+    params = [f"param.{p}" for p in study.spec.parameters]
+    out = Path(out_dir)
+    write_summary(out / SUMMARY_FILE, summarise(in_grid, params))
+    report.files = [store.results_path, out / SUMMARY_FILE, *write_plots(out, in_grid, params)]
+    (out / "study.json").write_text(json.dumps({
+        "study": str(study_path), "name": study.name, "runs": report.total, "done": report.done,
+        "failed": report.failed, "skipped": report.skipped, "executor": report.executor, "workers": workers,
+        "wall_s": report.wall_s, "runs_per_s": report.runs_per_s}, indent=2) + "\n")
+    return report
