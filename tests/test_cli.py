@@ -1,4 +1,4 @@
-"""Tests of the command line (CONTRACT.md), run as a user runs it: in a subprocess.
+"""Tests of the command line (docs/contract.md), run as a user runs it: in a subprocess.
 
 User errors: non-zero exit, exactly one line on stderr naming the file (and line, or the
 config key's dotted path), never a Python traceback.

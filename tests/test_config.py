@@ -1,7 +1,7 @@
 """Tests for bodyfusion.core.layout: strict two-stage layout validation, overrides, path resolution.
 
 Every refusal is a :class:`bodyfusion.core.errors.ConfigError` whose text names the file and the
-dotted path of the offending key (CONTRACT.md).
+dotted path of the offending key (docs/contract.md).
 """
 
 from __future__ import annotations

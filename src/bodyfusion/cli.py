@@ -1,4 +1,4 @@
-"""Command-line interface (CONTRACT.md): ``fusion run | simulate | study | validate | plugins``."""
+"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | plugins``."""
 
 from __future__ import annotations
 

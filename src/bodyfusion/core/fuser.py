@@ -3,7 +3,7 @@
 At each sync epoch the constrained systems are advanced to the epoch, their positions
 and covariances stacked, all active constraints solved together in position space
 (:mod:`bodyfusion.core.constraints`), and the correction spread to each system's full error
-state (DESIGN.md, "Distance constraints"):
+state (docs/architecture.md, "Distance constraints"):
 
     x* − x̂ = P_{x,p} Σ⁻¹ (p* − p̂) = −P_{x,p} Jᵀ λ,
     P* = (I − M) P (I − M)ᵀ,  M = P_{x,p} Jᵀ (J Σ Jᵀ)⁻¹ J S,

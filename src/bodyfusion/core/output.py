@@ -1,4 +1,4 @@
-"""Writers of the run outputs named in CONTRACT.md: metrics.json, trajectories.csv, plots."""
+"""Writers of the run outputs named in docs/contract.md: metrics.json, trajectories.csv, plots."""
 
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def _outage_block(result: RunResult, name: str) -> dict[str, float]:
 
 
 def metrics_document(result: RunResult, config_label: str, total_wall_s: float) -> dict:
-    """The metrics.json document (CONTRACT.md), plus per-system diagnostics."""
+    """The metrics.json document (docs/contract.md), plus per-system diagnostics."""
     layout = result.loaded.layout
     loop = layout.truth is not None and layout.truth.loop
     systems: dict[str, dict] = {}

@@ -13,6 +13,7 @@ the same interface.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -23,6 +24,31 @@ from pydantic import BaseModel
 from bodyfusion.core.errors import FusionError
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.core.types import InputReport, Trajectory
+
+
+@dataclass
+class JacobianCase:
+    """An analytic Jacobian to compare with central differences (what a plugin's optional
+    ``jacobian_cases()`` returns for :func:`bodyfusion.testing.check_system`).
+
+    ``func`` maps a nominal state to an output (a propagated state, a predicted
+    measurement...), ``x`` is the linearisation point, ``jacobian`` the analytic (m, n)
+    matrix of the output's error with respect to the input's error. ``retract(x, dx)``
+    applies an error dx (n,) to a nominal state (default ``x + dx``); ``difference(a, b)``
+    is the error of output a relative to b, true minus estimated (default ``a − b``).
+    The check passes when max |J_num − J| ≤ ``atol`` + ``rtol`` · max |J|.
+    """
+
+    name: str
+    func: Callable[[np.ndarray], np.ndarray]
+    x: np.ndarray
+    jacobian: np.ndarray
+    step: float = 1e-6
+    atol: float = 1e-7
+    rtol: float = 1e-6
+    retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    difference: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+
 
 
 @dataclass(frozen=True)

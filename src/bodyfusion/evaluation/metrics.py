@@ -1,4 +1,4 @@
-"""Scoring of estimated trajectories against ground truth (DESIGN.md "Evaluation protocol").
+"""Scoring of estimated trajectories against ground truth (docs/architecture.md, "Evaluation protocol").
 
 Frames and units: every position is in the navigation frame, local East-North-Up (ENU),
 metres; time in seconds. "Horizontal" means the east-north plane, "vertical" the up axis.

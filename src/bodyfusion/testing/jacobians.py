@@ -11,15 +11,18 @@ propagation with that F.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.core.system import SensorSystem
+from bodyfusion.core.system import JacobianCase, SensorSystem
 from bodyfusion.core.types import ImuStream
-from bodyfusion.nav.error_state import ERROR_SIZE, accumulate_propagation, error_between, inject, propagate_covariance
+from bodyfusion.nav.error_state import (
+    ERROR_SIZE,
+    accumulate_propagation,
+    error_between,
+    inject,
+    propagate_covariance,
+)
 from bodyfusion.nav.strapdown import NOMINAL_SIZE, mechanise
 from bodyfusion.testing.compare import max_diff
 
@@ -31,29 +34,6 @@ STRAPDOWN15 = "strapdown15"
 _CANNED_ACC_B = np.array([[0.3, -0.4, 9.9], [4.0, -7.0, 15.0], [-2.0, 1.0, 3.0]])
 _CANNED_GYRO_B = np.array([[0.02, -0.01, 0.03], [1.5, -3.0, 0.8], [-0.2, 0.1, -2.5]])
 _CANNED_DT_S = 0.01
-
-
-@dataclass
-class JacobianCase:
-    """An analytic Jacobian to compare with central differences.
-
-    ``func`` maps a nominal state to an output (a propagated state, a predicted
-    measurement...), ``x`` is the linearisation point, ``jacobian`` the analytic (m, n)
-    matrix of the output's error with respect to the input's error. ``retract(x, dx)``
-    applies an error dx (n,) to a nominal state (default ``x + dx``); ``difference(a, b)``
-    is the error of output a relative to b, true minus estimated (default ``a − b``).
-    The check passes when max |J_num − J| ≤ ``atol`` + ``rtol`` · max |J|.
-    """
-
-    name: str
-    func: Callable[[np.ndarray], np.ndarray]
-    x: np.ndarray
-    jacobian: np.ndarray
-    step: float = 1e-6
-    atol: float = 1e-7
-    rtol: float = 1e-6
-    retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
-    difference: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
 
 def numerical_jacobian(case: JacobianCase) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 During stance the foot is not perfectly still: the zero-velocity pseudo-measurement
 m_k = 0 = H x_k + v_k (H selects the velocity) carries a coloured error
-v_k = α v_{k−1} + ξ_k, ξ_k ~ N(0, R) (paper eq. 4; DESIGN.md "Coloured measurement
+v_k = α v_{k−1} + ξ_k, ξ_k ~ N(0, R) ([Xu2024] eq. 4; docs/architecture.md "Coloured measurement
 noise"). Differencing consecutive measurements (eq. 5) and substituting the state
 backwards with x_{k−1} = F⁻¹ (x_k − w_k) (the backward-Euler step of eqs. 6–9) gives
 

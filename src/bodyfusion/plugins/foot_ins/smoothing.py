@@ -16,7 +16,7 @@ Segments. The run is split at the midpoints of stance runs (runs shorter than
 gaps longer than ``max_segment_s`` are cut evenly). Each segment then holds one swing
 with half a stance at either end.
 
-Kinds (DESIGN.md "Smoothing"; Shen et al. 2025, Technologies 13(7) 296, §3):
+Kinds ([Shen2025] §3):
 
 * ``rts``: fixed-interval RTS over the closed-loop error states (:func:`rts_block`),
   over the whole run (``span: whole``, the backward sweep carried across blocks, each

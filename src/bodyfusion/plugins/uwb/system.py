@@ -18,9 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from bodyfusion.nav.measurements import chi2_gate
-from bodyfusion.core.system import AidingSource, LayoutContext, ScalarMeasurement
+from bodyfusion.core.system import (
+    AidingSource,
+    JacobianCase,
+    LayoutContext,
+    ScalarMeasurement,
+)
 from bodyfusion.core.types import InputReport
+from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
 from bodyfusion.plugins.uwb.ranges import read_ranges
 
@@ -96,8 +101,6 @@ class UwbTag(AidingSource):
 
     def jacobian_cases(self) -> list:
         """The range Jacobians (anchor and peer) at a few geometries, for the conformance check."""
-        from bodyfusion.testing import JacobianCase
-
         rng = np.random.default_rng(0)
         lever = self._lever_n
         cases = []
