@@ -1,4 +1,4 @@
-"""Tests for bodyfusion.io.readers: every bad input names the file and the line."""
+"""Tests for the readers (bodyfusion.io.tables, imu, truth): every bad input names the file and the line."""
 
 from __future__ import annotations
 

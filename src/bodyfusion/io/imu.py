@@ -26,7 +26,7 @@ GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
 
 
 class ImuCsvConfig(StrictModel):
-    """An IMU recorded as CSV: column names, units and time base (see :func:`bodyfusion.io.readers.read_imu_csv`)."""
+    """An IMU recorded as CSV: column names, units and time base (see :func:`read_imu_csv`)."""
 
     path: DataPath
     """CSV file; relative to the layout file."""
