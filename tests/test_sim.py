@@ -15,7 +15,8 @@ from bodyfusion.nav.attitude import azimuth_pitch_roll
 from bodyfusion.io.imu import read_imu_csv
 from bodyfusion.core.seeding import stable_hash
 from bodyfusion.sim import simulate
-from bodyfusion.sim.gait import GaitConfig, plan_gait
+from bodyfusion.sim.gait import plan_gait
+from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.imu import (
     ImuErrorConfig,
     MotionState,

@@ -14,7 +14,8 @@ from bodyfusion.core.layout import Layout, load_layout, validate_section
 from bodyfusion.core.errors import ConfigError
 from bodyfusion.core.run import run_layout
 from bodyfusion.sim import load_scenario, simulate
-from bodyfusion.sim.gait import GAIT_KINDS, GaitConfig, GaitPlan, plan_gait
+from bodyfusion.sim.gait import GaitPlan, plan_gait
+from bodyfusion.sim.gait_config import GAIT_KINDS, GaitConfig
 from bodyfusion.sim.imu import ideal_imu
 from bodyfusion.sim.paths import PolylinePath
 from bodyfusion.nav.strapdown import integrate

@@ -12,7 +12,8 @@ import yaml
 from bodyfusion.core.layout import Layout, load_layout, validate_section
 from bodyfusion.io.gnss import read_gnss_csv
 from bodyfusion.sim import simulate
-from bodyfusion.sim.gait import GaitConfig, plan_gait
+from bodyfusion.sim.gait import plan_gait
+from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.gnss import RADIUS_68_PER_SIGMA, GnssReceiverConfig, simulate_fixes
 from bodyfusion.sim.hand import HandSwayConfig, hand_motion
 from bodyfusion.sim.imu import MotionState, ideal_imu

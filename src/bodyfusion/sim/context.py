@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
-from bodyfusion.sim.gait import GaitConfig, GaitPlan
+from bodyfusion.sim.gait import GaitPlan
+from bodyfusion.sim.gait_config import GaitConfig
 
 DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
 """Latitude (deg), longitude (deg), ellipsoidal height (m) of the ENU frame when a scenario gives none."""

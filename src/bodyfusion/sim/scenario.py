@@ -61,7 +61,8 @@ from bodyfusion.core.errors import ConfigError
 from bodyfusion.core.layout import Layout, StrictModel, apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind
 from bodyfusion.sim.files import FLOAT_FORMAT
-from bodyfusion.sim.gait import GaitConfig, plan_gait
+from bodyfusion.sim.gait import plan_gait
+from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.paths import PATH_KINDS, PathConfig
 
 __all__ = ["LoadedScenario", "Scenario", "SimulationResult", "TRUTH_COLUMNS", "load_scenario", "simulate"]
