@@ -26,22 +26,16 @@ minute of independent evidence and, when the accuracy swings, is too small or to
 Heading from the GNSS course, z = wrap(ψ_gnss − ψ̂), only from a fix taken while the PDR
 detects steps with the phone held steadily, fast enough and accurate enough (a standing
 phone's course is its GNSS jitter). Each update is gated by the chi-square test on its
-innovation. Skipped (and counted): fixes inside a layout outage; a fix that repeats its
-predecessor's position exactly (the receiver holding its solution: no new measurement);
-a fix reporting a ground speed no pedestrian walks at (the receiver's solution moving on
-its own, as while it converges from a cold start).
+innovation. The fixes' σ_k, the fixes skipped (in an outage, held, too fast) and the start
+fix: :mod:`bodyfusion.plugins.hand_pdr.fixes`.
 
-Start from GNSS (``initial.position_m: gnss``). Receivers report wild first fixes (on
-IPIN 2023 Trial24 the first fix is 2.6 km off, reported at 61 m; with a start σ of 5 m the
-chi-square gate then refused 194 of 195 fixes and the track stayed 2.65 km away); the
-start is the first usable fix that its successor confirms: |p_j+1 − p_j| minus the
-distance the PDR walked between them passes the 2-D chi-square gate of σ_j² + σ_j+1².
-Earlier fixes are skipped. The filter starts at the first IMU sample with a diffuse
-position (σ :data:`DIFFUSE_SD_M`), so the start fix sets the position with its own σ at
-its own time, not a guessed σ at t0. After ``reset_after_rejections`` consecutive
-gated-out fixes the position is forgotten the same way (δp ← fresh, σ diffuse: rows of δp
-in the transition zeroed, diffuse Q) and taken from the fix: a filter whose prior
-excludes every fix never recovers by itself.
+Start from GNSS (``initial.position_m: gnss``): from the first usable fix that its
+successor confirms (:mod:`~bodyfusion.plugins.hand_pdr.fixes`; earlier fixes are skipped).
+The filter starts at the first IMU sample with a diffuse position (σ :data:`DIFFUSE_SD_M`),
+so the start fix sets the position with its own σ at its own time, not a guessed σ at t0.
+After ``reset_after_rejections`` consecutive gated-out fixes the position is forgotten the
+same way (δp ← fresh, σ diffuse: rows of δp in the transition zeroed, diffuse Q) and taken
+from the fix: a filter whose prior excludes every fix never recovers by itself.
 
 Unknown heading (``initial.heading_deg: gnss_track``): a bank of hypotheses
 (:mod:`bodyfusion.plugins.hand_pdr.hypotheses`) spread round the circle, each this filter with a
@@ -51,10 +45,9 @@ steadily, change their weights: standing, every hypothesis predicts the same dis
 evidence. The bank collapses into one filter once its heading σ is small
 (``heading_resolved_s``). When the phone's pose changes (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`:
 taken out of a pocket, raised to be read) the walking direction relative to the phone is
-lost: once it is held steadily again the bank is spread round the circle anew. While the
-bank is open the fuser sees the mixture's moments, a correction maps every hypothesis
-through the affine map that takes the mixture to the corrected Gaussian, and the
-transition Φ is 0 (the fuser's cross-covariances with this system are dropped).
+lost: once it is held steadily again the bank is spread round the circle anew. The filter
+runs over the bank, one filter or many, and shows the fuser the mixture
+(:mod:`bodyfusion.plugins.hand_pdr.bank_filter`).
 
 Magnetometer (``magnetometer.enabled``, unset: on for a phone log with MAGN lines;
 :mod:`bodyfusion.plugins.hand_pdr.magnetometer`): the device azimuth ψ_d (tilt-compensated,
@@ -71,7 +64,6 @@ so the fuser's cross-covariances stay exact.
 from __future__ import annotations
 
 from collections.abc import Callable
-from itertools import pairwise
 
 import numpy as np
 
@@ -83,9 +75,10 @@ from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.io.imu import read_imu
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
-from bodyfusion.plugins.hand_pdr.hypotheses import (Hypothesis, affine_map, collapse_if_resolved, mixture_moments,
-                                                normalise, spread_headings)
+from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
+from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
 from bodyfusion.plugins.hand_pdr.magnetometer import MagneticHeading, read_magnetometer_csv
 from bodyfusion.plugins.hand_pdr.pdr import azimuth_increments, detect_steps, held_steadily, step_lengths, up_in_body
 
@@ -153,7 +146,6 @@ class HandPdr(SensorSystem):
         self._report = report
         self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
         self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
-        self._walked_m = np.concatenate([[0.0], np.cumsum(self.step_length_m)])
         up_b = up_in_body(self.t, acc)
         self._azimuth = azimuth_increments(self.t, gyro, up_b)
         f = config.filter
@@ -164,20 +156,22 @@ class HandPdr(SensorSystem):
         self._angles = [3] + [8] * on  # nominal entries that are angles: ψ, o
         self._mag = MagneticHeading.of(*magn, self.t, up_b, self._azimuth, mag) if magn is not None else None
         self.geodetic_origin = context.geodetic_origin
-        self._fix_t = np.empty(0)
-        self._confirmed_fix = -1
+        self._fixes: PhoneFixes | None = None
         if fixes is not None and len(fixes):
-            self._set_fixes(fixes, context.outages.get(name, ()))
+            self._fixes = PhoneFixes.of(fixes, context.outages.get(name, ()), f, self.geodetic_origin,
+                                        self.t[self.step_index], self.step_length_m, self.walking(fixes.t),
+                                        self.held_steadily(fixes.t))
+            self.geodetic_origin = self._fixes.origin
         self._events = self._event_list()
         ini = config.initial
         self.start_fix_s: float | None = None
         self._start_fix = 0
         if ini.position_m == "gnss":
-            if self._confirmed_fix < 0:
+            if self._fixes is None or self._fixes.confirmed < 0:
                 raise ConfigError(f"{key}.initial.position_m", "no GNSS fix to start from")
-            self._start_fix = self._confirmed_fix
-            self.start_fix_s = float(self._fix_t[self._start_fix])
-            self._p0 = self._fix_pos[self._start_fix].copy()
+            self._start_fix = self._fixes.confirmed
+            self.start_fix_s = float(self._fixes.t[self._start_fix])
+            self._p0 = self._fixes.pos[self._start_fix].copy()
         else:
             self._p0 = np.asarray(ini.position_m, dtype=float)
         self._psi0 = 0.0 if ini.heading_deg in ("gnss_track", "auto") else float(np.deg2rad(ini.heading_deg))
@@ -187,33 +181,6 @@ class HandPdr(SensorSystem):
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
-    def _set_fixes(self, fixes: GnssFixes, outages: tuple[tuple[float, float], ...]) -> None:
-        """Per fix: σ per axis (m), masked by an outage, a held repeat, too fast, taken walking,
-        taken with the phone held steadily; the first confirmed usable fix (``_confirmed_fix``,
-        -1 if no fix is usable) and the fixes' ENU positions about the geodetic origin (the
-        layout's, else that fix)."""
-        f = self.config.filter
-        sd = f.accuracy_to_sigma * fixes.accuracy_m
-        self._fix_sd = np.where(np.isfinite(sd) & (sd > 0), sd, f.default_sigma_m)
-        self._fix_masked = np.zeros(len(fixes), dtype=bool)
-        for start, duration in outages:
-            self._fix_masked |= (fixes.t >= start) & (fixes.t < start + duration)
-        self._fix_held = fixes.repeats_previous()
-        self._fix_fast = fixes.speed_mps > f.max_speed_mps  # NaN speed: not fast
-        usable = np.flatnonzero(~self._fix_masked & ~self._fix_held & ~self._fix_fast)
-        first = (float(fixes.lat_deg[0]), float(fixes.lon_deg[0]), float(fixes.height_m[0]))
-        self._confirmed_fix = self._confirmed(fixes.t, fixes.enu(first), self._fix_sd, usable) if usable.size else -1
-        if self.geodetic_origin is None:
-            j = max(self._confirmed_fix, 0)
-            self.geodetic_origin = (float(fixes.lat_deg[j]), float(fixes.lon_deg[j]), float(fixes.height_m[j]))
-        self._fix_t = fixes.t
-        self._fix_pos = fixes.enu(self.geodetic_origin)
-        self._fix_accuracy = fixes.accuracy_m
-        self._fix_speed = fixes.speed_mps
-        self._fix_course = np.deg2rad(fixes.course_deg)
-        self._fix_walking = self.walking(fixes.t)
-        self._fix_steady = self.held_steadily(fixes.t)
-
     def walking(self, t: np.ndarray) -> np.ndarray:
         """(N,) True where the PDR says the phone walks at times ``t`` (s): a step detected in
         the last ``filter.walking_window_s``."""
@@ -227,25 +194,11 @@ class HandPdr(SensorSystem):
         ``filter.pose_window_s`` (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`)."""
         return self._steady[np.maximum(np.searchsorted(self.t, t, side="right") - 1, 0)]
 
-    def _walked_between(self, t0: float, t1: float) -> float:
-        """PDR distance (m, step model) walked in (t0, t1]."""
-        k0, k1 = np.searchsorted(self.t[self.step_index], [t0, t1], side="right")
-        return float(self._walked_m[k1] - self._walked_m[k0])
-
-    def _confirmed(self, t: np.ndarray, pos: np.ndarray, sd: np.ndarray, usable: np.ndarray) -> int:
-        """Index of the first of the ``usable`` fixes whose successor confirms it (see the module
-        docstring); the last usable one if none is confirmed (no successor contradicts it)."""
-        gate = chi2_gate(self.config.filter.gate_probability, 2)
-        for a, b in pairwise(usable):
-            gap = max(float(np.hypot(*(pos[b, :2] - pos[a, :2]))) - self._walked_between(t[a], t[b]), 0.0)
-            if gap**2 <= gate * (sd[a] ** 2 + sd[b] ** 2):
-                return int(a)
-        return int(usable[-1])
-
     def _event_list(self) -> list[tuple[float, int, int]]:
         """(time, kind, index) of steps, GNSS fixes and magnetometer updates, in time order."""
         ev = [(float(self.t[i]), STEP, k) for k, i in enumerate(self.step_index)]
-        ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fix_t) if self.t[0] < tf <= self.t[-1]]
+        if self._fixes is not None:
+            ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fixes.t) if self.t[0] < tf <= self.t[-1]]
         if self._mag is not None:
             ev += [(float(tm), MAGNETOMETER, k) for k, tm in enumerate(self._mag.t) if self.t[0] < tm <= self.t[-1]]
         if self.config.initial.heading_deg == "gnss_track":  # the phone held steadily again
@@ -271,8 +224,10 @@ class HandPdr(SensorSystem):
             x = np.append(x, np.deg2rad(mag.offset_deg) if self._offset_known else 0.0)
             variances.append(np.deg2rad(mag.offset_sd_deg) ** 2)
         P = np.diag(variances)
-        self._bank = ([Hypothesis(x, P)] if ini.heading_deg != "gnss_track"
-                      else spread_headings(x, P, ini.heading_hypotheses, 3, PSI))
+        self._bank = BankFilter([Hypothesis(x, P)], self._nominal, self._angles, 3,
+                                np.deg2rad(ini.heading_resolved_sd_deg))
+        if ini.heading_deg == "gnss_track":
+            self._bank.spread(x, P, ini.heading_hypotheses)
         self.heading_resolved_s: float | None = None
         self.heading_resolutions: list[float] = []
         self.heading_counts = {"weighted": 0, "unweighted_standing": 0, "unweighted_handling": 0, "reopened": 0}
@@ -286,18 +241,17 @@ class HandPdr(SensorSystem):
                             "heading_skipped_accuracy": 0}
         self._hist: list[tuple[float, float, float, float, float, float, float]] = []
         self._record()
-        self.phi = None
 
     # --- the state ----------------------------------------------------------------
     @property
     def x(self) -> np.ndarray:
         """Nominal state (the mixture's mean while the heading bank is open)."""
-        return mixture_moments(self._bank, self._nominal, self._angles)[0]
+        return self._bank.moments()[0]
 
     @property
     def P(self) -> np.ndarray:
         """Error-state covariance (the mixture's, moment-matched, while the bank is open)."""
-        return mixture_moments(self._bank, self._nominal, self._angles)[1]
+        return self._bank.moments()[1]
 
     @property
     def heading_hypotheses(self) -> int:
@@ -328,24 +282,8 @@ class HandPdr(SensorSystem):
         Q[C] = f.step_scale_random_walk**2 * dt
         if self._mag is not None:
             Q[O] = np.deg2rad(self.config.magnetometer.offset_random_walk) ** 2 * dt
-        self._transition(F, Q)
+        self._bank.transition(F, Q)
         self._tc = t
-
-    def _transition(self, F: np.ndarray | list[np.ndarray], Q: np.ndarray | list[np.ndarray]) -> None:
-        """P ← F P Fᵀ + Q for every hypothesis (F, Q one for all or one each; Q a full matrix
-        or its diagonal); the fuser's Φ ← F Φ (one filter) or 0 (a bank)."""
-        count = len(self._bank)
-        Fs = F if isinstance(F, list) else [F] * count
-        Qs = Q if isinstance(Q, list) else [Q] * count
-        for h, Fi, Qi in zip(self._bank, Fs, Qs):
-            h.P = Fi @ h.P @ Fi.T + (np.diag(Qi) if Qi.ndim == 1 else Qi)
-            h.P = 0.5 * (h.P + h.P.T)
-        self._chain(Fs[0])
-
-    def _chain(self, A: np.ndarray) -> None:
-        """Φ ← A Φ when tracked; a bank has no linear transition: Φ = 0 (see the module docstring)."""
-        if self.phi is not None:
-            self.phi = A @ self.phi if len(self._bank) == 1 else np.zeros_like(self.phi)
 
     def _step(self, k: int) -> None:
         """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
@@ -364,55 +302,31 @@ class HandPdr(SensorSystem):
             h.x[1] += s * np.cos(psi)
             Fs.append(F @ fresh)
             Qs_.append(F @ np.diag(Qs) @ F.T)
-        self._transition(Fs, Qs_)
+        self._bank.transition(Fs, Qs_)
 
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
                 weigh: bool) -> bool:
-        """Gated Kalman update (Joseph form) of every hypothesis, closed-loop reset; y = residual(x).
-        Rejected (False) when the innovation fails the chi-square gate of every hypothesis. With
-        ``weigh`` the log-weights gain log N(y; 0, S) (see :mod:`~bodyfusion.plugins.hand_pdr.hypotheses`)."""
-        ys = [residual(h.x) for h in self._bank]
-        Ss = [H @ h.P @ H.T + R for h in self._bank]
-        nis = [float(y @ np.linalg.solve(S_, y)) for y, S_ in zip(ys, Ss)]
-        if min(nis) > gate:
-            return False
-        IKH = None
-        for h, y, S_, q in zip(self._bank, ys, Ss, nis):
-            K = h.P @ H.T @ np.linalg.inv(S_)
-            h.x += (K @ y)[self._nominal]  # δS is white: nothing to feed back
-            IKH = np.eye(self.n_err) - K @ H
-            h.P = IKH @ h.P @ IKH.T + K @ R @ K.T
-            h.P = 0.5 * (h.P + h.P.T)
-            if weigh:
-                h.log_w -= 0.5 * (q + np.linalg.slogdet(S_)[1])
-        self._chain(IKH)
-        if len(self._bank) > 1:
-            self._settle_bank()
-        return True
-
-    def _settle_bank(self) -> None:
-        """Normalise and prune the weights; collapse the bank once its heading is resolved."""
-        self._bank = collapse_if_resolved(normalise(self._bank), self._nominal, self._angles, PSI,
-                                          np.deg2rad(self.config.initial.heading_resolved_sd_deg))
-        if len(self._bank) == 1:
+        """:meth:`BankFilter.update`; the time an open bank collapses is the heading's resolution."""
+        was_open = len(self._bank) > 1
+        ok = self._bank.update(H, residual, R, gate, weigh)
+        if was_open and len(self._bank) == 1:
             self.heading_resolved_s = self._tc
             self.heading_resolutions.append(self._tc)
-            self._chain(np.zeros((self.n_err, self.n_err)))
+        return ok
 
     def _reopen_heading(self) -> None:
         """The phone is held steadily again after being handled: the walking direction relative to
         it is unknown, so the bank is spread round the circle again from the mixture's moments;
         so is the holding offset: back to its prior (δo ← fresh, σ ``offset_sd_deg``), or, if
         ``auto``, taken afresh from the next accepted sample."""
-        x, P = mixture_moments(self._bank, self._nominal, self._angles)
+        x, P = self._bank.moments()
         mag = self.config.magnetometer
         if self._mag is not None:
             self._offset_known = mag.offset_deg != "auto"
             x[8] = np.deg2rad(mag.offset_deg) if self._offset_known else x[8]
             P[O, :] = P[:, O] = 0.0
             P[O, O] = np.deg2rad(mag.offset_sd_deg) ** 2
-        self._bank = spread_headings(x, P, self.config.initial.heading_hypotheses, 3, PSI)
-        self._chain(np.zeros((self.n_err, self.n_err)))
+        self._bank.spread(x, P, self.config.initial.heading_hypotheses)
         self.heading_resolved_s = None
         self.heading_counts["reopened"] += 1
 
@@ -422,32 +336,24 @@ class HandPdr(SensorSystem):
         F[[E, N, U]] = 0.0
         Q = np.zeros(self.n_err)
         Q[[E, N, U]] = DIFFUSE_SD_M**2
-        self._transition(F, Q)
+        self._bank.transition(F, Q)
 
     def _gnss(self, j: int) -> None:
-        counts = self.gnss_counts
-        if self._fix_masked[j]:
-            counts["masked"] += 1
-            return
-        if j < self._start_fix:
-            counts["before_start"] += 1
-            return
-        if self._fix_held[j]:
-            counts["held"] += 1
-            return
-        if self._fix_fast[j]:
-            counts["too_fast"] += 1
+        counts, fx = self.gnss_counts, self._fixes
+        skipped = fx.skipped(j, self._start_fix)
+        if skipped is not None:
+            counts[skipped] += 1
             return
         f = self.config.filter
-        walking, steady = bool(self._fix_walking[j]), bool(self._fix_steady[j])
-        sd, rho = self._fix_sd[j], f.gnss_correlated_fraction
+        walking, steady = bool(fx.walking[j]), bool(fx.steady[j])
+        sd, rho = fx.sd[j], f.gnss_correlated_fraction
         H = np.zeros((3, self.n_err))
         H[0, E] = H[1, N] = H[2, U] = 1.0
         H[0, BE] = H[1, BN] = sd * np.sqrt(rho)
         R = np.diag([sd**2 * (1.0 - rho), sd**2 * (1.0 - rho), (2.0 * sd) ** 2])
 
         def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
-            return self._fix_pos[j] - H[:, self._nominal] @ x
+            return fx.pos[j] - H[:, self._nominal] @ x
 
         ok = self._update(H, residual, R, self._gate_pos, walking and steady)
         self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
@@ -460,18 +366,18 @@ class HandPdr(SensorSystem):
         if len(self._bank) > 1:
             self.heading_counts["unweighted_standing" if not walking else
                                 "unweighted_handling" if not steady else "weighted"] += 1
-        if not (ok and np.isfinite(self._fix_course[j]) and self._fix_speed[j] >= f.min_speed_for_heading_mps):
+        if not (ok and np.isfinite(fx.course[j]) and fx.speed[j] >= f.min_speed_for_heading_mps):
             return
         if not walking:
             counts["heading_skipped_standing"] += 1
         elif not steady:
             counts["heading_skipped_handling"] += 1
-        elif self._fix_accuracy[j] > f.max_accuracy_for_heading_m:
+        elif fx.accuracy[j] > f.max_accuracy_for_heading_m:
             counts["heading_skipped_accuracy"] += 1
         else:
             Hp = np.zeros((1, self.n_err))
             Hp[0, PSI] = 1.0
-            okh = self._update(Hp, lambda x: np.array([wrap_angle(self._fix_course[j] - x[3])]),
+            okh = self._update(Hp, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]),
                                np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi, True)
             counts["heading_accepted" if okh else "heading_rejected"] += 1
 
@@ -493,7 +399,7 @@ class HandPdr(SensorSystem):
             Q[O] = r
             for h in self._bank:
                 h.x[8] = wrap_angle(h.x[3] - psi_d)
-            self._transition(F, Q)
+            self._bank.transition(F, Q)
             self._offset_known = True
             self.mag_counts["accepted"] += 1
             return
@@ -506,7 +412,7 @@ class HandPdr(SensorSystem):
 
     def _record(self) -> None:
         """History row: time, position (m), position one-sigma (m)."""
-        x, P = mixture_moments(self._bank, self._nominal, self._angles)
+        x, P = self._bank.moments()
         self._hist.append((self._tc, *x[:3], *np.sqrt(np.maximum(np.diag(P)[:3], 0.0))))
 
     # --- time -------------------------------------------------------------------
@@ -560,25 +466,8 @@ class HandPdr(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        """Closed-loop reset. A bank: every hypothesis i goes through the affine map that takes
-        the mixture N(x̄, P̄) to N(x̄ + dx, P): x_i ← x̄ + dx + T d_i, P_i ← T P_i Tᵀ, with
-        T P̄ Tᵀ = P (:func:`~bodyfusion.plugins.hand_pdr.hypotheses.affine_map`), d_i = x_i − x̄."""
-        x_bar, P_bar = mixture_moments(self._bank, self._nominal, self._angles)
-        changed = bool(np.any(dx)) or not np.array_equal(P, P_bar)
-        if len(self._bank) == 1:
-            self._bank[0].x += dx[self._nominal]
-            self._bank[0].P = 0.5 * (P + P.T)
-        elif changed:
-            T = affine_map(P_bar, P)
-            for h in self._bank:
-                d = np.zeros(self.n_err)
-                d[self._nominal] = h.x - x_bar
-                d[PSI] = wrap_angle(d[PSI])
-                if self._mag is not None:
-                    d[O] = wrap_angle(d[O])
-                h.x = x_bar + (dx + T @ d)[self._nominal]
-                TPT = T @ h.P @ T.T
-                h.P = 0.5 * (TPT + TPT.T)
+        """Closed-loop reset of one filter or of every hypothesis (:meth:`BankFilter.correct`)."""
+        changed = self._bank.correct(dx, P)
         if self._hist[-1][0] == self._tc:  # corrected at an event: that record shows it
             self._hist.pop()
             self._record()
@@ -586,10 +475,10 @@ class HandPdr(SensorSystem):
             self._record()
 
     def track_transition(self) -> None:
-        self.phi = np.eye(self.n_err)
+        self._bank.phi = np.eye(self.n_err)
 
     def transition_since_sync(self) -> np.ndarray:
-        phi, self.phi = self.phi, np.eye(self.n_err)
+        phi, self._bank.phi = self._bank.phi, np.eye(self.n_err)
         return phi
 
     def sync_times(self) -> np.ndarray:
