@@ -268,7 +268,9 @@ def test_every_kind_conforms(vicon_slice, kind):
 
 
 def test_stance_noise_moves_the_truth_and_the_imu_consistently():
-    from bodyfusion.sim.gait import StanceNoiseConfig, plan_gait, stance_drift
+    from bodyfusion.sim.foot_motion import stance_drift
+    from bodyfusion.sim.gait import plan_gait
+    from bodyfusion.sim.gait_config import StanceNoiseConfig
     from bodyfusion.sim.imu import ideal_imu
     from bodyfusion.sim.scenario import load_scenario
     from bodyfusion.nav.strapdown import integrate

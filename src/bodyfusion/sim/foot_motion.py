@@ -63,7 +63,7 @@ from numpy.polynomial import Polynomial
 
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.sim.gait_config import Foot, StanceNoiseConfig
-from bodyfusion.sim.imu import MotionState, quat_multiply
+from bodyfusion.sim.imu import MotionState, quat_about_axis, quat_multiply
 from bodyfusion.sim.paths import direction
 
 __all__ = ["FootMotion", "Impact", "Roll", "StanceDrift", "ground_motion_samples", "stance_drift"]
@@ -76,18 +76,6 @@ _LIFT = 256.0 * _BUMP4
 _TOE = -(19683.0 / 16.0) * Polynomial([1, -2]) * _BUMP4  # peaks −1 at τ = 1/3, +1 at τ = 2/3
 _PROFILES = {name: (p, p.deriv(1), p.deriv(2)) for name, p in {"along": _ALONG, "lift": _LIFT, "toe": _TOE}.items()}
 _LIFT_PEAK_CURVATURE = 32.0  # −d²(256 τ⁴(1−τ)⁴)/dτ² at τ = ½, its largest value
-
-
-def _quat_z(angle: np.ndarray) -> np.ndarray:
-    a = 0.5 * np.asarray(angle, dtype=float)
-    z = np.zeros_like(a)
-    return np.stack([np.cos(a), z, z, np.sin(a)], axis=-1)
-
-
-def _quat_y(angle: np.ndarray) -> np.ndarray:
-    a = 0.5 * np.asarray(angle, dtype=float)
-    z = np.zeros_like(a)
-    return np.stack([np.cos(a), z, np.sin(a), z], axis=-1)
 
 
 def _along_heading(forward_up: np.ndarray, az: np.ndarray) -> np.ndarray:
@@ -276,9 +264,9 @@ class FootMotion:
             vel[ground] += dv
             acc[ground] += da
         yaw = 0.5 * np.pi - az  # ENU yaw, counter-clockwise from East
-        q = quat_multiply(_quat_z(yaw), _quat_y(-toe))
+        q = quat_multiply(quat_about_axis(yaw, 3), quat_about_axis(-toe, 2))
         if self.mount_yaw_rad:
-            q = quat_multiply(q, _quat_z(np.full_like(yaw, -self.mount_yaw_rad)))
+            q = quat_multiply(q, quat_about_axis(np.full_like(yaw, -self.mount_yaw_rad), 3))
         # ω_n = yaw rate about Up + (−toe rate) about the yawed y axis [−sin yaw, cos yaw, 0].
         omega = np.stack([dtoe * np.sin(yaw), -dtoe * np.cos(yaw), -daz], axis=-1)
         return MotionState(pos=pos, vel=vel, acc=acc, q_nb=q, omega_n=omega)

@@ -46,12 +46,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from bodyfusion.core.errors import ConfigError
-from bodyfusion.sim.foot_motion import FootMotion, Impact, Roll, ground_motion_samples, stance_drift
-from bodyfusion.sim.gait_config import Foot, GaitConfig, PauseConfig, StairsConfig, StanceNoiseConfig
+from bodyfusion.sim.foot_motion import FootMotion, Impact, Roll, ground_motion_samples
+from bodyfusion.sim.gait_config import Foot, GaitConfig, PauseConfig, StairsConfig
 from bodyfusion.sim.paths import BodyPath, left_normal
 
 # GaitConfig, StanceNoiseConfig and stance_drift: re-exported for the plugins (see the module docstring)
-__all__ = ["FootTrack", "GaitConfig", "GaitPlan", "StanceNoiseConfig", "plan_gait", "stance_drift"]
+__all__ = ["FootTrack", "GaitPlan", "plan_gait"]
 
 
 @dataclass

@@ -46,7 +46,7 @@ from pydantic import Field
 from bodyfusion.core.layout import StrictModel
 from bodyfusion.core.seeding import system_seed
 from bodyfusion.sim.gait import GaitPlan
-from bodyfusion.sim.imu import MotionState, quat_multiply
+from bodyfusion.sim.imu import MotionState, quat_about_axis, quat_multiply
 from bodyfusion.sim.paths import Arc, BodyPath, direction, left_normal
 
 __all__ = ["HandMotion", "HandSwayConfig", "hand_motion", "heel_strikes"]
@@ -266,7 +266,7 @@ class HandMotion:
         yaw_rate = -w - wob["yaw"][1]
         pitch, pitch_rate = wob["pitch"][0], wob["pitch"][1]
         roll, roll_rate = wob["roll"][0], wob["roll"][1]
-        q = quat_multiply(quat_multiply(_quat_axis(yaw, 3), _quat_axis(pitch, 2)), _quat_axis(roll, 1))
+        q = quat_multiply(quat_multiply(quat_about_axis(yaw, 3), quat_about_axis(pitch, 2)), quat_about_axis(roll, 1))
         cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
         omega = np.column_stack([
             -pitch_rate * sy + roll_rate * cy * cp,
@@ -274,14 +274,6 @@ class HandMotion:
             yaw_rate - roll_rate * sp,
         ])
         return MotionState(pos=pos, vel=vel, acc=acc, q_nb=q, omega_n=omega)
-
-
-def _quat_axis(angle: np.ndarray, axis: int) -> np.ndarray:
-    h = 0.5 * np.asarray(angle, dtype=float)
-    q = np.zeros(h.shape + (4,))
-    q[..., 0] = np.cos(h)
-    q[..., axis] = np.sin(h)
-    return q
 
 
 def hand_motion(plan: GaitPlan, cycle_samples: int, *, seed: int, name: str, offset_m: tuple[float, float, float],

@@ -104,6 +104,16 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ], axis=-1)
 
 
+def quat_about_axis(angle: np.ndarray, axis: int) -> np.ndarray:
+    """Quaternions (..., 4), scalar first, of rotations by ``angle`` (rad) about body axis
+    ``axis`` (1: x, 2: y, 3: z: the quaternion component it sets)."""
+    h = 0.5 * np.asarray(angle, dtype=float)
+    q = np.zeros(h.shape + (4,))
+    q[..., 0] = np.cos(h)
+    q[..., axis] = np.sin(h)
+    return q
+
+
 def dcm_from_quat(q: np.ndarray) -> np.ndarray:
     """C_nb (..., 3, 3) of unit scalar-first quaternions q_nb (..., 4)."""
     w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)

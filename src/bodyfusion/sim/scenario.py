@@ -14,7 +14,7 @@ A scenario (YAML, validated strictly: unknown keys are errors)::
     geodetic_origin: [49.4613, 11.1109, 390.0]   # lat, lon, h of the ENU frame (for GNSS)
     layout: {}                        # merged over the generated config.yaml
 
-``path``: see :mod:`bodyfusion.sim.paths`; ``gait``: :class:`bodyfusion.sim.gait.GaitConfig`;
+``path``: see :mod:`bodyfusion.sim.paths`; ``gait``: :class:`bodyfusion.sim.gait_config.GaitConfig`;
 ``systems.<name>``: dispatched on ``kind`` to the plugin that simulates it (each plugin's
 ``fusion_simulation_kinds`` hook returns its kinds, :class:`bodyfusion.sim.context.SystemKind`:
 a strict section model and a simulation function that writes the plugin's layout section);

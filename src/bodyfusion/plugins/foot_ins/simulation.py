@@ -20,7 +20,8 @@ from bodyfusion.core.seeding import system_seed
 from bodyfusion.plugins.foot_ins.config import FootFilterConfig, FootInsConfig, InitialStateConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
 from bodyfusion.sim.files import imu_csv_section, write_imu_csv
-from bodyfusion.sim.gait import StanceNoiseConfig, stance_drift
+from bodyfusion.sim.foot_motion import stance_drift
+from bodyfusion.sim.gait_config import StanceNoiseConfig
 from bodyfusion.sim.imu import ImuErrorConfig, measured_imu
 
 IMU_COLUMNS = ("t", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "stance")
@@ -34,7 +35,7 @@ class FootImuSystem(StrictModel):
     """An IMU strapped to one foot (``kind: foot_imu``); ``mount_yaw_deg`` turns it on the
     foot clockwise seen from above (its x axis then points that far right of the toe);
     ``stance_noise`` (default none) lets the foot drift with an AR(1) velocity in stance
-    (:class:`bodyfusion.sim.gait.StanceNoiseConfig`; draws from ``system_seed(seed, name + "#stance")``);
+    (:class:`bodyfusion.sim.gait_config.StanceNoiseConfig`; draws from ``system_seed(seed, name + "#stance")``);
     ``heading_error_sd_deg``: σ of the error of the initial heading written into the
     config (0: the true heading; draw from ``system_seed(seed, name + "#heading")``)."""
 
