@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
+
 XIO_CFG = "configs/xio_long_walk.yaml"
 VICON_CFG = "configs/dual_foot_vicon.yaml"
 VICON_LEFT = ROOT / "examples" / "data" / "dual_foot_vicon_hu2025" / "imuMeasLeft.csv"
@@ -145,6 +146,7 @@ def xio_run(tmp_path_factory):
     return proc, out
 
 
+@pytest.mark.slow
 def test_run_xio_exits_0(xio_run):
     proc, out = xio_run
     assert proc.returncode == 0, proc.stderr

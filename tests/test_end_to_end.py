@@ -13,8 +13,7 @@ import pytest
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run_layout
 from bodyfusion.sim import simulate
-
-CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+from tests.paths import CONFIGS
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +31,7 @@ def test_error_free_imus_navigate_to_under_a_centimetre_after_a_minute_of_walkin
         assert score.metrics["vertical_error_m"]["max"] < 0.01, name
 
 
+@pytest.mark.slow
 def test_run_writes_the_contract_outputs_for_a_simulation(perfect_walk, tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, "-m", "bodyfusion.cli", "run", str(perfect_walk), "--out", str(out)],

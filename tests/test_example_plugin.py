@@ -9,21 +9,22 @@ from __future__ import annotations
 
 import importlib.util
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
+
 EXAMPLE = ROOT / "examples" / "plugin_barometer"
 if str(EXAMPLE) not in sys.path:
     sys.path.insert(0, str(EXAMPLE))
 
 import bodyfusion_barometer  # noqa: E402
 
-from bodyfusion.core import registry as plugins, run  # noqa: E402
-from bodyfusion.core.layout import load_layout  # noqa: E402
+from bodyfusion.core import registry as plugins  # noqa: E402
+from bodyfusion.core import run
 from bodyfusion.core.errors import ConfigError  # noqa: E402
+from bodyfusion.core.layout import load_layout  # noqa: E402
 
 
 def _own_tests():

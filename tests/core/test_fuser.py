@@ -1,0 +1,179 @@
+"""The central fuser: constraints enforced at sync epochs, corrections spread to full states."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bodyfusion.core.constraints import (
+    DistanceConstraint,
+    constrained_covariance,
+    solve_projection,
+)
+from bodyfusion.core.fuser import spread_correction
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run, run_layout
+from bodyfusion.sim import simulate
+from tests.paths import ROOT
+
+WALKERS = ROOT / "configs" / "paper_constraint_monte_carlo.yaml"
+VICON = ROOT / "configs" / "dual_foot_vicon.yaml"
+
+
+def walkers(method: str, seconds: float, seed: int = 0):
+    overrides = [f"fuser.method={method}", f"systems.system_1.duration_s={seconds}",
+                 f"systems.system_2.duration_s={seconds}"]
+    return run_layout(load_layout(WALKERS, overrides), seed=seed)
+
+
+def horizontal_separation(result) -> np.ndarray:
+    a, b = (result.trajectories[n].pos_n for n in ("system_1", "system_2"))
+    return np.hypot(*(a - b)[:, :2].T)
+
+
+def test_maximum_separation_holds_after_every_epoch():
+    result = walkers("projection", 20.0)
+    assert result.fuser.epochs == 2000
+    assert result.fuser.activations > 100
+    assert horizontal_separation(result).max() <= 1.5 + 1e-6
+    assert result.fuser.max_violation_after_m < 1e-6
+
+
+@pytest.mark.slow
+def test_constraint_averages_two_independent_random_walks():
+    """Errors ≫ d: the constrained pair tends to the mean of the two, RMSE × 1/√2."""
+    before, after = [], []
+    for seed in range(8):
+        for method, out in (("none", before), ("projection", after)):
+            res = walkers(method, 60.0, seed)
+            for name, system in res.systems.items():
+                err = res.trajectories[name].pos_n[-1, :2] - system.truth_pos_n[-1, :2]
+                out.append(err @ err)
+    ratio = np.sqrt(np.mean(after) / np.mean(before))
+    assert 0.5 < ratio < 0.9, ratio
+
+
+def test_unconstrained_method_changes_nothing():
+    a = walkers("none", 5.0)
+    assert a.fuser.epochs == 0
+    b = walkers("projection", 5.0)
+    assert not np.array_equal(a.trajectories["system_1"].pos_n, b.trajectories["system_1"].pos_n)
+
+
+@pytest.mark.parametrize("method", ["qp", "socp"])
+def test_every_method_gives_the_projection_trajectory_on_the_vicon_walk(method):
+    ref = run_layout(load_layout(VICON, ["fuser.method=projection"]))
+    other = run_layout(load_layout(VICON, [f"fuser.method={method}"]))
+    assert other.fuser.activations == ref.fuser.activations > 0
+    assert other.fuser.solver_fallbacks == 0
+    for name in ref.trajectories:
+        np.testing.assert_allclose(other.trajectories[name].pos_n, ref.trajectories[name].pos_n, atol=1e-5)
+
+
+def joint(covs: list[np.ndarray]) -> np.ndarray:
+    n = sum(c.shape[0] for c in covs)
+    out, k = np.zeros((n, n)), 0
+    for c in covs:
+        out[k:k + len(c), k:k + len(c)] = c
+        k += len(c)
+    return out
+
+
+def random_spd(rng: np.random.Generator, n: int, floor: float) -> np.ndarray:
+    A = rng.normal(size=(n, n))
+    return A @ A.T + floor * np.eye(n)
+
+
+def test_spread_correction_of_position_only_states_is_the_position_projection():
+    rng = np.random.default_rng(1)
+    sigma = joint([random_spd(rng, 3, 0.1), random_spd(rng, 3, 0.1)])
+    p_hat = np.array([0.0, 0.0, 0.0, 2.0, 0.5, 0.1])
+    sol = solve_projection(p_hat, sigma, [DistanceConstraint(0, 1, "max", 1.0)])
+    dx, P_new = spread_correction(sigma, np.arange(6), sol)
+    np.testing.assert_allclose(dx, sol.p - p_hat, atol=1e-10)
+    np.testing.assert_allclose(P_new, constrained_covariance(sigma, sol.gain), atol=1e-10)
+
+
+def test_spread_correction_moves_correlated_states_by_regression():
+    """A velocity correlated with position moves by P_vp P_pp⁻¹ δp; P stays symmetric PSD."""
+    rng = np.random.default_rng(2)
+    covs = [random_spd(rng, 6, 0.01), random_spd(rng, 6, 0.01)]
+    P = joint(covs)
+    pos = np.array([0, 1, 2, 6, 7, 8])
+    p_hat = np.array([0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
+    sol = solve_projection(p_hat, P[pos][:, pos], [DistanceConstraint(0, 1, "max", 1.0)])
+    dx, P_new = spread_correction(P, pos, sol)
+    for k, C in enumerate(covs):
+        dp = sol.p[3 * k:3 * k + 3] - p_hat[3 * k:3 * k + 3]
+        block = dx[6 * k:6 * k + 6]
+        np.testing.assert_allclose(block[:3], dp, atol=1e-10)
+        np.testing.assert_allclose(block[3:], C[3:, :3] @ np.linalg.solve(C[:3, :3], dp), atol=1e-9)
+    np.testing.assert_allclose(P_new, P_new.T, atol=1e-12)
+    assert np.linalg.eigvalsh(P_new).min() > -1e-10
+
+
+def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet(tmp_path):
+    config = simulate(ROOT / "configs" / "sim_perfect_walk.yaml", tmp_path, seed=0).config_path
+    free = run_layout(load_layout(config))
+    truth = free.truths
+    t = truth["left_foot"].t
+    sep = np.hypot(*(truth["left_foot"].pos_n - np.array([np.interp(t, truth["right_foot"].t, c)
+                                                           for c in truth["right_foot"].pos_n.T]).T)[:, :2].T)
+    limit = float(np.round(sep.max() + 0.05, 2))
+    constrained = run_layout(load_layout(config, [
+        "fuser.method=projection",
+        f"constraints=[{{between: [left_foot, right_foot], kind: max, distance_m: {limit}}}]"]))
+    for name, score in constrained.scores.items():
+        assert score.metrics["horizontal_error_m"]["max"] < 0.01, name
+
+
+def test_run_writes_the_constraints_block(tmp_path):
+    _, out = run(VICON, [], tmp_path)
+    block = json.loads((out / "metrics.json").read_text())["constraints"]
+    for key in ("method", "epochs", "activations", "solver_fallbacks", "max_violation_after_m", "solve_time_us"):
+        assert key in block
+    assert block["method"] == "projection"
+    assert block["activations"] > 0
+    assert block["max_violation_after_m"] < 1e-6
+    assert set(block["solve_time_us"]) == {"median", "p99"}
+
+
+def test_tracking_cross_covariances_keeps_the_filter_consistent():
+    """Dropping the cross-covariances a constraint creates makes both systems overconfident
+    (NEES ≫ 2); tracking them keeps the NEES near 2, with the same estimates."""
+    nees = {}
+    for tracked in (False, True):
+        values = []
+        for seed in range(4):
+            res = run_layout(load_layout(WALKERS, [
+                "fuser.method=projection", f"fuser.cross_covariance={str(tracked).lower()}",
+                "systems.system_1.duration_s=30", "systems.system_2.duration_s=30"]), seed=seed)
+            for system in res.systems.values():
+                values.append(system.horizontal_nees()[1500:])
+        nees[tracked] = float(np.nanmean(np.concatenate(values)))
+    assert nees[False] > 20
+    assert 1.0 < nees[True] < 4.0
+
+
+def test_cross_covariance_tracking_runs_with_foot_systems():
+    res = run_layout(load_layout(VICON, ["fuser.cross_covariance=true"]))
+    assert res.fuser.activations > 0
+    for system in res.systems.values():
+        assert np.linalg.eigvalsh(system.P).min() > -1e-12
+
+
+def test_positions_only_correction_leaves_the_other_states_and_their_variances():
+    rng = np.random.default_rng(3)
+    covs = [random_spd(rng, 6, 0.01), random_spd(rng, 6, 0.01)]
+    P = joint(covs)
+    pos = np.array([0, 1, 2, 6, 7, 8])
+    sol = solve_projection(np.array([0.0, 0, 0, 3.0, 0, 0]), P[pos][:, pos], [DistanceConstraint(0, 1, "max", 1.0)])
+    dx_all, P_all = spread_correction(P, pos, sol)
+    dx, P_new = spread_correction(P, pos, sol, positions_only=True)
+    others = np.array([3, 4, 5, 9, 10, 11])
+    np.testing.assert_array_equal(dx[others], 0.0)
+    np.testing.assert_allclose(dx[pos], dx_all[pos], atol=1e-12)
+    np.testing.assert_allclose(P_new[np.ix_(others, others)], P[np.ix_(others, others)], atol=1e-12)
+    assert np.linalg.eigvalsh(P_new).min() > -1e-10
