@@ -10,7 +10,7 @@ state (docs/architecture.md, "Distance constraints"):
 
 where P = blkdiag(P_1 … P_n) is the stacked error-state covariance, S selects the
 positions, Σ = S P Sᵀ, and J, λ are the active constraints' Jacobian and multipliers
-at the solution (PDR/GNSS paper eqs. 55–60 written for the full state). Each system
+at the solution ([KFSC2015] eqs. 55–60 written for the full state). Each system
 then takes its own block. The cross-covariances the constraint creates are dropped, as
 in the papers, unless ``fuser.cross_covariance`` is on: then the fuser keeps them and
 carries them between epochs with each system's accumulated transition,

@@ -90,7 +90,7 @@ class FuserConfig(StrictModel):
     """How constraints are enforced.
 
     method: ``none`` (systems run independently), ``projection`` (linearised, active
-    set; PDR/GNSS paper eqs. 55–60), ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy).
+    set; [KFSC2015] eqs. 55–60), ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy).
     epochs: when constraints are enforced — at the constrained systems' ``events``
     (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
     any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
@@ -115,7 +115,7 @@ class SmootherConfig(StrictModel):
 
     ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward
     filter's error states); ``fb`` (forward–backward navigation, covariance-weighted
-    fusion, position re-integrated); ``fb-rts`` (the FB-RTS paper: both passes RTS-smoothed
+    fusion, position re-integrated); ``fb-rts`` ([Shen2025]: both passes RTS-smoothed
     before the fusion). Segments run between stance midpoints (stance runs shorter than
     ``min_stance_s`` are ignored; segments longer than ``max_segment_s`` are split).
     ``span`` (``rts`` only): ``whole`` smooths the whole run, ``segment`` each segment on

@@ -188,7 +188,7 @@ def shoe(
     specific force, or an RMS specific-force deviation below ~1.7 m/s^2
     without rotation.  A 10x larger gamma (3e5) lets through ~1 rad/s.
 
-    On the shared 60 Hz Vicon walk (Hu & Hu 2025) these defaults agree with
+    On the shared 60 Hz Vicon walk ([Hu2025]) these defaults agree with
     the authors' stance labels on 92.8 % (left) and 88.3 % (right) of the
     samples (gamma = 3e5: 84.0 % / 78.1 %).  Labelled stance is almost never
     missed; the disagreements are stance declared in short (1-3 sample)
@@ -259,7 +259,7 @@ def adaptive_shoe(acc_b: np.ndarray, gyro_b: np.ndarray, rate_hz: float, *, wind
 def acceleration_magnitude(
     acc_b: np.ndarray, *, threshold: float, gravity: float = 9.81, window: int = 1
 ) -> np.ndarray:
-    """Acceleration-magnitude stance detector of the MDC-cKF paper (Xu et al. 2024).
+    """Acceleration-magnitude stance detector of [Xu2024].
 
     The paper (Sec. 2, Eq. for ``VAcc``) computes ``VAcc_t = sqrt(ax^2 + ay^2 +
     az^2)`` and declares stance by comparing it with a threshold ``t_d``; the
@@ -283,7 +283,7 @@ def acceleration_magnitude(
 
 
 def axes_sum_band(acc_b: np.ndarray, *, low: float, high: float, window: int = 1) -> np.ndarray:
-    """Axes-sum band stance detector of the DC-EnEKF paper (Deng et al. 2026).
+    """Axes-sum band stance detector of [Deng2026].
 
     Sec. 2.2: "the sum of the values along the three axes in the b-frame is
     used as the initial reference for ZUPT", stance when::

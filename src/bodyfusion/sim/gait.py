@@ -2,7 +2,7 @@
 
 Timing. One gait cycle of a foot lasts ``T`` = 2 / cadence (cadence counts steps of
 either foot) with ``stance_fraction`` of it on the ground; or, for the "pulse" profile
-of the FB-RTS paper's simulation, ``swing_s`` + ``stance_s``. The other foot runs half a
+of [Shen2025]'s simulation, ``swing_s`` + ``stance_s``. The other foot runs half a
 cycle later; with a stance fraction below ½ (running) both feet are in the air for
 ``T (½ − stance_fraction)`` after each toe-off (the flight phase). Every swing, roll and
 impact starts and ends ON an IMU sample instant (the cycle, the swing, the half-cycle

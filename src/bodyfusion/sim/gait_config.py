@@ -96,7 +96,7 @@ class GaitConfig(StrictModel):
     ``kind`` values change the defaults, :data:`GAIT_KINDS`).
 
     Give ``swing_s`` and ``stance_s`` together to set the cycle directly (they replace
-    ``cadence_steps_per_min`` and ``stance_fraction``), e.g. the FB-RTS paper's pulse
+    ``cadence_steps_per_min`` and ``stance_fraction``), e.g. [Shen2025]'s pulse
     profile: ``{swing_s: 1, stance_s: 1, lift_m: 0, pitch_amplitude_deg: 0}``.
     ``roll``, ``impact`` (:mod:`bodyfusion.sim.foot_motion`), ``stairs`` (:mod:`bodyfusion.sim.gait`):
     ``null``: none; ``pauses`` (:mod:`bodyfusion.sim.gait`): a list of ``{at_s, duration_s}``.
@@ -144,7 +144,7 @@ class GaitConfig(StrictModel):
 
 class StanceNoiseConfig(StrictModel):
     """A foot that is not perfectly still in stance (the coloured measurement noise of the
-    MDC-cKF and DC-EnEKF papers): inside each stance run its velocity (ENU, every axis)
+    [Xu2024] and [Deng2026]): inside each stance run its velocity (ENU, every axis)
     follows v_k = colour_factor · v_{k−1} + ξ_k, ξ_k ~ N(0, sigma_mps²), zero at both ends
     of the run (heel strike and toe-off) and in swing (:func:`bodyfusion.sim.foot_motion.stance_drift`)."""
 

@@ -209,7 +209,7 @@ class ImuErrorModel:
 _UG = 1e-6 * STANDARD_GRAVITY
 PRESETS: dict[str, dict[str, float]] = {
     "perfect": {},
-    # Shen et al. 2025 (FB-RTS), Table 1, ICM-20948 nodes at 125 Hz: gyroscope white noise
+    # [Shen2025] (FB-RTS), Table 1, ICM-20948 nodes at 125 Hz: gyroscope white noise
     # 0.5 °/√h and bias instability 13 °/h; accelerometer 168 µg/√Hz and 162 µg. Bias
     # instability is simulated as a Gauss–Markov process of that σ with τ = 100 s.
     "icm20948": {

@@ -1,4 +1,4 @@
-"""Zero-velocity update under coloured measurement noise (the cKF of the MDC-cKF paper).
+"""Zero-velocity update under coloured measurement noise (the cKF of [Xu2024]).
 
 During stance the foot is not perfectly still: the zero-velocity pseudo-measurement
 m_k = 0 = H x_k + v_k (H selects the velocity) carries a coloured error

@@ -20,8 +20,8 @@ class FootFilterConfig(StrictModel):
 
     kind: Literal["ekf", "ckf", "enekf", "cenekf"] = "ekf"
     """Estimator: ``ekf`` (15-state error-state EKF); ``ckf`` (the EKF with the zero-velocity
-    update under coloured measurement noise, MDC-cKF paper eqs. 5–18); ``enekf`` (ensemble EKF
-    whose members carry the attitude quaternion, DC-EnEKF paper eqs. 1–19); ``cenekf`` (the
+    update under coloured measurement noise, [Xu2024] eqs. 5–18); ``enekf`` (ensemble EKF
+    whose members carry the attitude quaternion, [Deng2026] eqs. 1–19); ``cenekf`` (the
     ensemble filter with the coloured noise in an augmented state, eqs. 5–7)."""
     colour_factor: float = Field(default=0.0, ge=0, lt=1)
     """Colour factor α of the stance noise v_k = α v_{k−1} + ξ_k, in [0, 1) (ckf, cenekf)."""

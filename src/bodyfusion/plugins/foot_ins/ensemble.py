@@ -1,4 +1,4 @@
-"""The ensemble estimator of the foot INS (``filter.kind: enekf | cenekf``; DC-EnEKF paper).
+"""The ensemble estimator of the foot INS (``filter.kind: enekf | cenekf``; [Deng2026]).
 
 The members (M, n_s) are propagated and analysed together by the compiled loop of
 :mod:`bodyfusion.plugins.foot_ins.ensemble_kernels`. This module owns their set-up, their

@@ -1,4 +1,4 @@
-"""Compiled per-sample loop of the ensemble foot INS (``enekf``, ``cenekf``; DC-EnEKF paper).
+"""Compiled per-sample loop of the ensemble foot INS (``enekf``, ``cenekf``; [Deng2026]).
 
 Members are rows of ``ens`` (M, n_s): the nominal state of :mod:`bodyfusion.nav.strapdown`
 (p_n m, v_n m/s, q_nb scalar-first, b_a m/s^2, b_g rad/s; 16 values), and for the

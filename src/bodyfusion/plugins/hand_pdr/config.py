@@ -58,7 +58,7 @@ class StepConfig(StrictModel):
 
 
 class PdrFilterConfig(StrictModel):
-    """The PDR error filter (PDR/GNSS paper eqs. 38–44), state [δE, δN, δU, δψ, δS, δb, δβE, δβN, δc].
+    """The PDR error filter ([KFSC2015] eqs. 38–44), state [δE, δN, δU, δψ, δS, δb, δβE, δβN, δc].
 
     PDR. step_length_sd_m: white step-length error σ_S; heading_noise_density: gyro angle
     random walk, rad/√s; gyro_bias_sd: steady-state σ of the first-order Gauss–Markov gyro

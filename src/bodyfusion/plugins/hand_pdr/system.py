@@ -1,4 +1,4 @@
-"""Hand-held phone: pedestrian dead reckoning corrected by GNSS (PDR/GNSS paper §5).
+"""Hand-held phone: pedestrian dead reckoning corrected by GNSS ([KFSC2015] §5).
 
 Nominal state: position E, N, U (ENU, m), step heading ψ (azimuth of walking, rad,
 clockwise from North), bias b of the levelled-gyro azimuth rate (rad/s), horizontal GNSS

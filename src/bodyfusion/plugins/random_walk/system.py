@@ -1,4 +1,4 @@
-"""A synthetic dead-reckoning system: the PDR/GNSS paper's §7.1 Monte-Carlo model.
+"""A synthetic dead-reckoning system: [KFSC2015]'s §7.1 Monte-Carlo model.
 
 The carrier moves at a constant velocity v_n (ENU, m/s) from ``start_m``. At each of
 ``rate_hz`` steps the system measures its position increment v_n dt plus white noise
