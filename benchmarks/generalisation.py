@@ -144,7 +144,7 @@ def _zupt_nis(result, name: str) -> float | None:
 def pyshoe_row(trial: Path, overrides: list[str]) -> list[Row]:
     from bodyfusion.evaluation.metrics import score_systems
     from bodyfusion.io.truth import read_truth_csv
-    from bodyfusion.core.types import Trajectory
+    from bodyfusion.base.types import Trajectory
 
     result = _run(pyshoe_layout(trial), overrides)
     score = result.scores["foot"].metrics["horizontal_error_m"]["rmse"]
@@ -184,7 +184,7 @@ def xio_row(csv: Path, overrides: list[str]) -> list[Row]:
 def ipin_row(log: Path, overrides: list[str]) -> list[Row]:
     from bodyfusion.evaluation.metrics import score_systems
     from bodyfusion.io.phone_log import read_getsensordata
-    from bodyfusion.core.types import Trajectory
+    from bodyfusion.base.types import Trajectory
 
     result = _run(ipin_layout(log), overrides)
     p75 = result.scores["hand_phone"].metrics["horizontal_error_m"]["p75"]

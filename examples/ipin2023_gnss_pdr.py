@@ -33,7 +33,7 @@ from bodyfusion.core.layout import load_layout
 from bodyfusion.evaluation.metrics import score_systems
 from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.core.run import run_layout
-from bodyfusion.core.types import Trajectory
+from bodyfusion.base.types import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "ipin2023_trial01.yaml"

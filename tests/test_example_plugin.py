@@ -23,7 +23,7 @@ import bodyfusion_barometer  # noqa: E402
 
 from bodyfusion.core import registry as plugins  # noqa: E402
 from bodyfusion.core import run
-from bodyfusion.core.errors import ConfigError  # noqa: E402
+from bodyfusion.base.errors import ConfigError  # noqa: E402
 from bodyfusion.core.layout import load_layout  # noqa: E402
 
 

@@ -9,7 +9,7 @@ from typing import Annotated, Literal, Optional
 
 import typer
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Fuse body-worn pedestrian navigation systems under body distance constraints.")

@@ -1,6 +1,6 @@
 """Tests for bodyfusion.core.layout: strict two-stage layout validation, overrides, path resolution.
 
-Every refusal is a :class:`bodyfusion.core.errors.ConfigError` whose text names the file and the
+Every refusal is a :class:`bodyfusion.base.errors.ConfigError` whose text names the file and the
 dotted path of the offending key (docs/contract.md).
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from bodyfusion.core.errors import ConfigError, FusionError
+from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.core.layout import (
     Layout,
     apply_overrides,

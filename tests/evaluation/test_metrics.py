@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import FusionError
-from bodyfusion.core.types import Trajectory, TruthTrack
+from bodyfusion.base.errors import FusionError
+from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import (
     PERCENTILES,
     PlanarTransform,

@@ -8,7 +8,7 @@ import numpy as np
 import pynmea2
 import pytest
 
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.gnss import GnssFixes, enu_to_geodetic, read_gnss_csv, read_nmea
 
 

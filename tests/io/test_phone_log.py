@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.phone_log import read_getsensordata
 from tests.paths import SHARED_DATA, needs_shared
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.imu import ACC_UNITS, GYRO_UNITS, read_imu_csv
 from bodyfusion.io.tables import TIMESTAMP_POLICIES, apply_timestamp_policy, read_table
 from bodyfusion.io.truth import read_truth_csv

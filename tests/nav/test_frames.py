@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run_layout
 from bodyfusion.nav.frames import apply_axis_map

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import Layout, load_layout, validate_section
 from bodyfusion.core.run import run_layout
 from bodyfusion.nav.strapdown import integrate

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import Layout, validate_section
-from bodyfusion.core.seeding import stable_hash
+from bodyfusion.base.seeding import stable_hash
 from bodyfusion.io.imu import read_imu_csv
 from bodyfusion.nav.attitude import azimuth_pitch_roll
 from bodyfusion.nav.strapdown import integrate

@@ -16,8 +16,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from bodyfusion.core.errors import ConfigError
-from bodyfusion.core.types import Trajectory, TruthTrack
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, outage_errors
 from bodyfusion.study import (
     ResultStore,

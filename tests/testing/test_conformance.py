@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel, read_yaml
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.core.layout import read_yaml
 from bodyfusion.core.system import SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.plugins.foot_ins import FootIns
 from bodyfusion.plugins.random_walk import RandomWalk
 from bodyfusion.testing import (
@@ -79,7 +80,7 @@ class Toy(SensorSystem):
         self.hist = [(self.x.copy(), np.diag(self.P).copy())]
 
     def draw_steps(self):
-        from bodyfusion.core.seeding import system_seed
+        from bodyfusion.base.seeding import system_seed
 
         rng = np.random.default_rng(system_seed(self.context.seed, self.name))
         return 1.0 + rng.normal(0, self.config.noise_m, self.t.size)

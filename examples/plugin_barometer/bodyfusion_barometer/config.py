@@ -9,7 +9,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from bodyfusion.core.layout import DataPath, StrictModel
+from bodyfusion.base.sections import DataPath, StrictModel
 
 
 class PressureCsvConfig(StrictModel):

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from bodyfusion.core.errors import ConfigError, InputError
+from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.core.system import JacobianCase, LayoutContext, SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion_barometer import atmosphere
 from bodyfusion_barometer.config import BarometerConfig
 

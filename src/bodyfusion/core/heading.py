@@ -13,7 +13,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from bodyfusion.core.layout import HeadingAlignmentConfig
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.core.system import SensorSystem
 
 

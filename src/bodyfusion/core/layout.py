@@ -10,32 +10,15 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import yaml
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.nav.frames import NAMED_FRAMES, AxisMap, AxisSigns
-
-
-def _resolve_path(value: Path, info: ValidationInfo) -> Path:
-    base = (info.context or {}).get("base_dir")
-    value = Path(value).expanduser()
-    if base is not None and not value.is_absolute():
-        value = Path(base) / value
-    return value
-
-
-DataPath = Annotated[Path, AfterValidator(_resolve_path)]
-"""A file path; relative paths resolve against the folder of the layout file."""
-
-
-class StrictModel(BaseModel):
-    """Base of every layout section: unknown keys are errors."""
-
-    model_config = ConfigDict(extra="forbid", validate_default=True)
 
 
 class PositionFrame(StrictModel):
@@ -244,15 +227,6 @@ class Layout(StrictModel):
                 if sys_name not in names:
                     raise KeyedError(f"truth.systems.{sys_name}", f"unknown system (have {sorted(names)})")
         return self
-
-
-class KeyedError(ValueError):
-    """A cross-field error raised in a validator that knows the dotted key (relative to
-    the section being validated) it is about."""
-
-    def __init__(self, key: str, reason: str) -> None:
-        super().__init__(reason)
-        self.key = key
 
 
 def _dotted(loc: tuple[Any, ...]) -> str:

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 import numpy as np
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.core.result import RunResult
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
 from bodyfusion.io.gnss import enu_to_geodetic

@@ -16,7 +16,7 @@ from typing import Any
 
 import pluggy
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 
 PROJECT = "bodyfusion"
 ENTRY_POINT_GROUPS = ("bodyfusion.plugins", "fusion.plugins")

@@ -10,7 +10,7 @@ import numpy as np
 from bodyfusion.core.fuser import FuserReport
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory, TruthTrack
+from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 

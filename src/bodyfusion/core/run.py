@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings
 from bodyfusion.core.layout import LoadedLayout, load_layout
@@ -14,9 +14,9 @@ from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.smoothing import constrain_trajectories, smooth_systems
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
-from bodyfusion.core.types import TruthTrack
+from bodyfusion.base.types import TruthTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
-from bodyfusion.io.truth import read_truth
+from bodyfusion.core.truth import read_truth
 from bodyfusion.nav.earth import normal_gravity
 
 __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "load_truth", "run", "run_layout"]

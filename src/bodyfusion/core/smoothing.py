@@ -18,7 +18,7 @@ from bodyfusion.core.constraints import violations
 from bodyfusion.core.fuser import SOLVERS, distance_constraints
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
 from bodyfusion.core.system import SensorSystem
-from bodyfusion.core.types import LOG, Trajectory
+from bodyfusion.base.types import LOG, Trajectory
 
 
 def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:

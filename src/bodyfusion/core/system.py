@@ -21,9 +21,9 @@ from typing import ClassVar
 import numpy as np
 from pydantic import BaseModel
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import SmootherConfig
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 
 
 @dataclass

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyfusion.core.errors import FusionError
-from bodyfusion.core.types import Trajectory, TruthTrack
+from bodyfusion.base.errors import FusionError
+from bodyfusion.base.types import Trajectory, TruthTrack
 
 PERCENTILES = (50, 75, 90, 95, 99)
 

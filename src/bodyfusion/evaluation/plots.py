@@ -16,7 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore, error_cdf
-from bodyfusion.core.types import Trajectory, TruthTrack
+from bodyfusion.base.types import Trajectory, TruthTrack
 
 DPI = 120
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pymap3d
 
-from bodyfusion.core.errors import InputError
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.errors import InputError
+from bodyfusion.base.types import InputReport
 
 KNOT = 1852.0 / 3600.0
 """One knot in m/s."""

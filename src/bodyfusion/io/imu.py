@@ -1,5 +1,5 @@
 """IMU recordings: the layout section that describes a CSV (:class:`ImuCsvConfig`) and the reader
-that turns it into an :class:`~bodyfusion.core.types.ImuStream` in SI units and the body frame,
+that turns it into an :class:`~bodyfusion.base.types.ImuStream` in SI units and the body frame,
 checked by :func:`bodyfusion.io.imu_checks.check_imu`."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from bodyfusion.core.errors import InputError
-from bodyfusion.core.layout import DataPath, StrictModel
-from bodyfusion.core.types import ImuStream
+from bodyfusion.base.errors import InputError
+from bodyfusion.base.sections import DataPath, StrictModel
+from bodyfusion.base.types import ImuStream
 from bodyfusion.io.imu_checks import check_imu
 from bodyfusion.io.tables import (TIMESTAMP_POLICIES, apply_timestamp_policy, check_columns, check_time_source,
                                   read_table, sample_times)

@@ -24,10 +24,10 @@ Thresholds are physical and hold for any body-worn MEMS IMU:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from bodyfusion.base.types import ImuChecks
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.initial_alignment import window_spreads
 
@@ -41,31 +41,6 @@ RATE_TOLERANCE = 0.02
 """Relative difference between declared and measured sample rate that is reported."""
 CLIP_RUN = 3
 """Equal consecutive samples at an axis's extreme that count as flat-topped."""
-
-
-@dataclass
-class ImuChecks:
-    """What the checks found in one stream. Rates in Hz, times in s.
-
-    ``gap_index``: sample indices i whose step t[i] − t[i−1] is a gap; ``gap_missing_s``:
-    the time missing in each (step minus one nominal period)."""
-
-    source: str
-    rate_hz: float
-    rest_specific_force_mps2: float
-    max_angular_rate_radps: float
-    gap_index: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
-    gap_missing_s: np.ndarray = field(default_factory=lambda: np.empty(0))
-    clipped_acc_samples: int = 0
-    clipped_gyro_samples: int = 0
-    warnings: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict:
-        """Plain-JSON figures for metrics.json."""
-        return {"rate_hz": self.rate_hz, "rest_specific_force_mps2": self.rest_specific_force_mps2,
-                "max_angular_rate_radps": self.max_angular_rate_radps, "gaps": int(self.gap_index.size),
-                "gap_missing_s": float(self.gap_missing_s.sum()), "clipped_acc_samples": self.clipped_acc_samples,
-                "clipped_gyro_samples": self.clipped_gyro_samples, "warnings": len(self.warnings)}
 
 
 def _clipped_samples(x: np.ndarray) -> int:

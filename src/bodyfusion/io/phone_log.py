@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.gnss import GnssFixes, clean_fixes
 from bodyfusion.io.tables import apply_timestamp_policy
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.types import InputReport
 
 USED_TYPES = {"ACCE": 5, "GYRO": 5, "MAGN": 5, "GNSS": 10, "POSI": 6}
 """Line type → number of numeric fields after the type that are used."""

@@ -1,6 +1,6 @@
 """Delimited text tables and time stamps: the layer every file reader stands on.
 
-Every problem with an input file raises :class:`bodyfusion.core.errors.InputError`
+Every problem with an input file raises :class:`bodyfusion.base.errors.InputError`
 naming the file and, when the problem is one cell or one row, the 1-based
 line number of the file (as an editor shows it).
 
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyfusion.core.errors import InputError
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.errors import InputError
+from bodyfusion.base.types import InputReport
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
 

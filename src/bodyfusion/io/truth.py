@@ -1,29 +1,19 @@
-"""Reference (truth) tracks, and the registry of truth file formats a layout may name.
-
-``truth.format`` selects a reader from :data:`TRUTH_FORMATS`; each turns the layout's truth
-section into one :class:`~bodyfusion.core.types.TruthTrack` per scored system, positions in
-the navigation frame (ENU, m): ``wide`` (one row per epoch, columns per system, in the file's
-declared frame), ``long`` (``system,t,east_m,north_m,up_m``, what ``fusion simulate``
-writes), ``phone_log`` (the surveyed points of a GetSensorData log, about the layout's
-geodetic origin). A new format is one function added to the registry.
-"""
+"""Readers of reference (truth) tracks: wide CSVs (one row per epoch, columns per system) and
+the long ``system,t,east_m,north_m,up_m`` files ``fusion simulate`` writes. The layout's truth
+formats (:data:`bodyfusion.core.truth.TRUTH_FORMATS`) are built on them."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import pymap3d
 
-from bodyfusion.core.errors import ConfigError, InputError
-from bodyfusion.core.layout import TruthConfig
-from bodyfusion.core.types import TruthTrack
-from bodyfusion.io.phone_log import read_getsensordata
+from bodyfusion.base.errors import InputError
+from bodyfusion.base.types import TruthTrack
 from bodyfusion.io.tables import (apply_timestamp_policy, check_columns, check_time_source, clean_cell, read_lines,
                                   read_table, sample_times, split_line)
-from bodyfusion.nav.frames import apply_axis_map
 
 
 def read_truth_csv(
@@ -120,43 +110,3 @@ def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, 
     if not out:
         raise InputError(path, "no data rows")
     return out
-
-
-def _wide(truth: TruthConfig, origin: tuple[float, float, float] | None,
-          systems: Collection[str]) -> dict[str, TruthTrack]:
-    tracks = read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
-                            time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
-                            delimiter=truth.delimiter, sparse=truth.sparse)
-    return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n), tr.sparse) for name, tr in tracks.items()}
-
-
-def _long(truth: TruthConfig, origin: tuple[float, float, float] | None,
-          systems: Collection[str]) -> dict[str, TruthTrack]:
-    tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
-    return {name: tr for name, tr in tracks.items() if name in systems}
-
-
-def _phone_log(truth: TruthConfig, origin: tuple[float, float, float] | None,
-               systems: Collection[str]) -> dict[str, TruthTrack]:
-    """The log's surveyed points (POSI lines), sparse truth for ``truth.score_systems``."""
-    ref = read_getsensordata(truth.path).reference
-    if ref is None:
-        raise ConfigError("truth.path", "the log has no POSI lines")
-    if origin is None:
-        raise ConfigError("geodetic_origin", "surveyed truth needs a geodetic origin")
-    e, n, _ = pymap3d.geodetic2enu(ref.lat_deg, ref.lon_deg, np.full(len(ref.t), origin[2]), *origin)
-    pos = np.column_stack([e, n, np.zeros(len(ref.t))])
-    return {name: TruthTrack(ref.t, pos, sparse=True) for name in truth.score_systems}
-
-
-TruthReader = Callable[[TruthConfig, "tuple[float, float, float] | None", Collection[str]], dict[str, TruthTrack]]
-TRUTH_FORMATS: dict[str, TruthReader] = {"wide": _wide, "long": _long, "phone_log": _phone_log}
-"""``truth.format`` → reader(truth section, geodetic origin or None, the layout's system names)."""
-
-
-def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,
-               systems: Collection[str]) -> dict[str, TruthTrack]:
-    """The truth tracks a layout's truth section describes (empty without a path)."""
-    if truth.path is None:
-        return {}
-    return TRUTH_FORMATS[truth.format](truth, origin, systems)

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.sim.foot_motion import FootMotion, Impact, Roll, ground_motion_samples
 from bodyfusion.sim.gait_config import Foot, GaitConfig, PauseConfig, StairsConfig
 from bodyfusion.sim.paths import BodyPath, left_normal

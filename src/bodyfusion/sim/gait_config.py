@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.core.layout import StrictModel
+from bodyfusion.base.sections import StrictModel
 
 __all__ = ["FlightConfig", "Foot", "GAIT_KINDS", "GaitConfig", "GaitKind", "ImpactConfig", "PauseConfig",
            "StairsConfig", "StanceNoiseConfig", "StanceRollConfig"]

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
+from bodyfusion.base.sections import StrictModel
 from bodyfusion.io.gnss import GnssFixes, enu_to_geodetic
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.sim.imu import Motion, gauss_markov
 
 __all__ = ["GNSS_COLUMNS", "GnssOutage", "GnssReceiverConfig", "simulate_fixes", "write_gnss_csv"]

@@ -43,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.sim.gait import GaitPlan
 from bodyfusion.sim.imu import MotionState, quat_about_axis, quat_multiply
 from bodyfusion.sim.paths import Arc, BodyPath, direction, left_normal

@@ -44,9 +44,9 @@ import numpy as np
 from pydantic import Field
 from scipy.signal import lfilter
 
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.seeding import system_seed
 
-from bodyfusion.core.layout import StrictModel
+from bodyfusion.base.sections import StrictModel
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 
 __all__ = [

@@ -24,8 +24,8 @@ import math
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.sim.imu import MotionState, dcm_from_quat
 
 __all__ = ["DisturbanceZone", "MagnetometerSimConfig", "simulate_magnetometer"]

@@ -21,8 +21,8 @@ from typing import Literal, Union
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.errors import ConfigError
 
 __all__ = [
     "Arc",

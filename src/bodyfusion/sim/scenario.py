@@ -57,8 +57,9 @@ import yaml
 from pydantic import Field, field_validator
 
 from bodyfusion.core import registry as plugin_registry
-from bodyfusion.core.errors import ConfigError
-from bodyfusion.core.layout import Layout, StrictModel, apply_overrides, read_yaml, validate_section
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.core.layout import Layout, apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind
 from bodyfusion.sim.files import FLOAT_FORMAT
 from bodyfusion.sim.gait import plan_gait

@@ -22,7 +22,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.study.grid import RunSpec
 from bodyfusion.study.worker import error_text, execute_run
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import apply_overrides, read_yaml
 from bodyfusion.study.spec import LoadedStudy
 

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 
 HEAD_COLUMNS: dict[str, pa.DataType] = {
     "run_key": pa.string(),

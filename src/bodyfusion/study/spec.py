@@ -34,7 +34,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from bodyfusion.core.layout import DataPath, StrictModel
+from bodyfusion.base.sections import DataPath, StrictModel
 
 
 class StudyLayout(StrictModel):

@@ -3,7 +3,7 @@
 Every layout is loaded with its fixed overrides and the longest outage, then with every
 parameter value: an unknown layout file, an override path that does not exist, an outage
 system without GNSS or an outage past the end of the walk stop the study with one
-:class:`~bodyfusion.core.errors.ConfigError` naming the study file, the study key and the
+:class:`~bodyfusion.base.errors.ConfigError` naming the study file, the study key and the
 layout file's own key.
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from bodyfusion.core.errors import ConfigError, FusionError
+from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.core.layout import Layout, apply_overrides, load_layout, read_yaml, validate_section
 from bodyfusion.core.registry import get_registry
 from bodyfusion.sim.gait import plan_gait

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bodyfusion.core.errors import FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.output import metrics_document
 from bodyfusion.core.run import run_layout

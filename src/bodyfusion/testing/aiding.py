@@ -14,7 +14,7 @@ import numpy as np
 
 from bodyfusion.core.fuser import scalar_update
 from bodyfusion.core.system import AidingSource, ScalarMeasurement
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.types import InputReport
 from bodyfusion.testing.compare import as_bytes
 from bodyfusion.testing.systems import SystemChecker, fail
 
@@ -59,7 +59,7 @@ class AidingChecker(SystemChecker):
         if not isinstance(s.samples, (int, np.integer)) or s.samples != t.size:
             fail("measurements", f"samples ({s.samples!r}) is not the number of measurements ({t.size})")
         if not isinstance(s.input_report, InputReport):
-            fail("measurements", "input_report must be a bodyfusion.core.types.InputReport")
+            fail("measurements", "input_report must be a bodyfusion.base.types.InputReport")
         named = {r for _, r in self.cls.system_references(s.config)}
         for k in range(t.size):
             systems = s.measured_systems(k)

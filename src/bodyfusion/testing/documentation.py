@@ -15,7 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from bodyfusion.core.layout import StrictModel
+from bodyfusion.base.sections import StrictModel
 
 UNIT_SUFFIXES = ("m", "m2", "s", "hz", "mps", "mps2", "deg", "rad", "radps", "pa", "hpa", "k", "pct")
 """Unit suffixes a field name may end with (``_m``, ``_hz``...): a docstring may name the field without it."""

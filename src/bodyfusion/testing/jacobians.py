@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from bodyfusion.core.system import JacobianCase, SensorSystem
-from bodyfusion.core.types import ImuStream
+from bodyfusion.base.types import ImuStream
 from bodyfusion.nav.error_state import (
     ERROR_SIZE,
     accumulate_propagation,

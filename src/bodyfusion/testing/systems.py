@@ -14,7 +14,7 @@ The checks, by name (see ``docs/plugin_guide.md`` for the contract they enforce)
     :func:`bodyfusion.testing.documentation.undocumented_fields`.
 ``bad_config``
     each given bad config, and an unknown key, is refused with a
-    :class:`~bodyfusion.core.errors.ConfigError` naming the given dotted key
+    :class:`~bodyfusion.base.errors.ConfigError` naming the given dotted key
     (``systems.<name>.<key>``), either by ``Config`` or when the system is built.
 ``build``
     the config validates and the system builds.
@@ -70,10 +70,10 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
-from bodyfusion.core.errors import ConfigError, FusionError
+from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.core.layout import validate_section
 from bodyfusion.core.system import LayoutContext, SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.testing.compare import max_diff, same_bits
 from bodyfusion.testing.documentation import nested_models, undocumented_fields
 from bodyfusion.testing.jacobians import STRAPDOWN15, check_jacobian, check_strapdown15
@@ -295,7 +295,7 @@ class SystemChecker:
         if not isinstance(s.samples, (int, np.integer)) or s.samples < 1:
             fail("advance", f"samples must be a positive int, got {s.samples!r}")
         if not isinstance(s.input_report, InputReport):
-            fail("advance", "input_report must be a bodyfusion.core.types.InputReport")
+            fail("advance", "input_report must be a bodyfusion.base.types.InputReport")
         az = s.initial_travel_azimuth(1.0)
         if az is not None and not math.isfinite(az):
             fail("advance", f"initial_travel_azimuth returned {az!r}")
@@ -375,7 +375,7 @@ class SystemChecker:
         other = a.first_difference(c)
         if self.stochastic and other is None:
             fail("seed", f"seeds {seed} and {seed + 1} give the same bits, but the system is declared stochastic "
-                         "(draw from bodyfusion.core.seeding.system_seed(context.seed, name))")
+                         "(draw from bodyfusion.base.seeding.system_seed(context.seed, name))")
         if not self.stochastic and other is not None:
             fail("seed", f"seeds {seed} and {seed + 1} differ ({other}), but the system is declared deterministic")
         return "same seed, same bits; " + ("another seed differs" if self.stochastic else "seed-independent")
@@ -425,7 +425,7 @@ class SystemChecker:
         s = self.run_to_end(self.build())
         tr = s.trajectory()
         if not isinstance(tr, Trajectory):
-            fail("trajectory", "trajectory() must return a bodyfusion.core.types.Trajectory")
+            fail("trajectory", "trajectory() must return a bodyfusion.base.types.Trajectory")
         t, p, sd = (np.asarray(a, dtype=float) for a in (tr.t, tr.pos_n, tr.pos_sd))
         N = t.shape[0] if t.ndim == 1 else -1
         if t.ndim != 1 or p.shape != (N, 3) or sd.shape != (N, 3):

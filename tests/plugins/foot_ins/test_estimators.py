@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
 from bodyfusion.core.run import build_systems, layout_context, run_layout
 from bodyfusion.nav.error_state import accumulate_propagation, process_noise_diag

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.core.run import run_layout
 from bodyfusion.nav.strapdown import integrate

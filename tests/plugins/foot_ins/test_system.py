@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import build_systems, layout_context, run_layout

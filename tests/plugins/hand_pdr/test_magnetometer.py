@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
 from bodyfusion.core.run import run_layout
 from bodyfusion.io.imu import ImuCsvConfig

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import yaml
 
-from bodyfusion.core.errors import ConfigError, InputError
+from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import build_systems, layout_context, run, run_layout
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.uwb import UwbTag
 from bodyfusion.plugins.uwb.ranges import read_ranges
 from bodyfusion.plugins.uwb.simulation import NlosConfig, nlos_states

@@ -6,7 +6,8 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.core.layout import DataPath, KeyedError, PositionFrame, StrictModel
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
+from bodyfusion.core.layout import PositionFrame
 from bodyfusion.io.imu import ImuCsvConfig
 
 

@@ -18,7 +18,7 @@ random numbers and what the fuser sees of them:
   deviations and c their mean (of second order, from the attitude). Exact when the members span
   the error space (M > n); with fewer members P is matched on their span only.
 
-Random numbers: ``bodyfusion.core.seeding.system_seed(context.seed, name)`` spawns one stream for
+Random numbers: ``bodyfusion.base.seeding.system_seed(context.seed, name)`` spawns one stream for
 the initial members (drawn from N(x₀, P₀) in error coordinates; cenekf: V from its
 stationary N(0, σ_v²/(1 − α²))) and one for the process noise and the perturbed
 observations, drawn per sample in time order, so the same seed gives the same bits
@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from bodyfusion.nav.error_state import inject
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.foot_ins.ensemble_kernels import (NOISE_WIDTH, NOMINAL, ensemble_covariance, ensemble_deviations,
                                                       ensemble_mean, place_members, run_ensemble)
 

@@ -15,8 +15,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.foot_ins.config import FootFilterConfig, FootInsConfig, InitialStateConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
 from bodyfusion.sim.files import imu_csv_section, write_imu_csv

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from bodyfusion.core.errors import ConfigError, FusionError
-from bodyfusion.core.layout import KeyedError, Layout, SmootherConfig
+from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.sections import KeyedError
+from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.system import LayoutContext, SensorSystem
-from bodyfusion.core.types import ImuStream, InputReport, Trajectory
+from bodyfusion.base.types import ImuStream, InputReport, Trajectory
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors

@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from bodyfusion.core.layout import DataPath, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
 from bodyfusion.io.imu import ImuCsvConfig
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.io.imu import ImuCsvConfig
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.tables import apply_timestamp_policy, read_table
 from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig, QuasiStaticConfig
 

@@ -11,7 +11,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
+from bodyfusion.base.sections import StrictModel
 from bodyfusion.plugins.hand_pdr.config import (FieldCheckConfig, GnssSourceConfig, HandPdrConfig, MagnetometerConfig,
                                                 PdrInitialConfig)
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section

@@ -67,14 +67,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from bodyfusion.core.errors import ConfigError
+from bodyfusion.base.errors import ConfigError
 from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.io.imu import read_imu
 from bodyfusion.core.system import LayoutContext, SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes

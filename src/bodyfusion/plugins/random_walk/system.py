@@ -15,10 +15,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from bodyfusion.core.layout import StrictModel
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.core.system import LayoutContext, SensorSystem
-from bodyfusion.core.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 
 
 class RandomWalkConfig(StrictModel):

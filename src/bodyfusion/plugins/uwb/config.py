@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.core.layout import DataPath, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
 
 Vector3 = tuple[float, float, float]
 

@@ -1,10 +1,10 @@
 """Reader of UWB range logs: ``t, id, range_m`` rows (CSV with a header line).
 
-Policies (counted in the :class:`bodyfusion.core.types.InputReport` and the tag's diagnostics):
+Policies (counted in the :class:`bodyfusion.base.types.InputReport` and the tag's diagnostics):
 failed rangings (empty or NaN range) and negative ranges are dropped; a row whose time is
 earlier than the row before it is dropped (several ranges may share one time). Anything
 else wrong with a row — a missing or non-numeric cell, an infinite value, an id the layout
-does not name — stops with a one-line :class:`bodyfusion.core.errors.InputError` naming the file
+does not name — stops with a one-line :class:`bodyfusion.base.errors.InputError` naming the file
 and line.
 """
 
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyfusion.core.errors import InputError
+from bodyfusion.base.errors import InputError
 from bodyfusion.io.tables import clean_cell, read_lines, split_line
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.types import InputReport
 
 
 @dataclass

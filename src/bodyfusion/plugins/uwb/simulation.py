@@ -36,9 +36,9 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from bodyfusion.core.errors import ConfigError
-from bodyfusion.core.layout import KeyedError, StrictModel
-from bodyfusion.core.seeding import system_seed
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.sections import KeyedError, StrictModel
+from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.uwb.config import RangeFileConfig, UwbConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
 

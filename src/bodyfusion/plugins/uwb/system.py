@@ -24,7 +24,7 @@ from bodyfusion.core.system import (
     LayoutContext,
     ScalarMeasurement,
 )
-from bodyfusion.core.types import InputReport
+from bodyfusion.base.types import InputReport
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
 from bodyfusion.plugins.uwb.ranges import read_ranges

@@ -8,12 +8,8 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from bodyfusion.io.imu_checks import ImuChecks
 
 LOG = logging.getLogger("fusion")
 """The project's logger: warnings about the input and the run go here (and to the console)."""
@@ -46,6 +42,31 @@ class InputReport:
             self.notes + other.notes,
             self.warnings + other.warnings,
         )
+
+
+@dataclass
+class ImuChecks:
+    """What :func:`bodyfusion.io.imu_checks.check_imu` found in one stream. Rates in Hz, times in s.
+
+    ``gap_index``: sample indices i whose step t[i] − t[i−1] is a gap; ``gap_missing_s``:
+    the time missing in each (step minus one nominal period)."""
+
+    source: str
+    rate_hz: float
+    rest_specific_force_mps2: float
+    max_angular_rate_radps: float
+    gap_index: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+    gap_missing_s: np.ndarray = field(default_factory=lambda: np.empty(0))
+    clipped_acc_samples: int = 0
+    clipped_gyro_samples: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """Plain-JSON figures for metrics.json."""
+        return {"rate_hz": self.rate_hz, "rest_specific_force_mps2": self.rest_specific_force_mps2,
+                "max_angular_rate_radps": self.max_angular_rate_radps, "gaps": int(self.gap_index.size),
+                "gap_missing_s": float(self.gap_missing_s.sum()), "clipped_acc_samples": self.clipped_acc_samples,
+                "clipped_gyro_samples": self.clipped_gyro_samples, "warnings": len(self.warnings)}
 
 
 @dataclass
