@@ -1,4 +1,7 @@
-"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | plugins``."""
+"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | plugins``.
+
+Each command imports what it needs when it runs (the compiled kernels, matplotlib, Dask are
+heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
 
 from __future__ import annotations
 

@@ -146,7 +146,7 @@ def plot_against_outage_duration(path: Path, curves: Mapping[str, Mapping[float,
                                  title: str, ylabel: str = "horizontal error [m]") -> None:
     """An error (m) against the GNSS outage duration (s): per curve (label → duration → one value
     per run) the mean with its 95 % confidence band (Student t) and the 90th percentile, dashed."""
-    from scipy.stats import t as student_t
+    from scipy.stats import t as student_t  # scipy.stats is slow to import; only study plots need it
 
     fig = _new_figure()
     ax = fig.add_subplot(1, 1, 1)

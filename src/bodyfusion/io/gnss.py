@@ -15,9 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pymap3d
+import pynmea2
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import InputReport
+from bodyfusion.io.tables import read_table
 
 KNOT = 1852.0 / 3600.0
 """One knot in m/s."""
@@ -93,8 +95,6 @@ def read_gnss_csv(path: str | Path, *, time_column: str, lat_column: str, lon_co
                   speed_column: str | None = None, course_column: str | None = None,
                   delimiter: str = ",") -> GnssFixes:
     """GNSS fixes from a CSV with named columns (deg, m, m/s, deg)."""
-    from bodyfusion.io.tables import read_table
-
     optional = [c for c in (height_column, accuracy_column, speed_column, course_column) if c]
     arrays, _ = read_table(path, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,
                            allow_missing=optional)
@@ -114,8 +114,6 @@ def read_nmea(path: str | Path, *, user_range_error_m: float = 5.0) -> GnssFixes
     Skipped and counted: bad or missing checksums, unparsable sentences, no-fix GGA (quality 0),
     void RMC, empty fields.
     """
-    import pynmea2
-
     path = Path(path)
     try:
         lines = path.read_text(errors="replace").splitlines()
