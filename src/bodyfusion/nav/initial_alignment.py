@@ -12,8 +12,10 @@ soon as the logger runs. So the still interval is looked for in the data:
   for MEMS IMUs) and within absolute limits (a foot in a walking stance of that length
   rolls, and heel strike and toe-off fall inside), grown to the whole run of still
   windows. The factor keeps out the shuffling before a walk, whose mean rate would pass
-  for gyro bias. When there is none, the *quietest* window of the recording (the smallest
-  s_f/f_lim + s_ω/ω_lim), flagged as not still so that the caller inflates its priors.
+  for gyro bias. When there is none, the first of the *quietest* windows of the recording
+  (a score s_f/f_lim + s_ω/ω_lim within the same factor of its smallest: the earliest, so that
+  little is navigated backward), grown the same way and flagged as not still so that the
+  caller widens its priors.
 * :func:`attitude_from_specific_force` — TRIAD levelling: the mean specific force over the
   interval is "up" in the body frame; the heading is the azimuth of the horizontal
   projection of a named body axis (x by default), which is defined for any mounting except
@@ -71,7 +73,8 @@ def find_still_interval(acc_b: np.ndarray, gyro_b: np.ndarray, length: int, acc_
                         gyro_limit_radps: float) -> StillInterval:
     """The first still interval of at least ``length`` samples (both window spreads within
     the limits and within :data:`STILL_NOISE_FACTOR` times their smallest over the
-    recording), extended over the following still windows; else the quietest window.
+    recording), extended over the following still windows; else the first run of the quietest
+    windows.
     Raises ValueError when the recording is shorter than one window."""
     n = len(acc_b)
     if n < length or length < 2:
@@ -79,14 +82,31 @@ def find_still_interval(acc_b: np.ndarray, gyro_b: np.ndarray, length: int, acc_
     s_f, s_w = window_spreads(acc_b, gyro_b, length)
     still = ((s_f <= min(acc_limit_mps2, STILL_NOISE_FACTOR * s_f.min()))
              & (s_w <= min(gyro_limit_radps, STILL_NOISE_FACTOR * s_w.min())))
-    if still.any():
-        first = int(np.argmax(still))
-        moving = np.flatnonzero(~still[first:])
-        last = first + (int(moving[0]) - 1 if moving.size else len(still) - 1 - first)
-        run = slice(first, last + 1)
-        return StillInterval(first, last + length, True, float(s_f[run].max()), float(s_w[run].max()))
-    k = int(np.argmin(s_f / acc_limit_mps2 + s_w / gyro_limit_radps))
-    return StillInterval(k, k + length, False, float(s_f[k]), float(s_w[k]))
+    is_still = bool(still.any())
+    if not is_still:  # the quietest windows instead
+        score = s_f / acc_limit_mps2 + s_w / gyro_limit_radps
+        still = score <= STILL_NOISE_FACTOR * score.min()
+    first = int(np.argmax(still))
+    moving = np.flatnonzero(~still[first:])
+    last = first + (int(moving[0]) - 1 if moving.size else len(still) - 1 - first)
+    run = slice(first, last + 1)
+    return StillInterval(first, last + length, is_still, float(s_f[run].max()), float(s_w[run].max()))
+
+
+BATCHES = 10
+"""Non-overlapping batches whose means estimate the standard error of a window mean."""
+
+
+def mean_standard_error(x: np.ndarray) -> float:
+    """Standard error of the window mean of ``x`` (N, 3), combined over the axes, by batch
+    means: √(Σ_axes var(batch means) / B) over B = 10 consecutive batches (fewer for a short
+    window). It holds for correlated noise (a sensor's low-pass filter) as for white: jitter
+    averages out over the window, a smooth motion does not."""
+    x = np.asarray(x, dtype=float)
+    batches = max(2, min(BATCHES, len(x) // 5))
+    size = len(x) // batches
+    means = x[: batches * size].reshape(batches, size, -1).mean(axis=1)
+    return float(np.sqrt(np.sum(means.var(axis=0, ddof=1)) / batches))
 
 
 def heading_axis(up_b: np.ndarray, preferred: str = "x") -> str:

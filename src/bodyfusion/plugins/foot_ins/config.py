@@ -90,8 +90,9 @@ class InitialStateConfig(StrictModel):
     recording (:mod:`bodyfusion.nav.initial_alignment`): at least ``stationary_s`` long, with the
     spreads of specific force and angular rate within ``still_acc_sd_mps2`` and
     ``still_gyro_sd_radps``. Motion before it is navigated backward from it to give the
-    state at the first sample. Without any still interval the quietest window is used and
-    the level and gyro-bias σ are inflated to its spreads (a warning says so)."""
+    state at the first sample. Without any still interval the first of the quietest windows is
+    used, the level and gyro-bias σ at least the standard errors of its means (a warning
+    says so)."""
 
     position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     heading_deg: float | Literal["auto"] = 0.0

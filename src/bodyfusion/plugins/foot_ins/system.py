@@ -19,7 +19,7 @@ from bodyfusion.nav.earth import earth_rate_enu
 from bodyfusion.nav.error_state import DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, rotate_about_up
 from bodyfusion.nav.frames import apply_axis_map
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
-                                              find_still_interval, heading_axis)
+                                              find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
@@ -168,7 +168,7 @@ class FootIns(SensorSystem):
                 f"{self.name}: no still interval of {ini.stationary_s:g} s (spreads ≤ {ini.still_acc_sd_mps2:g} m/s^2, "
                 f"{ini.still_gyro_sd_radps:g} rad/s); levelled on the quietest window {span} (spreads "
                 f"{still.acc_spread_mps2:.2g} m/s^2, {still.gyro_spread_radps:.2g} rad/s), level and gyro-bias "
-                "uncertainty inflated to match")
+                "uncertainty at least the standard errors of its means")
         elif still.start > 0:
             self.stream.report.notes.append(f"{self.name}: levelled on the still interval {span}; the "
                                             f"{t[still.start] - t[0]:.2f} s before it navigated backward from there")
@@ -206,9 +206,9 @@ class FootIns(SensorSystem):
                                     f"initial.heading_deg is taken as the heading of axis {self.heading_axis}")
         level_sd = np.deg2rad(ini.level_sd_deg)
         gyro_bias_sd = ini.gyro_bias_sd_radps
-        if not st.still:  # the mean over a moving window: level and rate errors of the window's spreads
-            level_sd = max(level_sd, st.acc_spread_mps2 / self.context.gravity_mps2)
-            gyro_bias_sd = max(gyro_bias_sd, st.gyro_spread_radps)
+        if not st.still:  # the mean over a moving window: the standard errors of its means
+            level_sd = max(level_sd, mean_standard_error(self.stream.acc_b[window]) / self.context.gravity_mps2)
+            gyro_bias_sd = max(gyro_bias_sd, mean_standard_error(self.stream.gyro_b[window]))
         x = np.zeros(NOMINAL_SIZE)
         x[6:10] = attitude_from_specific_force(f_b, self._azimuth0, self.heading_axis)
         x[13:16] = self.stream.gyro_b[window].mean(axis=0)
