@@ -95,12 +95,22 @@ class ImuStream:
 class Trajectory:
     """Estimated track of one system in the navigation frame (ENU, m).
 
-    t: (N,) s.  pos_n: (N, 3) m.  pos_sd: (N, 3) one-sigma position, m.
+    t: (N,) s.  pos_n: (N, 3) m.  pos_sd: (N, 3) one-sigma position, m.  pos_cov_en: (N,)
+    east–north position covariance, m² (None: not given, taken as 0).
     """
 
     t: np.ndarray
     pos_n: np.ndarray
     pos_sd: np.ndarray
+    pos_cov_en: np.ndarray | None = None
+
+    def horizontal_covariance(self) -> np.ndarray:
+        """(N, 2, 2) east–north position covariance, m²."""
+        cov = np.empty((len(self.t), 2, 2))
+        cov[:, 0, 0] = self.pos_sd[:, 0] ** 2
+        cov[:, 1, 1] = self.pos_sd[:, 1] ** 2
+        cov[:, 0, 1] = cov[:, 1, 0] = 0.0 if self.pos_cov_en is None else self.pos_cov_en
+        return cov
 
 
 @dataclass

@@ -91,14 +91,14 @@ class Ensemble:
         ensemble_mean(self.ens, self.mean)
 
     def run(self, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, stance: np.ndarray, i0: int, i1: int,
-            params: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+            params: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1 (see :func:`run_ensemble`), noise drawn block by block."""
         alpha = -1.0 if self.alpha is None else float(self.alpha)
         for a in range(i0, i1, NOISE_BLOCK):
             b = min(a + NOISE_BLOCK, i1)
             noise = self._rng.standard_normal((b - a, self.members, NOISE_WIDTH))
             run_ensemble(self.ens, self.memory, t, acc_b, gyro_b, stance, a, b, params, alpha, noise, self.mean,
-                         hist_x, hist_pos_var, counters)
+                         hist_x, hist_pos_cov, counters)
 
     def covariance(self) -> np.ndarray:
         """Sample covariance (n, n) of the error-state deviations about the mean."""

@@ -253,14 +253,15 @@ def ensemble_analysis(ens: np.ndarray, first: int, second: int, z: np.ndarray, r
 @numba.njit(cache=True)
 def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                  stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float, noise: np.ndarray,
-                 mean: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+                 mean: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1) as the module docstring says; ``alpha`` < 0:
     enekf, ``alpha`` ≥ 0: cenekf with colour factor α (``ens`` then has 19 columns).
 
     ``ens`` (M, n_s) and ``memory`` (M, 6) (each member's two-sample mechanisation memory)
     are updated in place; ``noise`` (i1 − i0, M, 21) holds the draws; ``mean`` (n_s,)
     receives the ensemble mean after the last sample; row i of ``hist_x`` (N, 16) and
-    ``hist_pos_var`` (N, 3) the mean nominal state and the members' position variances (m^2).
+    ``hist_pos_cov`` (N, 4) the mean nominal state and the members' position covariance (variances
+    east, north, up and the east–north covariance, m^2).
     ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS].
     """
     M = ens.shape[0]
@@ -323,4 +324,8 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
             for j in range(M):
                 d = ens[j, k] - mean[k]
                 s += d * d
-            hist_pos_var[i, k] = s / (M - 1)
+            hist_pos_cov[i, k] = s / (M - 1)
+        s = 0.0
+        for j in range(M):
+            s += (ens[j, 0] - mean[0]) * (ens[j, 1] - mean[1])
+        hist_pos_cov[i, 3] = s / (M - 1)

@@ -36,7 +36,8 @@ from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, differenced_sa
 class RunData:
     """What every estimator reads and writes: the samples (t s, specific force m/s^2, rate
     rad/s, stance flags), the filter parameters, the per-sample history rows it fills
-    (nominal state, position variances m²), the counters, and the covariances it leaves
+    (nominal state; position covariance: variances east, north, up and the east–north
+    covariance, m²), the counters, and the covariances it leaves
     outside the plain EKF recursion (sample index, covariance) for the smoothers."""
 
     t: np.ndarray
@@ -45,7 +46,7 @@ class RunData:
     stance: np.ndarray
     params: np.ndarray
     hist_x: np.ndarray
-    hist_pos_var: np.ndarray
+    hist_pos_cov: np.ndarray
     counters: np.ndarray
     override_idx: list[np.ndarray] = field(default_factory=list)
     override_P: list[np.ndarray] = field(default_factory=list)
@@ -68,7 +69,7 @@ class Estimator:
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1; ``phi`` accumulates the transition ((0, 0): off)."""
         run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                     self.mech_memory, phi, data.hist_x, data.hist_pos_var, data.counters)
+                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.counters)
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset: inject dx (n,) into the nominal state, take P (n, n)."""
@@ -93,7 +94,7 @@ class ColouredEkf(Estimator):
         bound = differenced_samples(data.stance, i0, i1).size
         post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
         run_foot_ins_coloured(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                              self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_var,
+                              self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_cov,
                               data.counters, post_idx, post_P)
         k = int(data.counters[C_CALL_COLOURED])
         if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
@@ -121,7 +122,7 @@ class EnsembleEkf(Estimator):
 
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         self.ensemble.run(data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params, data.hist_x,
-                          data.hist_pos_var, data.counters)
+                          data.hist_pos_cov, data.counters)
         self._sync()
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:

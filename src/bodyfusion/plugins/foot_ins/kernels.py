@@ -62,23 +62,25 @@ def _count(params: np.ndarray, nis: float, counters: np.ndarray) -> None:
 
 
 @numba.njit(inline="always")
-def _record_sample(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_var: np.ndarray) -> None:
+def _record_sample(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
     for k in range(16):
         hist_x[i, k] = x[k]
     for k in range(3):
-        hist_pos_var[i, k] = P[k, k]
+        hist_pos_cov[i, k] = P[k, k]
+    hist_pos_cov[i, 3] = P[0, 1]
 
 
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                  stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
-                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray, counters: np.ndarray) -> None:
+                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
     """The ``ekf``: process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i],
     propagate P, and at stance samples apply the gated ZUPT (and the ZARU when its σ > 0).
 
     x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
     increments, see :func:`bodyfusion.nav.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
-    ``hist_pos_var`` receives the state and the position variances (m^2) after sample i.
+    ``hist_pos_cov`` (N, 4) receives the state and the position covariance after sample i
+    (variances east, north, up and the east–north covariance, m^2).
     ``counters`` accumulates (layout ``C_*``). ``phi`` (15, 15) accumulates the error-state
     transition for the fuser's cross-covariances (empty (0, 0): off).
     """
@@ -90,13 +92,13 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
         _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
         if stance[i]:
             _count(params, stance_update(x, P, gyro_b[i], params, dx, phi), counters)
-        _record_sample(x, P, i, hist_x, hist_pos_var)
+        _record_sample(x, P, i, hist_x, hist_pos_cov)
 
 
 @numba.njit(cache=True)
 def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                           stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float,
-                          mech_memory: np.ndarray, phi: np.ndarray, hist_x: np.ndarray, hist_pos_var: np.ndarray,
+                          mech_memory: np.ndarray, phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
                           counters: np.ndarray, post_idx: np.ndarray, post_P: np.ndarray) -> None:
     """The ``ckf`` with colour factor α: as :func:`run_foot_ins`, with the coloured-noise
     update at the :func:`differenced_samples` (a separate entry point, so that the ekf does
@@ -136,4 +138,4 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
                     for c in range(15):
                         post_P[n_post, r, c] = P[r, c]
                 counters[C_CALL_COLOURED] += 1
-        _record_sample(x, P, i, hist_x, hist_pos_var)
+        _record_sample(x, P, i, hist_x, hist_pos_cov)

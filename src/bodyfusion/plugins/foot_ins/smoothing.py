@@ -132,7 +132,7 @@ class _Buffers:
         self.Ps = np.zeros((size, 15, 15))
         self.x = np.zeros((size, 16))
         self.xs = np.zeros((size, 16))
-        self.var = np.zeros((size, 3))
+        self.var = np.zeros((size, 4))
 
 
 def _latency(ms: list[float]) -> dict:
@@ -172,7 +172,7 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
     size = int(np.max(np.diff(bounds))) + 1
     fw = _Buffers(size)
     out_x = hist_x.copy()
-    out_var = np.zeros((n, 3))
+    out_var = np.zeros((n, 4))
     empty = np.zeros(15)
     gain_failures = 0
     fusion_failures = 0

@@ -384,7 +384,8 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
 @numba.njit(cache=True)
 def apply_smoothed(hist_x: np.ndarray, a: int, L: int, dxs: np.ndarray, Ps: np.ndarray,
                    out_x: np.ndarray, out_var: np.ndarray, out_a: int) -> None:
-    """out_x[out_a+j] = hist_x[a+j] ⊞ dxs[j]; out_var[out_a+j] = diag Ps[j][0:3], 0 ≤ j ≤ L."""
+    """out_x[out_a+j] = hist_x[a+j] ⊞ dxs[j]; out_var[out_a+j] = the position variances and the
+    east–north covariance of Ps[j], 0 ≤ j ≤ L."""
     x = np.empty(16)
     d = np.empty(15)
     for j in range(L + 1):
@@ -397,6 +398,7 @@ def apply_smoothed(hist_x: np.ndarray, a: int, L: int, dxs: np.ndarray, Ps: np.n
             out_x[out_a + j, k] = x[k]
         for k in range(3):
             out_var[out_a + j, k] = Ps[j, k, k]
+        out_var[out_a + j, 3] = Ps[j, 0, 1]
 
 
 @numba.njit(cache=True)

@@ -244,10 +244,10 @@ class FootIns(SensorSystem):
         Pb = P_s * flip
         t_r, acc_r, gyro_r = -st.t[s - r], st.acc_b[src], -st.gyro_b[src]
         stance_r = np.ascontiguousarray(self.stance[s - r])
-        hist_x, hist_var = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 3))
+        hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
         run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
-                     hist_x, hist_var, self.backward_counters)
+                     hist_x, hist_cov, self.backward_counters)
         xb[3:6] *= -1.0
         xb[13:16] *= -1.0
         Pb = 2.0 * (Pb * flip)
@@ -265,15 +265,15 @@ class FootIns(SensorSystem):
         self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
                                                                      self.context.seed, self.name)
         self.run_data = RunData(self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
-                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 3)), np.zeros(COUNTERS_SIZE))
+                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.zeros(COUNTERS_SIZE))
         self.run_data.hist_x[0] = self.x
-        self.run_data.hist_pos_var[0] = np.diag(self.P)[:3]
+        self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
         self._next_fix = 0
         self._i = 0  # index of the sample the state refers to
         self.smoothed_x: np.ndarray | None = None
-        self.smoothed_pos_var: np.ndarray | None = None
+        self.smoothed_pos_cov: np.ndarray | None = None
         self.smoothing_diagnostics: dict | None = None
 
     @property
@@ -292,9 +292,14 @@ class FootIns(SensorSystem):
         return self.run_data.hist_x
 
     @property
-    def hist_pos_var(self) -> np.ndarray:
-        """(N, 3) position variances after each sample, m²."""
-        return self.run_data.hist_pos_var
+    def hist_pos_cov(self) -> np.ndarray:
+        """(N, 4) position covariance after each sample: variances east, north, up and the
+        east–north covariance, m²."""
+        return self.run_data.hist_pos_cov
+
+    def _record_position_covariance(self, i: int) -> None:
+        self.hist_pos_cov[i, :3] = np.diag(self.P)[:3]
+        self.hist_pos_cov[i, 3] = self.P[0, 1]
 
     @property
     def counters(self) -> np.ndarray:
@@ -376,7 +381,7 @@ class FootIns(SensorSystem):
         """History row i after a correction outside the compiled loop (fuser, fix, gap); the
         covariance left there is recorded for the smoothers."""
         self.hist_x[i] = self.x
-        self.hist_pos_var[i] = np.diag(self.P)[:3]
+        self._record_position_covariance(i)
         if self.filter.smoothable:
             self.run_data.override_idx.append(np.array([i], dtype=np.int64))
             self.run_data.override_P.append(self.P[None].copy())
@@ -424,11 +429,12 @@ class FootIns(SensorSystem):
         validation (:meth:`check_layout`)."""
         return smooth_system(self, cfg).diagnostics
 
-    def set_smoothed(self, x: np.ndarray | None, pos_var: np.ndarray | None, diagnostics: dict) -> None:
-        """Store the smoother's result: (n, 16) nominal states and (n, 3) position
-        variances replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
+    def set_smoothed(self, x: np.ndarray | None, pos_cov: np.ndarray | None, diagnostics: dict) -> None:
+        """Store the smoother's result: (n, 16) nominal states and (n, 4) position covariances
+        (as :attr:`hist_pos_cov`) replace the filter's in :meth:`trajectory` (None keeps the
+        filter's)."""
         self.smoothed_x = x
-        self.smoothed_pos_var = pos_var
+        self.smoothed_pos_cov = pos_cov
         self.smoothing_diagnostics = diagnostics
 
     def _initialisation_report(self) -> dict:
@@ -449,10 +455,10 @@ class FootIns(SensorSystem):
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         n = self._i + 1
-        if self.smoothed_x is not None and self.smoothed_pos_var is not None:
-            return Trajectory(self.stream.t[:n], self.smoothed_x[:n, 0:3],
-                              np.sqrt(np.maximum(self.smoothed_pos_var[:n], 0.0)))
-        return Trajectory(self.stream.t[:n], self.hist_x[:n, 0:3], np.sqrt(np.maximum(self.hist_pos_var[:n], 0.0)))
+        smoothed = self.smoothed_x is not None and self.smoothed_pos_cov is not None
+        x = self.smoothed_x if smoothed else self.hist_x
+        cov = self.smoothed_pos_cov if smoothed else self.hist_pos_cov
+        return Trajectory(self.stream.t[:n], x[:n, 0:3], np.sqrt(np.maximum(cov[:n, :3], 0.0)), cov[:n, 3].copy())
 
     @property
     def samples(self) -> int:
