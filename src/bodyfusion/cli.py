@@ -12,7 +12,7 @@ from typing import Annotated, Literal, Optional
 
 import typer
 
-from bodyfusion.base.errors import FusionError
+from bodyfusion.base.errors import ConfigError, FusionError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Fuse body-worn pedestrian navigation systems under body distance constraints.")
@@ -48,9 +48,41 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         table.add_row(name, str(block["samples"]), fmt(block.get("distance_m"), ".1f"), fmt(h.get("rmse")),
                       fmt(h.get("max")), fmt(block.get("final_error_pct_distance"), ".2f"), fmt(block.get("loop_closure_m")))
     console.print(table)
+    for line in counted_policies(doc):
+        console.print(line)
     rt = doc["runtime"]
     console.print(f"{rt['samples']} samples, navigation {rt['navigation_s']:.2f} s "
                   f"({rt['samples_per_s']:,.0f} samples/s), total {rt['wall_s']:.2f} s")
+
+
+COUNTED = ("dropped", "reordered", "rejected", "gated", "skipped", "not_converged", "fallbacks", "resets", "warnings")
+"""Words that mark a count of what a policy did to the input or the estimate (metrics.json keys)."""
+
+
+def counted_policies(doc: dict) -> list[str]:
+    """One line per part of the run (input, each system, aiding source, the constraints) with
+    every non-zero count metrics.json holds of what was dropped, rejected, gated, skipped or
+    did not converge: the console's summary of the counted policies."""
+    def counts(block: dict, prefix: str = "") -> list[str]:
+        out = []
+        for key, value in block.items():
+            if isinstance(value, dict):
+                out += counts(value, f"{prefix}{key}.")
+            elif isinstance(value, (int, float)) and not isinstance(value, bool) and value and any(
+                    word in key for word in COUNTED):
+                out.append(f"{prefix}{key} {value:g}")
+        return out
+
+    parts = {"input": {k: v for k, v in doc.get("input", {}).items() if not isinstance(v, list)}}
+    parts |= {name: block.get("diagnostics", {}) for name, block in doc.get("systems", {}).items()}
+    parts |= doc.get("aiding", {})
+    if "constraints" in doc:
+        parts["constraints"] = doc["constraints"]
+    warned = len(doc.get("input", {}).get("warnings", []))
+    lines = [f"{name}: " + ", ".join(found) for name, block in parts.items() if (found := counts(block))]
+    if warned:
+        lines.append(f"{warned} warning(s) about the input, above and in metrics.json input.warnings")
+    return lines
 
 
 @app.command()
@@ -84,10 +116,17 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
 
 @app.command()
 def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
-    """Check a layout (both stages: layout and each plugin's section)."""
-    from bodyfusion.core.layout import load_layout
+    """Check a layout without reading its data: both stages (layout and each plugin's section),
+    finite numbers, a feasible constraint set, the files it names exist."""
+    from bodyfusion.core.layout import data_files, load_layout
 
     loaded = load_layout(config, set_ or [])
+    for key, path in data_files(loaded):
+        if not path.is_file():
+            raise ConfigError(key, f"no such file: {path}", config)
+    if loaded.layout.constraints and loaded.layout.fuser.method == "none":
+        typer.echo(f"warning: fuser.method is none: the {len(loaded.layout.constraints)} constraint(s) are not "
+                   "enforced", err=True)
     typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
 
 

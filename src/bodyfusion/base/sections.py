@@ -22,9 +22,9 @@ DataPath = Annotated[Path, AfterValidator(_resolve_path)]
 
 
 class StrictModel(BaseModel):
-    """Base of every layout section: unknown keys are errors."""
+    """Base of every layout section: unknown keys are errors, and so are NaN and infinite numbers."""
 
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
 
 
 class KeyedError(ValueError):

@@ -72,8 +72,9 @@ class OutageConfig(StrictModel):
 class FuserConfig(StrictModel):
     """How constraints are enforced.
 
-    method: ``none`` (systems run independently), ``projection`` (linearised, active
-    set; [KFSC2015] eqs. 55–60), ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy).
+    method: ``projection`` (linearised, active set; [KFSC2015] eqs. 55–60; the default),
+    ``qp`` (OSQP, re-linearised), ``socp`` (cvxpy), or ``none`` (systems run independently:
+    the constraints are not enforced).
     epochs: when constraints are enforced — at the constrained systems' ``events``
     (stance starts, steps), every ``interval_s`` seconds, or at every ``sample`` of
     any constrained system. tolerance_m / max_iterations bound the nonlinear solve.
@@ -83,11 +84,12 @@ class FuserConfig(StrictModel):
     other states as Schmidt consider states (robust when those correlations are poorly known).
     """
 
-    method: Literal["none", "projection", "qp", "socp"] = "none"
+    method: Literal["none", "projection", "qp", "socp"] = "projection"
+    """How the layout's constraints are enforced; ``none`` turns them off (said on the console)."""
     epochs: Literal["events", "interval", "sample"] = "events"
     interval_s: float = Field(default=0.5, gt=0)
     tolerance_m: float = Field(default=1e-6, gt=0)
-    max_iterations: int = Field(default=20, ge=1)
+    max_iterations: int = Field(default=20, ge=1, le=1000)
     cross_covariance: bool = False
     correct: Literal["all", "positions"] = "all"
 
@@ -174,6 +176,34 @@ class OutputConfig(StrictModel):
     decimate: int = Field(default=1, ge=1)
 
 
+def _check_feasible(constraints: list[ConstraintConfig]) -> None:
+    """Refuse a constraint set no positions can satisfy: a minimum separation (``min`` or
+    ``fixed``) larger than the longest the maximum separations allow between the two systems
+    through any chain of others (triangle inequality; a horizontal limit bounds only
+    horizontal distances, a 3-D one both). Constraints with lever arms are left out (their
+    arms loosen the bound)."""
+    plain = [(k, c) for k, c in enumerate(constraints) if not c.lever_arms_m]
+    names = sorted({n for _, c in plain for n in c.between})
+    index = {n: i for i, n in enumerate(names)}
+    for horizontal in (True, False):
+        far = [[0.0 if i == j else float("inf") for j in range(len(names))] for i in range(len(names))]
+        for _, c in plain:  # a 3-D limit bounds the horizontal distance too, not the reverse
+            if c.kind in ("max", "fixed") and (horizontal or not c.horizontal):
+                i, j = index[c.between[0]], index[c.between[1]]
+                far[i][j] = far[j][i] = min(far[i][j], c.distance_m)
+        for m in range(len(names)):  # Floyd–Warshall: the loosest chain of maxima
+            for i in range(len(names)):
+                for j in range(len(names)):
+                    far[i][j] = min(far[i][j], far[i][m] + far[m][j])
+        for k, c in plain:
+            if c.kind in ("min", "fixed") and c.horizontal == horizontal:
+                bound = far[index[c.between[0]]][index[c.between[1]]]
+                if c.distance_m > bound + 1e-9:
+                    raise KeyedError(f"constraints.{k}.distance_m", f"{c.distance_m:g} m apart cannot hold: the "
+                                                                    f"maximum separations keep {c.between[0]} and "
+                                                                    f"{c.between[1]} within {bound:g} m")
+
+
 class Layout(StrictModel):
     """A whole body layout. ``systems`` maps a name to its plugin section."""
 
@@ -216,6 +246,7 @@ class Layout(StrictModel):
             pair[c.kind] = c.distance_m
             if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
                 raise KeyedError(f"constraints.{k}.distance_m", "minimum separation exceeds the maximum for this pair")
+        _check_feasible(self.constraints)
         for k, outage in enumerate(self.outages):
             if outage.system not in names:
                 raise KeyedError(f"outages.{k}.system", f"unknown system {outage.system!r} (have {sorted(names)})")
@@ -322,6 +353,9 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
                 if last:
                     node[part] = value
                 else:
+                    if depth == 1 and parts[0] == "systems" and part not in node:
+                        raise ConfigError(here, f"unknown system (have {sorted(node)}); a new system is set "
+                                                f"whole: --set 'systems.{part}={{plugin: ..., ...}}'")
                     if node.get(part) is None:
                         node[part] = {}
                     node = node[part]
@@ -330,14 +364,25 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
     return out
 
 
+MAX_YAML_BYTES = 4 * 1024 * 1024
+"""Largest layout, scenario or study file read, bytes (real ones are a few kB)."""
+MAX_YAML_NODES = 100_000
+"""Most YAML nodes a file may hold once its aliases are expanded (an alias "bomb" is refused
+before it is built; real layouts hold a few hundred)."""
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key repeated in one mapping (two systems with one name)."""
+    """SafeLoader that refuses a key repeated in one mapping (two systems with one name) and
+    a key that is not a plain value (a YAML complex key such as ``? [a, b]``)."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen: set[Any] = set()
         for key_node, _ in node.value:
             if key_node.tag == "tag:yaml.org,2002:merge":
                 continue
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise yaml.constructor.ConstructorError(None, None, "a mapping key must be a plain value",
+                                                        key_node.start_mark)
             key = self.construct_object(key_node, deep=deep)
             if key in seen:
                 raise yaml.constructor.ConstructorError(None, None, f"key {key!r} appears twice", key_node.start_mark)
@@ -345,16 +390,45 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """Nodes in the document once every alias is expanded, counted without expanding
+    (shared nodes counted once per reference; capped so a bomb stops the count early)."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    memo[key] = MAX_YAML_NODES + 1  # a node reached again while being counted: a cycle
+    if isinstance(node, yaml.MappingNode):
+        size = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+    elif isinstance(node, yaml.SequenceNode):
+        size = 1 + sum(_expanded_size(v, memo) for v in node.value)
+    else:
+        size = 1
+    memo[key] = min(size, MAX_YAML_NODES + 1)
+    return memo[key]
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
-    """Read a YAML mapping; syntax errors name the file and line."""
+    """Read a YAML mapping; syntax errors name the file and line. A file over
+    :data:`MAX_YAML_BYTES`, or over :data:`MAX_YAML_NODES` nodes once its aliases are
+    expanded, is refused before anything is built."""
     try:
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise ConfigError("", f"{size} bytes: larger than a layout can be ({MAX_YAML_BYTES} bytes)", path)
         text = path.read_text()
     except FileNotFoundError:
         raise ConfigError("", "file not found", path) from None
     except OSError as err:
         raise ConfigError("", f"cannot read: {err.strerror}", path) from None
     try:
-        raw = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+        loader = _UniqueKeyLoader(text)
+        try:
+            node = loader.get_single_node()
+            if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
+                raise ConfigError("", f"more than {MAX_YAML_NODES} YAML nodes once its aliases are expanded", path)
+            raw = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
@@ -387,7 +461,12 @@ class LoadedLayout:
 def load_layout(path: str | Path, overrides: list[str] | None = None, registry: Any = None) -> LoadedLayout:
     """Read, override, and validate a layout file (both stages)."""
     path = Path(path)
-    raw = apply_overrides(read_yaml(path), overrides or [])
+    try:
+        raw = apply_overrides(read_yaml(path), overrides or [])
+    except ConfigError as err:
+        if err.path is not None:
+            raise
+        raise ConfigError(err.key, err.reason, path) from None
     base_dir = path.resolve().parent
     layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
     registry = registry or plugin_registry.get_registry()
@@ -403,6 +482,30 @@ def load_layout(path: str | Path, overrides: list[str] | None = None, registry: 
                 raise ConfigError(err.key, str(err), path) from None
     _check_aiding_references(layout, system_configs, registry, path)
     return LoadedLayout(path, layout, system_configs, raw)
+
+
+def data_files(loaded: LoadedLayout) -> list[tuple[str, Path]]:
+    """(dotted key, path) of every file the layout names (its data, truth, fixes...), for a
+    check that needs no reading: ``fusion validate`` refuses a layout whose files are missing."""
+    found: list[tuple[str, Path]] = []
+
+    def walk(node: Any, key: str) -> None:
+        if isinstance(node, Path):
+            found.append((key, node))
+        elif isinstance(node, BaseModel):
+            for name in type(node).model_fields:
+                walk(getattr(node, name), f"{key}.{name}" if key else name)
+        elif isinstance(node, dict):
+            for name, value in node.items():
+                walk(value, f"{key}.{name}" if key else str(name))
+        elif isinstance(node, (list, tuple)):
+            for k, value in enumerate(node):
+                walk(value, f"{key}.{k}")
+
+    walk(loaded.layout.truth, "truth")
+    for name, cfg in loaded.system_configs.items():
+        walk(cfg, f"systems.{name}")
+    return found
 
 
 def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel], registry: Any, path: Path) -> None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.base.types import TruthTrack
+from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.io.tables import (apply_timestamp_policy, check_columns, check_time_source, clean_cell, read_lines,
                                   read_table, sample_times, split_line)
 
@@ -62,6 +62,9 @@ def read_truth_csv(
         ok = ~np.isnan(pos).any(axis=1)
         if not ok.any():
             raise InputError(path, f"system {name!r} has no row with all of {triplet} present")
+        if not ok.all():
+            LOG.warning("%s: %d truth row(s) of %s skipped (empty or NaN cells; the first at line %d)", path.name,
+                        int((~ok).sum()), name, int(line_no[kept][np.argmin(ok)]))
         if pos.shape[1] == 2:
             pos = np.column_stack([pos, np.full(len(pos), np.nan)])
         out[name] = TruthTrack(

@@ -7,16 +7,24 @@ run gives the same bits wherever it runs; only the timing columns
 (:func:`bodyfusion.study.results.is_timing_column`) differ. Each worker loads the compiled
 kernels from Numba's on-disk cache, which writes each entry to a temporary file and
 renames it, so workers compiling at once do not corrupt it. Each finished row is handed
-to ``on_row`` as it arrives.
+to ``on_row`` as it arrives. Workers never outlive the study: the pool's end with their
+parent (:func:`exit_with_parent`); Dask's nannies and workers end when their scheduler's
+process does (Dask's own parent watch).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import enum
 import logging
 import multiprocessing
 import os
+import signal
+import sys
+import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -53,10 +61,35 @@ def _worker_environment() -> Iterator[None]:
                 os.environ[k] = v
 
 
+PARENT_POLL_S = 0.5
+"""How often a pool worker checks that the study that started it is still alive, s."""
+
+
+def exit_with_parent(parent_pid: int) -> None:
+    """Pool worker initialiser: the worker ends when the study process that started it dies
+    (even by SIGKILL, which runs no clean-up), instead of living on as an orphan. On Linux the
+    kernel sends SIGKILL at once (``prctl(PR_SET_PDEATHSIG)``); everywhere a daemon thread also
+    checks the parent every :data:`PARENT_POLL_S` seconds."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def run_local(specs: list[RunSpec], workers: int, on_row: Callable[[dict[str, Any]], None]) -> None:
-    """Execute ``specs`` on a pool of ``workers`` spawned processes; a dead worker stops the
-    study with a FusionError (the rows already handed over are kept)."""
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    """Execute ``specs`` on a pool of ``workers`` spawned processes, which end with the study
+    (:func:`exit_with_parent`); a dead worker stops the study with a FusionError (the rows
+    already handed over are kept)."""
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=exit_with_parent, initargs=(os.getpid(),))
     try:
         with _worker_environment():  # workers are spawned as the first runs are submitted
             futures = [pool.submit(execute_run, s) for s in specs]

@@ -1,0 +1,94 @@
+"""Faults during a study: the parent killed, a worker killed, an unwritable output folder.
+Whatever happens, a rerun completes the study with no row lost or twice, and no process of
+the study outlives it."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pyarrow.parquet as pq
+import pytest
+
+from bodyfusion.base.errors import FusionError
+from bodyfusion.study import expand_grid, load_study, run_study
+from tests.paths import ROOT
+from tests.study.test_study import write_study
+
+STUDY = """\
+    layouts:
+      walk: {scenario: walk.yaml}
+    outages: {system: hand_phone, start_s: 8, durations_s: [0, 5, 10]}
+    seeds: 4
+    """
+
+
+def start_study(study: Path, out: Path, workers: int) -> subprocess.Popen:
+    code = (f"from bodyfusion.study import run_study; "
+            f"run_study({str(study)!r}, {str(out)!r}, workers={workers}, batch_rows=1)")
+    return subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def wait_for_parts(out: Path, count: int, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and len(list((out / "parts").glob("part-*.parquet"))) < count:
+        time.sleep(0.05)
+
+
+def assert_complete(study: Path, out: Path) -> None:
+    table = pq.read_table(out / "results.parquet")
+    keys = table.column("run_key").to_pylist()
+    assert sorted(keys) == sorted(r.key for r in expand_grid(load_study(study)))  # none lost, none twice
+
+
+@pytest.mark.slow
+def test_a_killed_parent_leaves_no_worker_behind(tmp_path):
+    """``kill -9`` of the study process alone (not its group): its pool workers and the
+    multiprocessing helpers it started end within seconds instead of living on as orphans."""
+    study = write_study(tmp_path, STUDY)
+    out = tmp_path / "out"
+    proc = start_study(study, out, workers=2)
+    wait_for_parts(out, 2)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    assert children, "the study started no worker"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    gone, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive, f"{len(alive)} process(es) of the study outlived it: {[p.pid for p in alive]}"
+    run_study(study, out, workers=1)
+    assert_complete(study, out)
+
+
+@pytest.mark.slow
+def test_a_killed_worker_stops_the_study_and_a_rerun_completes_it(tmp_path):
+    study = write_study(tmp_path, STUDY)
+    out = tmp_path / "out"
+    proc = start_study(study, out, workers=1)
+    wait_for_parts(out, 2)
+    workers = psutil.Process(proc.pid).children(recursive=True)
+    victim = next(p for p in workers if "resource_tracker" not in " ".join(p.cmdline()))
+    victim.kill()
+    assert proc.wait(timeout=60) != 0  # the study stops, saying so
+    run_study(study, out, workers=1)
+    assert_complete(study, out)
+
+
+def test_an_unwritable_output_folder_is_one_line_and_a_rerun_completes(tmp_path):
+    """The folder for the saved rows cannot be made (a file stands in its place, as a full or
+    read-only disk would refuse it): the study stops with one line; once it can write, a
+    rerun completes."""
+    study = write_study(tmp_path, STUDY.replace("seeds: 4", "seeds: 1"))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "parts").write_text("in the way")
+    with pytest.raises(FusionError, match="cannot create"):
+        run_study(study, out, workers=1)
+    (out / "parts").unlink()
+    run_study(study, out, workers=1)
+    assert_complete(study, out)
