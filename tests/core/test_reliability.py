@@ -1,0 +1,110 @@
+"""No silent wrong answer: every bad layout or input the reliability review found is refused in
+one line naming the file and key, or warned about and counted."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.cli import counted_policies
+from bodyfusion.core.layout import MAX_YAML_NODES, load_layout, read_yaml
+from bodyfusion.io.tables import apply_timestamp_policy, timestamp_spikes
+from bodyfusion.io.truth import read_truth_csv
+from tests.paths import CONFIGS
+
+VICON = CONFIGS / "dual_foot_vicon.yaml"
+
+
+def refused(overrides, path=VICON) -> ConfigError:
+    with pytest.raises(ConfigError) as err:
+        load_layout(path, overrides)
+    assert "\n" not in str(err.value) and str(path.name) in str(err.value)
+    return err.value
+
+
+@pytest.mark.parametrize("override, key", [
+    ("constraints.0.distance_m=.inf", "constraints.0.distance_m"),
+    ("systems.left_foot.initial.heading_deg=.nan", "systems.left_foot.initial.heading_deg"),
+    ("systems.left_foot.initial.position_m=[.inf, 0, 0]", "systems.left_foot.initial.position_m"),
+    ("systems.left_foot.filter.zupt_sigma_mps=.nan", "systems.left_foot.filter.zupt_sigma_mps"),
+    ("fuser.tolerance_m=.inf", "fuser.tolerance_m"),
+])
+def test_non_finite_numbers_are_refused_with_their_key(override, key):
+    assert refused([override]).key.startswith(key)
+
+
+def test_a_new_system_is_not_made_by_a_dotted_path():
+    err = refused(["systems.left_fot.filter.kind=ekf"])
+    assert err.key == "systems.left_fot" and "unknown system" in err.reason
+
+
+def test_an_infeasible_constraint_set_is_refused(write_yaml):
+    path = write_yaml({"systems": {n: {"plugin": "random_walk"} for n in "abc"}, "constraints": [
+        {"between": ["a", "b"], "kind": "max", "distance_m": 0.1},
+        {"between": ["b", "c"], "kind": "max", "distance_m": 0.1},
+        {"between": ["a", "c"], "kind": "min", "distance_m": 5.0}]})
+    err = refused([], path)
+    assert err.key == "constraints.2.distance_m" and "within 0.2 m" in err.reason
+    # the same with a 3-D minimum and horizontal maxima is feasible (the heights are free)
+    load_layout(path, ["constraints.2.horizontal=false"])
+
+
+def test_a_complex_yaml_key_is_a_syntax_error_with_its_line(tmp_path):
+    path = tmp_path / "l.yaml"
+    path.write_text("name: x\n? [a, b]\n: 1\nsystems: {}\n")
+    with pytest.raises(ConfigError, match=r"l\.yaml:2: YAML syntax: a mapping key must be a plain value"):
+        read_yaml(path)
+
+
+def test_an_alias_bomb_is_refused_before_it_is_built(tmp_path):
+    lines = ['a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
+    lines += [f"{chr(97 + i)}: &{chr(97 + i)} [" + ",".join(["*" + chr(96 + i)] * 9) + "]" for i in range(1, 9)]
+    path = tmp_path / "bomb.yaml"
+    path.write_text("\n".join(lines) + "\nsystems: {}\n")
+    with pytest.raises(ConfigError, match=f"more than {MAX_YAML_NODES} YAML nodes"):
+        read_yaml(path)
+
+
+def test_an_oversized_yaml_is_refused_unread(tmp_path):
+    path = tmp_path / "big.yaml"
+    path.write_text("x: [" + "1," * 3_000_000 + "1]\n")
+    with pytest.raises(ConfigError, match="larger than a layout can be"):
+        read_yaml(path)
+
+
+def test_constraints_are_enforced_by_default(write_yaml):
+    path = write_yaml({"systems": {n: {"plugin": "random_walk"} for n in "ab"},
+                       "constraints": [{"between": ["a", "b"], "distance_m": 1.0}]})
+    assert load_layout(path).layout.fuser.method == "projection"
+
+
+def test_a_corrupt_timestamp_drops_one_sample_not_the_rest():
+    t = np.arange(300) * 0.01
+    t[100] = 1e30
+    assert timestamp_spikes(t).tolist() == [100]
+    kept, report = apply_timestamp_policy(t, "drop", "imu.csv")
+    assert kept.size == 299 and report.dropped_samples == 1 and len(report.warnings) == 1
+    long_gap = np.concatenate([np.arange(100) * 0.01, 100 + np.arange(100) * 0.01])
+    assert timestamp_spikes(long_gap).size == 0  # a gap is not a spike
+
+
+def test_truth_rows_with_missing_cells_are_skipped_and_warned(tmp_path, caplog):
+    path = tmp_path / "truth.csv"
+    path.write_text("t,x,y,z\n0,0,0,0\n1,1,nan,0\n2,2,2,0\n")
+    track = read_truth_csv(path, position_columns={"foot": ["x", "y", "z"]}, time_column="t")["foot"]
+    assert track.t.tolist() == [0.0, 2.0]
+    assert any("1 truth row(s) of foot skipped" in r.message and "line 3" in r.message for r in caplog.records)
+
+
+def test_the_console_summary_names_every_counted_policy():
+    doc = {"input": {"dropped_samples": 3, "reordered_samples": 0, "warnings": ["w"]},
+           "systems": {"foot": {"diagnostics": {"zupt_gated": 2, "zupt_updates": 100,
+                                                "input_checks": {"gaps": 1, "warnings": 1}}}},
+           "constraints": {"not_converged": 4, "solver_fallbacks": 0, "epochs": 10}}
+    lines = counted_policies(doc)
+    assert "input: dropped_samples 3" in lines
+    assert "foot: zupt_gated 2, input_checks.warnings 1" in lines
+    assert "constraints: not_converged 4" in lines
+    assert any("1 warning(s)" in line for line in lines)
