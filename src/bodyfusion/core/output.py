@@ -1,4 +1,5 @@
-"""Writers of the run outputs named in docs/contract.md: metrics.json, trajectories.csv, plots."""
+"""Writers of the run outputs named in docs/contract.md: metrics.json (with each system's
+consistency ``health``), trajectories.csv, plots (nees.png where truth exists)."""
 
 from __future__ import annotations
 
@@ -52,6 +53,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     layout = result.loaded.layout
     loop = layout.truth is not None and layout.truth.loop
     systems: dict[str, dict] = {}
+    health = result.health()
     for name, system in result.systems.items():
         traj = result.trajectories[name]
         block: dict = {"samples": system.samples}
@@ -64,6 +66,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
             block["loop_closure_m"] = loop_closure_m(traj)
         block.update(_outage_block(result, name))
         block["diagnostics"] = system.diagnostics()
+        block["health"] = health[name]
         systems[name] = block
     t = result.transform
     doc: dict = {
@@ -94,7 +97,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     if result.smoothed_constraints is not None:
         doc.setdefault("constraints", {})["smoothed"] = result.smoothed_constraints
     if result.aiding:  # aiding sources (UWB tags): no trajectory, their diagnostics
-        doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics()} for name, src in result.aiding.items()}
+        doc["aiding"] = {name: {"samples": src.samples, **src.diagnostics(), "health": src.health()}
+                         for name, src in result.aiding.items()}
     inp = result.input_report
     doc["input"] = {"dropped_samples": inp.dropped_samples, "reordered_samples": inp.reordered_samples,
                     "notes": inp.notes, "warnings": inp.warnings}
@@ -147,3 +151,4 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
         if result.scores:
             plots.plot_error_vs_time(out_dir / "error_vs_time.png", result.scores)
             plots.plot_error_cdf(out_dir / "error_cdf.png", result.scores)
+            plots.plot_nees(out_dir / "nees.png", result.nees)

@@ -1,5 +1,5 @@
-"""What a run produced: the systems with their histories, the trajectories, the truth and the
-scores, the fuser's and the smoothers' reports (:class:`RunResult`)."""
+"""What a run produced: the systems with their histories, the trajectories, the truth, the
+scores and the consistency figures, the fuser's and the smoothers' reports (:class:`RunResult`)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from bodyfusion.core.fuser import FuserReport
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
+from bodyfusion.evaluation.consistency import CovarianceHealth, NeesTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 
@@ -32,6 +33,21 @@ class RunResult:
     """Aiding sources (UWB tags...): no trajectory; diagnostics in metrics.json ``aiding``."""
     smoothed_constraints: dict | None = None
     """Counts of the constraints applied to the smoothed tracks (``smoother.constrain_smoothed``)."""
+    nees: dict[str, NeesTrack] = field(default_factory=dict)
+    """Horizontal NEES against truth of every scored system (after the evaluation alignment)."""
+
+    def health(self) -> dict[str, dict]:
+        """metrics.json ``systems.<name>.health``: each system's own figures
+        (:meth:`~bodyfusion.core.system.SensorSystem.health`), ``trajectory_covariance`` (the
+        checks of the output trajectory's east–north covariance at every epoch, smoothed when
+        smoothed) and, where truth exists, ``nees``."""
+        out = {}
+        for name, system in self.systems.items():
+            traj = self.trajectories[name]
+            out[name] = {**system.health(),
+                         "trajectory_covariance": CovarianceHealth.of(traj.horizontal_covariance(), traj.t).to_dict(),
+                         **({"nees": self.nees[name].summary()} if name in self.nees else {})}
+        return out
 
     @property
     def samples(self) -> int:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.fuser import Fuser
+from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.heading import align_headings
 from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.output import write_outputs
@@ -15,6 +16,7 @@ from bodyfusion.core.result import RunResult
 from bodyfusion.core.smoothing import constrain_trajectories, smooth_systems
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
 from bodyfusion.base.types import TruthTrack
+from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
 from bodyfusion.core.truth import read_truth
 from bodyfusion.nav.earth import normal_gravity
@@ -81,7 +83,10 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
 
     t0 = time.perf_counter()
     rotations = align_headings(systems, loaded.layout.heading_alignment)
-    report = Fuser(systems, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
+    monitors = {name: CovarianceMonitor(s) for name, s in systems.items()}
+    report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
+    for monitor in monitors.values():
+        monitor.flush()
     timings["navigation_s"] = time.perf_counter() - t0
 
     smoothed: dict[str, dict] = {}
@@ -102,9 +107,11 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
                                           loop=truth_cfg.loop, alignment_distance_m=truth_cfg.alignment_distance_m)
     else:
         transform, scores = PlanarTransform.identity(), {}
+    nees = {name: horizontal_nees(trajectories[name], score, transform, truth_cfg.alignment)
+            for name, score in scores.items()}
     timings["scoring_s"] = time.perf_counter() - t0
     return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
-                     aiding, smoothed_constraints)
+                     aiding, smoothed_constraints, nees)
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,

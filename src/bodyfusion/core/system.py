@@ -24,6 +24,7 @@ from pydantic import BaseModel
 from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.evaluation.consistency import CovarianceHealth
 
 
 @dataclass
@@ -95,6 +96,23 @@ class Plugin(ABC):
         """Plugin-specific figures for metrics.json (stance fraction, updates, rejections...)."""
         return {}
 
+    def health(self) -> dict:
+        """Consistency figures of the filter for metrics.json ``systems.<name>.health`` (an aiding
+        source's: ``aiding.<name>.health``), in the forms of :mod:`bodyfusion.evaluation.consistency`:
+
+        - ``covariance``: :class:`~bodyfusion.evaluation.consistency.CovarianceHealth` of the
+          error-state covariance (a navigation system's default, see :meth:`SensorSystem.health`);
+        - ``nis``: {aiding type: :class:`~bodyfusion.evaluation.consistency.NisTally` dict} for
+          every aiding type the plugin applies (ZUPT, GNSS position, ranges...), its expected
+          value the measurement dimension;
+        - ``quaternion_norm_max_deviation``: max |‖q‖ − 1| over the run, for a quaternion state;
+        - ``covariance_history``: the checks of every covariance the plugin recorded, with the
+          ``block`` they cover.
+
+        The core adds ``trajectory_covariance`` and, where truth exists, ``nees`` (the
+        horizontal NEES, :meth:`bodyfusion.core.result.RunResult.health`). Default here: nothing."""
+        return {}
+
 
 class SensorSystem(Plugin):
     """Base class of a body-worn navigation system.
@@ -111,6 +129,11 @@ class SensorSystem(Plugin):
     error_model: ClassVar[str | None] = None
     """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
     :func:`bodyfusion.testing.check_system` can check its Jacobians."""
+
+    def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
+        super().__init__(name, config, context)
+        self.covariance_health = CovarianceHealth()
+        """Checks of the error-state covariance made during the run (see :meth:`health`)."""
 
     # --- time -----------------------------------------------------------------
     @property
@@ -192,6 +215,19 @@ class SensorSystem(Plugin):
     @abstractmethod
     def trajectory(self) -> Trajectory:
         """History of positions and their one-sigma uncertainty."""
+
+    # --- consistency ----------------------------------------------------------------
+    def health(self) -> dict:
+        """As :meth:`Plugin.health`; default ``covariance``: the checks in
+        :attr:`covariance_health`, which the core makes while the fuser runs
+        (:class:`bodyfusion.core.health.CovarianceMonitor`: at every sync epoch, after every
+        correction, at least every second of the system's own sync events, and at the end), or
+        the current covariance alone when none was made. Plugins add what they know (their NIS,
+        quaternion norm, recorded covariances) to this dict."""
+        checks = self.covariance_health
+        if not checks.checks:
+            checks = CovarianceHealth.of(self.covariance()[None], np.array([self.t_now]))
+        return {"covariance": checks.to_dict()}
 
 
 @dataclass(frozen=True)

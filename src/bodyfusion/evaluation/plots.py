@@ -1,5 +1,5 @@
-"""PNG plots of scored runs (plan view against truth, horizontal error vs time, error CDF)
-and of studies (an error against the GNSS outage duration).
+"""PNG plots of scored runs (plan view against truth, horizontal error vs time, error CDF,
+horizontal NEES vs time) and of studies (an error against the GNSS outage duration).
 
 Positions are ENU metres (plan view: east vs north), time in seconds. Uses
 ``matplotlib.figure.Figure`` with the Agg canvas directly: no pyplot, no global state,
@@ -15,10 +15,13 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from bodyfusion.evaluation.consistency import NeesTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore, error_cdf
 from bodyfusion.base.types import Trajectory, TruthTrack
 
 DPI = 120
+MAX_POINTS = 20000
+"""Most points drawn per line (longer series are decimated evenly)."""
 
 
 def _new_figure(width_in: float = 7.0, height_in: float = 5.0) -> Figure:
@@ -139,6 +142,50 @@ def plot_error_cdf(path: Path, scores: Mapping[str, SystemScore]) -> None:
     ax.grid(True, alpha=0.3)
     if scores:
         ax.legend(loc="lower right", fontsize="small")
+    _save(fig, path)
+
+
+def plot_nees(path: Path, tracks: Mapping[str, NeesTrack], title: str = "Horizontal position NEES against time") -> None:
+    """Horizontal NEES (2 dof) against time (s) per system, log scale, with the two-sided 95 %
+    chi-square band of one epoch (of a Monte-Carlo mean: of ``runs`` runs) shaded and the
+    expected value (the dof) as a line; the legend gives each system's mean NEES and the
+    share of epochs inside the band."""
+    crowded = len(tracks) > 4  # the legend goes beside the axes
+    fig = _new_figure(10.0 if crowded else 7.0, 5.0)
+    ax = fig.add_subplot(1, 1, 1)
+    colour = _colours(list(tracks))
+    low = []
+    for name, track in tracks.items():
+        ok = np.isfinite(track.nees) & (track.nees > 0)
+        t, v = track.t[ok], track.nees[ok]
+        if not v.size:
+            continue
+        step = max(1, v.size // MAX_POINTS)
+        s = track.summary()
+        ax.plot(t[::step], v[::step], "-", lw=0.8, color=colour[name],
+                label=f"{name} (mean {s['mean']:.3g}, {100 * s['in_band_fraction']:.0f} % in band)")
+        low.append(np.percentile(v, 1))
+    bands = {(track.dof, track.runs): track.band() for track in tracks.values()}
+    for (dof, runs), (lo, hi) in sorted(bands.items()):
+        of = f", mean of {runs} runs" if runs > 1 else ""
+        ax.axhspan(lo, hi, color="0.5", alpha=0.15, lw=0, label=f"95 % band, {dof} dof{of} [{lo:.3g}, {hi:.3g}]")
+    for dof in sorted({dof for dof, _ in bands}):
+        ax.axhline(dof, color="k", lw=1.0, ls="--", label=f"expected ({dof})")
+    if low:  # the first epochs (a covariance and an error near 0) would stretch the axis for decades
+        ax.set_ylim(bottom=min(min(low), *(lo / 3.0 for lo, _ in bands.values())))
+    else:
+        _no_data(ax, "no finite NEES")
+    fitted = sorted({track.alignment for track in tracks.values()} - {"none"})
+    ax.set_title(title + (f" (frame fitted: {', '.join(fitted)})" if fitted else ""))
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("NEES [-]")
+    ax.set_yscale("log")
+    ax.grid(True, which="major", alpha=0.3)
+    if crowded:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
+        fig.subplots_adjust(right=0.62)
+    elif tracks:
+        ax.legend(loc="best", fontsize="small")
     _save(fig, path)
 
 

@@ -11,6 +11,7 @@ from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import ImuStream, InputReport, Trajectory
+from bodyfusion.evaluation.consistency import NisTally, nis, quaternion_norm_deviation
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
@@ -270,6 +271,7 @@ class FootIns(SensorSystem):
         self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
+        self.fix_nis = NisTally(3)
         self._next_fix = 0
         self._i = 0  # index of the sample the state refers to
         self.smoothed_x: np.ndarray | None = None
@@ -316,6 +318,7 @@ class FootIns(SensorSystem):
         while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
             k = self._fix_index[self._next_fix]
             self._run_to(k + 1)
+            self._count_fix_nis(self._fix_pos_n[self._next_fix])
             self.filter.position_fix(self._fix_pos_n[self._next_fix], self._fix_sigma, self._fix_gate,
                                      self.fix_counts, self.phi)
             self._record_state(k)
@@ -485,3 +488,26 @@ class FootIns(SensorSystem):
                 "position_fixes_rejected": self.fix_counts.rejected} if self.config.position_fixes else {}),
             **({"smoothing": self.smoothing_diagnostics} if self.smoothing_diagnostics is not None else {}),
         }
+
+    def _count_fix_nis(self, z_n: np.ndarray) -> None:
+        """The NIS of position fix z_n (ENU, m) against the state before it, S = P_pp + σ² I."""
+        value = nis(z_n - self.x[0:3], self.P[0:3, 0:3] + self._fix_sigma**2 * np.eye(3))
+        self.fix_nis.add(value, value <= self._fix_gate)
+
+    def health(self) -> dict:
+        """As :meth:`SensorSystem.health`, plus ``quaternion_norm_max_deviation`` of the filter's
+        history (``smoothed_quaternion_norm_max_deviation``: the smoother's) and ``nis``:
+        ``zupt`` (3 dof, every stance sample before gating; beyond the gate: de-weighted;
+        with the ckf the coloured updates' NIS too), ``zaru`` (3 dof; the compiled kernels keep
+        no ZARU NIS sum, so only its count), ``position_fix`` (3 dof, with position fixes)."""
+        n = self._i + 1
+        c = self.counters
+        tallies = {"zupt": NisTally(3, int(c[C_ZUPTS]), float(c[C_NIS_SUM]), int(c[C_GATED])),
+                   "zaru": NisTally(3, int(c[C_ZARUS]), None)}
+        if self.config.position_fixes is not None:
+            tallies["position_fix"] = self.fix_nis
+        out = {**super().health(), "quaternion_norm_max_deviation": quaternion_norm_deviation(self.hist_x[:n, 6:10]),
+               "nis": {kind: tally.to_dict() for kind, tally in tallies.items()}}
+        if self.smoothed_x is not None:
+            out["smoothed_quaternion_norm_max_deviation"] = quaternion_norm_deviation(self.smoothed_x[:n, 6:10])
+        return out

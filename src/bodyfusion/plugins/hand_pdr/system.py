@@ -75,6 +75,7 @@ from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.io.imu import read_imu
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.evaluation.consistency import NisTally, nis
 from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
@@ -239,7 +240,10 @@ class HandPdr(SensorSystem):
                             "position_resets": 0, "heading_accepted": 0, "heading_rejected": 0,
                             "heading_skipped_standing": 0, "heading_skipped_handling": 0,
                             "heading_skipped_accuracy": 0}
-        self._hist: list[tuple[float, float, float, float, float, float, float]] = []
+        self.nis_tallies = {"gnss_position": NisTally(3), "gnss_course": NisTally(1)}
+        if self._mag is not None:
+            self.nis_tallies["magnetometer"] = NisTally(1)
+        self._hist: list[tuple[float, ...]] = []
         self._record()
 
     # --- the state ----------------------------------------------------------------
@@ -305,10 +309,17 @@ class HandPdr(SensorSystem):
         self._bank.transition(Fs, Qs_)
 
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
-                weigh: bool) -> bool:
-        """:meth:`BankFilter.update`; the time an open bank collapses is the heading's resolution."""
+                weigh: bool, kind: str | None) -> bool:
+        """:meth:`BankFilter.update`; the time an open bank collapses is the heading's resolution.
+        The NIS of a ``kind`` of :attr:`nis_tallies` is counted while the bank is one filter."""
         was_open = len(self._bank) > 1
+        value = None
+        if kind is not None and not was_open:
+            x, P = self._bank.moments()
+            value = nis(residual(x), H @ P @ H.T + R)
         ok = self._bank.update(H, residual, R, gate, weigh)
+        if value is not None:
+            self.nis_tallies[kind].add(value, ok)
         if was_open and len(self._bank) == 1:
             self.heading_resolved_s = self._tc
             self.heading_resolutions.append(self._tc)
@@ -355,11 +366,11 @@ class HandPdr(SensorSystem):
         def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
             return fx.pos[j] - H[:, self._nominal] @ x
 
-        ok = self._update(H, residual, R, self._gate_pos, walking and steady)
+        ok = self._update(H, residual, R, self._gate_pos, walking and steady, "gnss_position")
         self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
         if not ok and 0 < f.reset_after_rejections <= self._rejected_in_row:
             self._forget_position()
-            ok = self._update(H, residual, R, self._gate_pos, False)
+            ok = self._update(H, residual, R, self._gate_pos, False, None)
             counts["position_resets"] += 1
             self._rejected_in_row = 0
         counts["accepted" if ok else "rejected"] += 1
@@ -378,7 +389,8 @@ class HandPdr(SensorSystem):
             Hp = np.zeros((1, self.n_err))
             Hp[0, PSI] = 1.0
             okh = self._update(Hp, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]),
-                               np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi, True)
+                               np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi, True,
+                               "gnss_course")
             counts["heading_accepted" if okh else "heading_rejected"] += 1
 
     def _magnetometer(self, k: int) -> None:
@@ -407,13 +419,13 @@ class HandPdr(SensorSystem):
         H[0, PSI], H[0, O] = 1.0, -1.0
         tm = np.array([self._mag.t[k]])
         ok = self._update(H, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), np.array([[r]]),
-                          self._gate_mag, bool(self.walking(tm)[0] and self.held_steadily(tm)[0]))
+                          self._gate_mag, bool(self.walking(tm)[0] and self.held_steadily(tm)[0]), "magnetometer")
         self.mag_counts["accepted" if ok else "rejected_gate"] += 1
 
     def _record(self) -> None:
-        """History row: time, position (m), position one-sigma (m)."""
+        """History row: time, position (m), position one-sigma (m), east–north covariance (m²)."""
         x, P = self._bank.moments()
-        self._hist.append((self._tc, *x[:3], *np.sqrt(np.maximum(np.diag(P)[:3], 0.0))))
+        self._hist.append((self._tc, *x[:3], *np.sqrt(np.maximum(np.diag(P)[:3], 0.0)), P[E, N]))
 
     # --- time -------------------------------------------------------------------
     @property
@@ -493,7 +505,7 @@ class HandPdr(SensorSystem):
         # several records at one time (an update right after a step): keep the last
         last = np.concatenate([h[1:, 0] > h[:-1, 0], [True]])
         h = h[last]
-        return Trajectory(h[:, 0], h[:, 1:4], h[:, 4:7])
+        return Trajectory(h[:, 0], h[:, 1:4], h[:, 4:7], h[:, 7])
 
     @property
     def samples(self) -> int:
@@ -527,3 +539,10 @@ class HandPdr(SensorSystem):
                 "heading": heading,
                 **({"magnetometer": {**self.mag_counts, "offset_deg": float(np.rad2deg(wrap_angle(x[8])))}}
                    if self._mag is not None else {})}
+
+    def health(self) -> dict:
+        """As :meth:`SensorSystem.health`, plus ``nis``: ``gnss_position`` (3 dof: east, north, up),
+        ``gnss_course`` (1 dof) and, with the magnetometer, ``magnetometer`` (1 dof), each counted
+        before the gate while the heading bank is one filter (an open bank's moments are a
+        mixture's, not a Gaussian's); the update that follows a position reset is not counted."""
+        return {**super().health(), "nis": {kind: tally.to_dict() for kind, tally in self.nis_tallies.items()}}

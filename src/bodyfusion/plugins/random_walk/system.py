@@ -19,6 +19,7 @@ from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.evaluation.consistency import CovarianceHealth
 
 
 class RandomWalkConfig(StrictModel):
@@ -149,3 +150,11 @@ class RandomWalk(SensorSystem):
     @property
     def input_report(self) -> InputReport:
         return InputReport()
+
+    def health(self) -> dict:
+        """As :meth:`SensorSystem.health`, plus ``covariance_history``: the checks of the full
+        position covariance recorded at every sample."""
+        n = self._i + 1
+        return {**super().health(),
+                "covariance_history": {"block": "position, every sample",
+                                       **CovarianceHealth.of(self.hist_cov[:n], self.t[:n]).to_dict()}}

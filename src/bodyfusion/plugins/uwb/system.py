@@ -25,6 +25,7 @@ from bodyfusion.core.system import (
     ScalarMeasurement,
 )
 from bodyfusion.base.types import InputReport
+from bodyfusion.evaluation.consistency import NisTally
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
 from bodyfusion.plugins.uwb.ranges import read_ranges
@@ -157,3 +158,13 @@ class UwbTag(AidingSource):
                 "los_rejected": int((applied & ~nlos & rejected).sum()),
                 "los_accepted": int((applied & ~nlos & ~rejected).sum())}
         return out
+
+    def health(self) -> dict:
+        """``nis`` of the ranges the fuser applied (1 dof, before the gate; beyond the gate:
+        rejected), ``anchor_ranges`` and ``peer_ranges`` apart where the tag has them."""
+        applied = (self.fate == ACCEPTED) | (self.fate == REJECTED)
+        groups = {"anchor_ranges": self.log.end < self.n_anchors, "peer_ranges": self.log.end >= self.n_anchors}
+        tallies = {kind: NisTally(1, int((mask & applied).sum()), float(self.nis[mask & applied].sum()),
+                                  int((mask & (self.fate == REJECTED)).sum()))
+                   for kind, mask in groups.items() if mask.any()}
+        return {"nis": {kind: tally.to_dict() for kind, tally in tallies.items()}}

@@ -1,0 +1,76 @@
+"""Covariance checks while the fuser runs: each system seen through a :class:`CovarianceMonitor`.
+
+The fuser drives a system with ``advance`` and ``apply_correction`` at its sync epochs; the
+monitor passes every call on and checks the covariance the system holds afterwards (symmetric,
+positive semi-definite: :class:`bodyfusion.evaluation.consistency.CovarianceHealth`, kept in
+the system's ``covariance_health`` for :meth:`~bodyfusion.core.system.SensorSystem.health`).
+A long advance (a system no constraint involves is advanced to its end in one call) is split
+at the system's own sync times, at most one per :data:`STRIDE_S`, so that every system is
+checked at least about once a second and at the end. Splitting there changes nothing: the
+plugin contract asks that advancing in chunks at sync times gives the same bits, and the fuser
+itself syncs there. Checks are buffered and made in batches (one vectorised eigenvalue call).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bodyfusion.core.system import SensorSystem
+
+STRIDE_S = 1.0
+"""Least time (s) between the extra checks inside one long advance."""
+BATCH = 256
+"""Covariances buffered before they are checked together."""
+
+
+def stride_times(sync_times: np.ndarray, stride_s: float) -> np.ndarray:
+    """The sync times (s) kept for the checks: the first, then each first one at least
+    ``stride_s`` after the last kept."""
+    kept: list[float] = []
+    for t in np.unique(np.asarray(sync_times, dtype=float)):
+        if not kept or t >= kept[-1] + stride_s:
+            kept.append(float(t))
+    return np.asarray(kept)
+
+
+class CovarianceMonitor:
+    """``system`` as the fuser sees it: every attribute is the system's own, and after each
+    ``advance`` and ``apply_correction`` its covariance is checked. Call :meth:`flush` once
+    the fuser is done."""
+
+    def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
+        self.system = system
+        self._stride_t = stride_times(system.sync_times(), stride_s)
+        self._t: list[float] = []
+        self._covs: list[np.ndarray] = []
+
+    def __getattr__(self, name: str):
+        return getattr(self.system, name)
+
+    def advance(self, t: float) -> None:
+        """The system's ``advance(t)``, split at the stride times between now and t."""
+        s = self.system
+        a, b = np.searchsorted(self._stride_t, [s.t_now, t], side="right")
+        for ts in self._stride_t[a:b]:
+            if ts < t:
+                s.advance(float(ts))
+                self._check()
+        s.advance(t)
+        self._check()
+
+    def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """The system's ``apply_correction(dx, P)``, then a check."""
+        self.system.apply_correction(dx, P)
+        self._check()
+
+    def _check(self) -> None:
+        self._t.append(self.system.t_now)
+        self._covs.append(self.system.covariance())
+        if len(self._covs) >= BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        """Check the buffered covariances into the system's ``covariance_health``."""
+        if self._covs:
+            self.system.covariance_health.add_many(np.stack(self._covs), np.asarray(self._t))
+        self._t, self._covs = [], []

@@ -1,0 +1,228 @@
+"""Filter consistency: does each covariance mean what it says?
+
+Three measures (docs/contract.md, metrics.json ``systems.<name>.health``):
+
+- **Covariance checks**: P symmetric and positive semi-definite. The asymmetry is
+  max |P − Pᵀ| (unit of P); the minimum eigenvalue is that of ½ (P + Pᵀ). The states mix
+  units (m², rad², (m/s²)²...), so a violation is judged on the correlation form
+  C = D^-½ ½(P + Pᵀ) D^-½, D = diag(P) (1 where a variance is 0): a non-finite entry, a
+  negative variance, |P_ij − P_ji| > :data:`RTOL` √(P_ii P_jj), or λ_min(C) < −:data:`RTOL`.
+- **NIS** of an m-dimensional update, yᵀ S⁻¹ y with y the innovation and S its covariance:
+  a consistent filter averages m (:class:`NisTally`, before any gating).
+- **NEES** of the horizontal position against truth, eᵀ C⁻¹ e with e = truth − estimate
+  (east, north; m) and C the 2 × 2 east–north covariance (m²): a consistent filter averages 2,
+  and 95 % of its epochs lie in the two-sided chi-square band [χ²₂(0.025), χ²₂(0.975)] =
+  [0.0506, 7.38] (:class:`NeesTrack`).
+
+Frames: ENU navigation frame, metres; time in seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from bodyfusion.base.types import Trajectory
+from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
+
+RTOL = 1e-9
+"""Relative tolerance of the covariance checks (asymmetry and negative eigenvalues of the
+correlation form)."""
+BAND_PROBABILITY = 0.95
+"""Probability of the two-sided chi-square band the NEES is checked against."""
+PROFILE_BINS = 10
+"""Time windows of the NEES profile in metrics.json."""
+
+
+def chi2_band(dof: int, probability: float = BAND_PROBABILITY, runs: int = 1) -> tuple[float, float]:
+    """Two-sided ``probability`` band of the mean of ``runs`` independent χ² values of ``dof``
+    degrees of freedom (one epoch: runs = 1; a Monte-Carlo average over N runs: runs = N)."""
+    tail = 0.5 * (1.0 - probability)
+    n = dof * runs
+    return float(chi2.ppf(tail, n) / runs), float(chi2.ppf(1.0 - tail, n) / runs)
+
+
+# --------------------------------------------------------------------------- covariance
+
+
+def covariance_defects(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Asymmetry max |P − Pᵀ|, minimum eigenvalue of ½ (P + Pᵀ), and the violation flag of
+    covariances P (..., n, n) (see the module docstring); each of shape (...)."""
+    P = np.asarray(P, dtype=float)
+    finite = np.all(np.isfinite(P), axis=(-2, -1))
+    P = np.where(finite[..., None, None], P, 0.0)
+    diff = np.abs(P - np.swapaxes(P, -1, -2))
+    sym = 0.5 * (P + np.swapaxes(P, -1, -2))
+    var = np.diagonal(sym, axis1=-2, axis2=-1)
+    scale = np.sqrt(np.where(var > 0.0, var, 1.0))
+    outer = scale[..., :, None] * scale[..., None, :]
+    lam_min = np.linalg.eigvalsh(sym)[..., 0]
+    lam_corr = np.linalg.eigvalsh(sym / outer)[..., 0]
+    bad = (~finite | np.any(var < 0.0, axis=-1) | (np.max(diff / outer, axis=(-2, -1)) > RTOL)
+           | (lam_corr < -RTOL))
+    return np.max(diff, axis=(-2, -1)), lam_min, bad
+
+
+@dataclass
+class CovarianceHealth:
+    """Running figures of the covariance checks of one system: ``checks`` made,
+    ``max_asymmetry`` (max |P − Pᵀ|), ``min_eigenvalue`` (of ½ (P + Pᵀ)), ``violations``
+    (checks that failed, see :func:`covariance_defects`), the time of the first one (s), and
+    the last check's asymmetry and minimum eigenvalue (``end``)."""
+
+    checks: int = 0
+    max_asymmetry: float = 0.0
+    min_eigenvalue: float = float("inf")
+    violations: int = 0
+    first_violation_t_s: float | None = None
+    end_asymmetry: float | None = None
+    end_min_eigenvalue: float | None = None
+
+    def add(self, P: np.ndarray, t: float) -> None:
+        """Check one covariance P (n, n) at time t (s)."""
+        self.add_many(np.asarray(P, dtype=float)[None], np.array([t], dtype=float))
+
+    def add_many(self, covs: np.ndarray, t: np.ndarray) -> None:
+        """Check covariances (K, n, n) at times t (K,) s, in time order."""
+        if len(covs) == 0:
+            return
+        asym, lam, bad = covariance_defects(covs)
+        self.checks += len(covs)
+        self.max_asymmetry = max(self.max_asymmetry, float(asym.max()))
+        self.min_eigenvalue = min(self.min_eigenvalue, float(lam.min()))
+        self.violations += int(bad.sum())
+        if self.first_violation_t_s is None and bad.any():
+            self.first_violation_t_s = float(t[np.argmax(bad)])
+        self.end_asymmetry, self.end_min_eigenvalue = float(asym[-1]), float(lam[-1])
+
+    @classmethod
+    def of(cls, covs: np.ndarray, t: np.ndarray) -> CovarianceHealth:
+        """The figures of covariances (K, n, n) at times t (K,) s."""
+        health = cls()
+        health.add_many(covs, t)
+        return health
+
+    def to_dict(self) -> dict:
+        """The metrics.json form."""
+        return {"checks": self.checks, "max_asymmetry": self.max_asymmetry,
+                "min_eigenvalue": self.min_eigenvalue if self.checks else None,
+                "violations": self.violations, "first_violation_t_s": self.first_violation_t_s,
+                "end": {"asymmetry": self.end_asymmetry, "min_eigenvalue": self.end_min_eigenvalue}}
+
+
+def quaternion_norm_deviation(q: np.ndarray) -> float:
+    """max |‖q‖ − 1| over quaternions (N, 4); 0 for none."""
+    q = np.asarray(q, dtype=float)
+    return float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0), initial=0.0))
+
+
+# --------------------------------------------------------------------------- NIS
+
+
+def nis(y: np.ndarray, S: np.ndarray) -> float:
+    """Normalised innovation squared yᵀ S⁻¹ y of innovation y (m,) with covariance S (m, m)."""
+    y = np.atleast_1d(np.asarray(y, dtype=float))
+    return float(y @ np.linalg.solve(np.atleast_2d(S), y))
+
+
+@dataclass
+class NisTally:
+    """NIS of one aiding type of ``dof`` dimensions: ``count`` updates, the ``total`` of
+    their NIS (before any gating; None: only the count is kept) and how many lay
+    ``beyond_gate`` (rejected or de-weighted)."""
+
+    dof: int
+    count: int = 0
+    total: float | None = 0.0
+    beyond_gate: int = 0
+
+    def add(self, value: float, within_gate: bool = True) -> None:
+        """Count one update's NIS."""
+        self.count += 1
+        self.total += float(value)
+        self.beyond_gate += int(not within_gate)
+
+    def to_dict(self) -> dict:
+        """The metrics.json form: ``mean`` (None without updates) beside its ``expected`` value,
+        the measurement dimension."""
+        return {"dof": self.dof, "expected": float(self.dof), "count": self.count,
+                "mean": self.total / self.count if self.count and self.total is not None else None,
+                "beyond_gate": self.beyond_gate}
+
+
+# --------------------------------------------------------------------------- NEES
+
+
+def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """NEES eᵀ C⁻¹ e of errors (N, k) with covariances (N, k, k); NaN where C is singular
+    or an input is not finite."""
+    err = np.asarray(err, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    out = np.full(len(err), np.nan)
+    ok = np.all(np.isfinite(err), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
+    ok[ok] = np.linalg.det(cov[ok]) > 0.0
+    if ok.any():
+        out[ok] = np.einsum("ni,ni->n", err[ok], np.linalg.solve(cov[ok], err[ok][..., None])[..., 0])
+    return out
+
+
+def interpolate_covariance(t_src: np.ndarray, cov: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Covariances (N, k, k) given at times ``t_src`` (s) interpolated entry by entry to ``t``
+    (a convex combination of two PSD matrices is PSD); NaN outside the span."""
+    flat = np.asarray(cov, dtype=float).reshape(len(t_src), -1)
+    out = np.full((len(t), flat.shape[1]), np.nan)
+    inside = (t >= t_src[0]) & (t <= t_src[-1])
+    out[inside] = np.column_stack([np.interp(t[inside], t_src, col) for col in flat.T])
+    return out.reshape(len(t), *np.shape(cov)[1:])
+
+
+@dataclass
+class NeesTrack:
+    """Horizontal NEES (2 dof) of one system at the truth epochs: ``t`` (M,) s, ``nees`` (M,),
+    and ``alignment``: ``none`` (the navigation frame) or the evaluation alignment whose
+    frame was fitted to the truth (then the NEES is of the aligned estimate). ``runs`` > 1:
+    ``nees`` is the mean over that many independent runs at each epoch (a Monte-Carlo NEES)."""
+
+    t: np.ndarray
+    nees: np.ndarray
+    alignment: str = "none"
+    dof: int = 2
+    runs: int = 1
+
+    def band(self) -> tuple[float, float]:
+        """The two-sided 95 % band of one epoch's NEES (of the mean of ``runs`` runs)."""
+        return chi2_band(self.dof, runs=self.runs)
+
+    def summary(self, bins: int = PROFILE_BINS) -> dict:
+        """metrics.json ``health.nees``: mean and median over the finite epochs, the fraction
+        inside the 95 % band, and the mean in ``bins`` equal time windows (``profile``)."""
+        ok = np.isfinite(self.nees)
+        t, v = self.t[ok], self.nees[ok]
+        lo, hi = self.band()
+        out: dict = {"dof": self.dof, "expected": float(self.dof), "epochs": int(v.size),
+                     "mean": float(v.mean()) if v.size else None,
+                     "median": float(np.median(v)) if v.size else None,
+                     "in_band_fraction": float(np.mean((v >= lo) & (v <= hi))) if v.size else None,
+                     "band": [lo, hi], "alignment": self.alignment, "frame_fitted": self.alignment != "none"}
+        if v.size:
+            edges = np.linspace(t[0], t[-1], bins + 1)
+            k = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, bins - 1)
+            count = np.bincount(k, minlength=bins)
+            mean = np.bincount(k, weights=v, minlength=bins) / np.maximum(count, 1)
+            out["profile"] = {"t_s": [float(a) for a in 0.5 * (edges[1:] + edges[:-1])],
+                              "mean": [float(m) if c else None for m, c in zip(mean, count)]}
+        return out
+
+
+def horizontal_nees(est: Trajectory, score: SystemScore, transform: PlanarTransform, alignment: str) -> NeesTrack:
+    """Horizontal NEES of a scored trajectory at its truth epochs: the error truth − estimate
+    after the evaluation ``transform`` (``score``), the east–north covariance
+    (:meth:`Trajectory.horizontal_covariance`) interpolated to those epochs and turned by the
+    transform's rotation R, C' = R C Rᵀ."""
+    cov = interpolate_covariance(np.asarray(est.t, dtype=float), est.horizontal_covariance(), score.t)
+    R = transform.matrix
+    cov = R @ cov @ R.T
+    err = score.pos_truth[:, :2] - score.pos_est_aligned[:, :2]
+    return NeesTrack(np.asarray(score.t, dtype=float), nees(err, cov), alignment)
