@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal
 
 import typer
 
@@ -17,12 +17,12 @@ from bodyfusion.base.errors import ConfigError, FusionError
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Fuse body-worn pedestrian navigation systems under body distance constraints.")
 
-SetOption = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: KEY=VALUE (dotted path).")]
+SetOption = Annotated[list[str] | None, typer.Option("--set", help="Override a config field: KEY=VALUE (dotted path).")]
 
 
 @app.command()
 def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
-        out: Annotated[Optional[Path], typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
+        out: Annotated[Path | None, typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
         set_: SetOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
     """Run a layout and write metrics.json, trajectories.csv and plots."""
@@ -102,8 +102,8 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
           out: Annotated[Path, typer.Option("--out", help="Output folder (a study there is resumed).")],
           executor: Annotated[Literal["local", "dask"], typer.Option(
               "--executor", help="A local process pool or a Dask cluster.")] = "local",
-          workers: Annotated[Optional[int], typer.Option("--workers", help="Processes (default: all cores).")] = None,
-          scheduler: Annotated[Optional[str], typer.Option(
+          workers: Annotated[int | None, typer.Option("--workers", help="Processes (default: all cores).")] = None,
+          scheduler: Annotated[str | None, typer.Option(
               "--scheduler", help="Dask scheduler address, tcp://host:port (default: a LocalCluster).")] = None) -> None:
     """Run a study: layouts × overrides × GNSS outages × seeds; results.parquet, summary.csv, plots."""
     from bodyfusion.study import run_study
@@ -139,12 +139,27 @@ def plugins() -> None:
         typer.echo(f"{', '.join(info.systems):<20} {info.module:<32} {info.package} {info.version}")
 
 
+class _StderrHandler(logging.StreamHandler):
+    """A handler that writes to whatever ``sys.stderr`` is when it emits (so the CLI can be run
+    in-process, with stderr redirected, many times)."""
+
+    @property
+    def stream(self):  # type: ignore[override]
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
+
+
 def _console_warnings() -> None:
-    """Warnings of the ``fusion`` logger (input checks, initialisation) as one line each on stderr."""
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("warning: %(message)s"))
+    """Warnings of the ``fusion`` logger (input checks, initialisation) as one line each on
+    stderr; installed once however often ``main`` runs."""
     log = logging.getLogger("fusion")
-    log.addHandler(handler)
+    if not any(isinstance(h, _StderrHandler) for h in log.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("warning: %(message)s"))
+        log.addHandler(handler)
     log.setLevel(logging.WARNING)
     log.propagate = False
 

@@ -10,8 +10,10 @@ import yaml
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.cli import counted_policies
 from bodyfusion.core.layout import MAX_YAML_NODES, load_layout, read_yaml
+from bodyfusion.core.run import run_layout
 from bodyfusion.io.tables import apply_timestamp_policy, timestamp_spikes
 from bodyfusion.io.truth import read_truth_csv
+from tests.fuzz.recording import write_recording
 from tests.paths import CONFIGS
 
 VICON = CONFIGS / "dual_foot_vicon.yaml"
@@ -108,3 +110,38 @@ def test_the_console_summary_names_every_counted_policy():
     assert "foot: zupt_gated 2, input_checks.warnings 1" in lines
     assert "constraints: not_converged 4" in lines
     assert any("1 warning(s)" in line for line in lines)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """Both feet, a phone with GNSS and foot-to-foot UWB ranges over a 12 m walk."""
+    return write_recording(tmp_path_factory.mktemp("recording"))["csv"]
+
+
+def input_warnings(layout, overrides=()) -> list[str]:
+    return run_layout(load_layout(layout, list(overrides))).input_report.warnings
+
+
+@pytest.mark.slow
+def test_gnss_on_another_clock_is_warned_unused(recording, tmp_path):
+    gnss = np.loadtxt(recording.parent / "hand_phone_gnss.csv", delimiter=",", skiprows=1)
+    gnss[:, 0] += 86_400.0
+    shifted = tmp_path / "gnss.csv"
+    np.savetxt(shifted, gnss, delimiter=",", header="t,lat_deg,lon_deg,height_m,accuracy_m,speed_mps,course_deg",
+               comments="")
+    warned = input_warnings(recording, [f"systems.hand_phone.gnss.path={shifted}", "fuser.method=none"])
+    assert any("none of the 13 GNSS fixes" in w and "GNSS unused" in w for w in warned), warned
+
+
+@pytest.mark.slow
+def test_a_range_file_with_no_usable_range_is_warned(recording, tmp_path):
+    ranges = tmp_path / "ranges.csv"
+    ranges.write_text("t,id,range_m,nlos\n" + "".join(f"{0.1 * k:.1f},right_foot,-1,0\n" for k in range(50)))
+    warned = input_warnings(recording, [f"systems.feet_tags.ranges.path={ranges}"])
+    assert any("feet_tags: no usable range" in w and "50 negative" in w for w in warned), warned
+
+
+@pytest.mark.slow
+def test_constraints_left_unenforced_are_warned_at_run(recording, caplog):
+    run_layout(load_layout(recording, ["fuser.method=none"]))
+    assert any("the 2 constraint(s) of the layout are not enforced" in r.message for r in caplog.records)

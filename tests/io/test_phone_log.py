@@ -68,3 +68,17 @@ def test_ipin_trial01_log():
     assert np.median(np.diff(log.acc.t)) == pytest.approx(0.02, abs=1e-6)
     assert len(log.reference.t) == 14
     assert len(log.gnss) == 207 and np.nanmedian(log.gnss.accuracy_m) == pytest.approx(4.0)
+
+
+def test_a_log_in_reverse_time_is_refused_not_crashed(tmp_path):
+    path = synthetic_log(tmp_path)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:2] + lines[2:][::-1]) + "\n")
+    with pytest.raises(InputError, match="only 1 of the 50 ACCE lines are in increasing sensor time"):
+        read_getsensordata(path)
+
+
+def test_readings_beyond_any_sensor_are_dropped_and_warned(tmp_path, caplog):
+    log = read_getsensordata(synthetic_log(tmp_path, extra=["ACCE;1.0;5001.0;1e300;0;9.8;3"]))
+    assert len(log.acc.t) == 50
+    assert any("dropped 1 ACCE samples beyond any sensor's range" in w for w in log.report.warnings)

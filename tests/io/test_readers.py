@@ -217,6 +217,30 @@ def test_empty_file(tmp_path):
     _err(p, None, "empty file")
 
 
+def test_a_cut_off_last_row_says_so(tmp_path):
+    rows = _rows(12)
+    rows[-1] = "0.11,0.1"
+    p = _write(tmp_path, [HEADER] + rows)
+    _err(p, 13, "fields", "was the file cut off")
+
+
+@pytest.mark.parametrize("cell, what", [("1e308", "accelerometer"), ("-2e4", "accelerometer")])
+def test_a_reading_beyond_any_sensor_is_refused_with_its_line(tmp_path, cell, what):
+    rows = _rows(12)
+    rows[6] = f"0.06,0.1,{cell},9.8,0.01,0.02,0.03,0"
+    p = _write(tmp_path, [HEADER] + rows)
+    _err(p, 8, what, "beyond any sensor's range")
+    rows[6] = "0.06,0.1,0.2,9.8,0.01,3e4,0.03,0"
+    _err(_write(tmp_path, [HEADER] + rows), 8, "gyroscope")
+
+
+def test_a_gap_longer_than_max_gap_s_is_refused_with_its_line(tmp_path):
+    rows = _rows(10) + _rows(10, t0=700.0)
+    p = _write(tmp_path, [HEADER] + rows)
+    _err(p, 12, "a gap of 699.91 s", "max_gap_s (600 s)")
+    assert len(_read(p, max_gap_s=1000.0)) == 20
+
+
 def test_header_only(tmp_path):
     p = _write(tmp_path, [HEADER])
     _err(p, 1, "no data rows")

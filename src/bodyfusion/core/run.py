@@ -6,19 +6,19 @@ import time
 from pathlib import Path
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.types import LOG, TruthTrack
+from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.fuser import Fuser
-from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.heading import align_headings
+from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.output import write_outputs
-from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.smoothing import constrain_trajectories, smooth_systems
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
-from bodyfusion.base.types import TruthTrack
+from bodyfusion.core.truth import read_truth
 from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
-from bodyfusion.core.truth import read_truth
 from bodyfusion.nav.earth import normal_gravity
 
 __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "load_truth", "run", "run_layout"]
@@ -82,6 +82,9 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     timings["load_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    if loaded.layout.constraints and loaded.layout.fuser.method == "none":
+        LOG.warning("%s: fuser.method is none: the %d constraint(s) of the layout are not enforced",
+                    loaded.path.name, len(loaded.layout.constraints))
     rotations = align_headings(systems, loaded.layout.heading_alignment)
     monitors = {name: CovarianceMonitor(s) for name, s in systems.items()}
     report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()

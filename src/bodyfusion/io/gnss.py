@@ -54,7 +54,7 @@ class GnssFixes:
         same = (np.diff(self.lat_deg) == 0) & (np.diff(self.lon_deg) == 0) & (np.diff(self.height_m) == 0)
         return np.concatenate([[False], same])
 
-    def select(self, keep: np.ndarray) -> "GnssFixes":
+    def select(self, keep: np.ndarray) -> GnssFixes:
         return GnssFixes(self.t[keep], self.lat_deg[keep], self.lon_deg[keep], self.height_m[keep],
                          self.accuracy_m[keep], self.speed_mps[keep], self.course_deg[keep], self.report)
 
@@ -99,7 +99,7 @@ def read_gnss_csv(path: str | Path, *, time_column: str, lat_column: str, lon_co
     arrays, _ = read_table(path, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,
                            allow_missing=optional)
     n = len(arrays[time_column])
-    col = lambda name: arrays[name] if name else np.full(n, np.nan)  # noqa: E731
+    col = lambda name: arrays[name] if name else np.full(n, np.nan)
     height = arrays[height_column] if height_column else np.zeros(n)
     rows = np.column_stack([arrays[time_column], arrays[lat_column], arrays[lon_column], height,
                             col(accuracy_column), col(speed_column), col(course_column)])
@@ -138,24 +138,27 @@ def read_nmea(path: str | Path, *, user_range_error_m: float = 5.0) -> GnssFixes
             continue
         kind = msg.sentence_type
         try:
+            stamp = msg.timestamp if kind in ("RMC", "GGA") else None
+            if stamp is not None and not isinstance(stamp, dt.time):  # a time field not hhmmss.ss
+                raise ValueError(stamp)
             if kind == "RMC":
-                if msg.status != "A" or msg.timestamp is None:
+                if msg.status != "A" or stamp is None:
                     counts["no_fix"] += 1
                     continue
-                t = clock(msg.timestamp)
+                t = clock(stamp)
                 rmc[t] = (float(msg.spd_over_grnd or np.nan) * KNOT,
                           float(msg.true_course) if msg.true_course not in (None, "") else np.nan)
             elif kind == "GGA":
-                if not msg.gps_qual or int(msg.gps_qual) == 0 or msg.lat in ("", None) or msg.timestamp is None:
+                if not msg.gps_qual or int(msg.gps_qual) == 0 or msg.lat in ("", None) or stamp is None:
                     counts["no_fix"] += 1
                     continue
-                t = clock(msg.timestamp)
+                t = clock(stamp)
                 hdop = float(msg.horizontal_dil) if msg.horizontal_dil else np.nan
                 alt = float(msg.altitude or 0.0) + float(msg.geo_sep or 0.0)
                 gga.append([t, float(msg.latitude), float(msg.longitude), alt, hdop * user_range_error_m])
             else:
                 counts["other_sentence"] += 1
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, AttributeError):
             counts["unparsable"] += 1
     skipped = counts["bad_or_missing_checksum"] + counts["unparsable"] + counts["no_fix"]
     report.dropped_samples += skipped

@@ -16,13 +16,25 @@ from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import DataPath, StrictModel
 from bodyfusion.base.types import ImuStream
 from bodyfusion.io.imu_checks import check_imu
-from bodyfusion.io.tables import (TIMESTAMP_POLICIES, apply_timestamp_policy, check_columns, check_time_source,
-                                  read_table, sample_times)
+from bodyfusion.io.tables import (
+    TIMESTAMP_POLICIES,
+    apply_timestamp_policy,
+    check_columns,
+    check_time_source,
+    read_table,
+    sample_times,
+)
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.frames import AxisMap, apply_axis_map
 
 ACC_UNITS: dict[str, float] = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+ACC_LIMIT_MPS2 = 1.0e4
+"""No accelerometer reads more than this (m/s², ~1000 g, per axis): a larger value is corrupt."""
+GYRO_LIMIT_RADPS = 1.0e4
+"""No gyroscope reads more than this (rad/s per axis; deg/s misread as rad/s stay below it)."""
+MAX_GAP_S = 600.0
+"""Default longest gap in a recording's timestamps (s) a navigation system is asked to bridge."""
 
 
 class ImuCsvConfig(StrictModel):
@@ -59,9 +71,12 @@ class ImuCsvConfig(StrictModel):
     max_step_samples: float = Field(default=5.0, gt=1)
     """A time step longer than this many nominal sample periods is a gap (reported, and
     handled by the navigation system's gap policy)."""
+    max_gap_s: float = Field(default=MAX_GAP_S, gt=0)
+    """Longest gap (s) in the timestamps a navigation system is asked to bridge; a longer one
+    refuses the file (split the recording there, or raise this)."""
 
     @model_validator(mode="after")
-    def _time_source(self) -> "ImuCsvConfig":
+    def _time_source(self) -> ImuCsvConfig:
         if self.time_column is None and self.rate_hz is None:
             raise ValueError("give time_column or rate_hz")
         return self
@@ -85,6 +100,7 @@ def read_imu_csv(
     axes: Sequence[str] = ("x", "y", "z"),
     declared_rate_hz: float | None = None,
     max_step_samples: float = 5.0,
+    max_gap_s: float = MAX_GAP_S,
 ) -> ImuStream:
     """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units.
 
@@ -98,7 +114,8 @@ def read_imu_csv(
     in ``stream.report``.  The stream is then checked
     (:func:`bodyfusion.io.imu_checks.check_imu`, against ``declared_rate_hz`` and with gaps
     longer than ``max_step_samples`` periods): ``stream.checks``, and one warning
-    each in ``stream.report``.
+    each in ``stream.report``. Refused with the line: a reading beyond :data:`ACC_LIMIT_MPS2`
+    or :data:`GYRO_LIMIT_RADPS` (corrupt, not a sensor's), a gap longer than ``max_gap_s``.
     """
     path = Path(path)
     if acc_unit not in ACC_UNITS:
@@ -146,6 +163,19 @@ def read_imu_csv(
 
     acc = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in acc_cols]) * ACC_UNITS[acc_unit])
     gyro = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in gyro_cols]) * GYRO_UNITS[gyro_unit])
+    for what, x, limit, unit in (("accelerometer", acc, ACC_LIMIT_MPS2, "m/s^2"),
+                                 ("gyroscope", gyro, GYRO_LIMIT_RADPS, "rad/s")):
+        bad = np.flatnonzero(np.any(np.abs(x[kept]) > limit, axis=1))
+        if bad.size:
+            k = int(kept[bad[0]])
+            raise InputError(path, f"{what} reading {np.max(np.abs(x[k])):.3g} {unit} is beyond any sensor's range "
+                             f"({limit:g} {unit}): a corrupt value ({bad.size} such samples)", int(line_no[k]))
+    gap = np.diff(t[kept])
+    if gap.size and gap.max() > max_gap_s:
+        j = int(np.argmax(gap))
+        raise InputError(path, f"a gap of {gap[j]:.6g} s in the timestamps (t = {t[kept[j]]:.6g} → "
+                         f"{t[kept[j + 1]]:.6g} s), longer than max_gap_s ({max_gap_s:g} s): split the recording "
+                         "there, or raise max_gap_s", int(line_no[kept[j + 1]]))
     stream = ImuStream(
         t=np.ascontiguousarray(t[kept]),
         acc_b=np.ascontiguousarray(acc[kept]),
@@ -173,4 +203,4 @@ def read_imu(section: ImuCsvConfig) -> ImuStream:
         time_column=section.time_column, time_scale=section.time_scale, rate_hz=None if timed else section.rate_hz,
         skip_rows=section.skip_rows, delimiter=section.delimiter, timestamp_policy=section.timestamp_policy,
         axes=section.axes, declared_rate_hz=section.rate_hz if timed else None,
-        max_step_samples=section.max_step_samples)
+        max_step_samples=section.max_step_samples, max_gap_s=section.max_gap_s)

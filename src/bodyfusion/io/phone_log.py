@@ -22,12 +22,17 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.io.gnss import GnssFixes, clean_fixes
-from bodyfusion.io.tables import apply_timestamp_policy
 from bodyfusion.base.types import InputReport
+from bodyfusion.io.gnss import GnssFixes, clean_fixes
+from bodyfusion.io.imu import ACC_LIMIT_MPS2, GYRO_LIMIT_RADPS, MAX_GAP_S
+from bodyfusion.io.tables import apply_timestamp_policy
 
 USED_TYPES = {"ACCE": 5, "GYRO": 5, "MAGN": 5, "GNSS": 10, "POSI": 6}
 """Line type → number of numeric fields after the type that are used."""
+MIN_TRIAD_SAMPLES = 10
+"""Fewest ACCE and GYRO samples, in increasing time, a log must hold (fewer MAGN: no magnetometer)."""
+TRIAD_LIMIT = {"ACCE": ACC_LIMIT_MPS2, "GYRO": GYRO_LIMIT_RADPS, "MAGN": 1.0e4}
+"""Largest plausible reading per axis (m/s², rad/s, µT); a larger one is corrupt and dropped."""
 
 
 @dataclass
@@ -66,6 +71,20 @@ def _triad(rows: list[list[float]], path: Path, name: str, report: InputReport) 
     app, sensor = a[:, 0], a[:, 1]
     t = sensor + np.median(app - sensor)
     keep, rep = apply_timestamp_policy(t, "drop", path)
+    plausible = np.all(np.abs(a[keep, 2:5]) <= TRIAD_LIMIT[name], axis=1)
+    if not plausible.all():
+        report.dropped_samples += int((~plausible).sum())
+        report.warn(f"{path.name}: dropped {(~plausible).sum()} {name} samples beyond any sensor's range "
+                    f"({TRIAD_LIMIT[name]:g} per axis)")
+        keep = keep[plausible]
+    if keep.size < MIN_TRIAD_SAMPLES:
+        raise InputError(path, f"only {keep.size} of the {len(t)} {name} lines are in increasing sensor time; "
+                         f"at least {MIN_TRIAD_SAMPLES} are needed")
+    gap = np.diff(t[keep])
+    if gap.size and gap.max() > MAX_GAP_S:
+        j = int(np.argmax(gap))
+        raise InputError(path, f"a gap of {gap[j]:.6g} s between {name} samples (t = {t[keep[j]]:.6g} → "
+                         f"{t[keep[j + 1]]:.6g} s), longer than {MAX_GAP_S:g} s: split the log there")
     if rep.dropped_samples:
         report.dropped_samples += rep.dropped_samples
         report.notes.append(f"{name}: dropped {rep.dropped_samples} samples with non-increasing sensor time")
@@ -110,11 +129,11 @@ def read_getsensordata(path: str | Path) -> PhoneLog:
     if ignored:
         report.notes.append("line types not used: " + ", ".join(f"{k} ×{v}" for k, v in sorted(ignored.items())))
     for kind in ("ACCE", "GYRO"):
-        if len(rows[kind]) < 10:
-            raise InputError(path, f"fewer than 10 usable {kind} lines")
+        if len(rows[kind]) < MIN_TRIAD_SAMPLES:
+            raise InputError(path, f"fewer than {MIN_TRIAD_SAMPLES} usable {kind} lines")
     acc = _triad(rows["ACCE"], path, "ACCE", report)
     gyro = _triad(rows["GYRO"], path, "GYRO", report)
-    magn = _triad(rows["MAGN"], path, "MAGN", report) if len(rows["MAGN"]) >= 10 else None
+    magn = _triad(rows["MAGN"], path, "MAGN", report) if len(rows["MAGN"]) >= MIN_TRIAD_SAMPLES else None
     gnss = None
     if rows["GNSS"]:
         g = np.array(rows["GNSS"])

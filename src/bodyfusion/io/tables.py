@@ -59,7 +59,7 @@ def read_lines(path: Path) -> list[str]:
         line = raw[: err.start].count(b"\n") + 1
         raise InputError(path, "not a UTF-8 text file", line) from None
     lines = text.split("\n")
-    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    return [ln.removesuffix("\r") for ln in lines]
 
 
 def _slow_parse(
@@ -81,7 +81,8 @@ def _slow_parse(
             raise InputError(
                 path,
                 f"row has {len(cells)} fields, the header has {n_header} "
-                f"(column {names[int(np.argmax(np.asarray(idx) >= len(cells)))]!r} is missing)",
+                f"(column {names[int(np.argmax(np.asarray(idx) >= len(cells)))]!r} is missing)"
+                + ("; the last row: was the file cut off? remove that row" if r == len(rows) - 1 else ""),
                 int(line_no[r]),
             )
         for c, (j, name) in enumerate(zip(idx, names)):

@@ -12,8 +12,16 @@ import numpy as np
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import LOG, TruthTrack
-from bodyfusion.io.tables import (apply_timestamp_policy, check_columns, check_time_source, clean_cell, read_lines,
-                                  read_table, sample_times, split_line)
+from bodyfusion.io.tables import (
+    apply_timestamp_policy,
+    check_columns,
+    check_time_source,
+    clean_cell,
+    read_lines,
+    read_table,
+    sample_times,
+    split_line,
+)
 
 
 def read_truth_csv(
@@ -96,12 +104,14 @@ def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, 
         if len(cells) < len(header):
             raise InputError(path, f"expected {len(header)} fields, found {len(cells)}", line=k)
         name = clean_cell(cells[idx[0]])
-        try:
-            values = [float(cells[i]) for i in idx[1:]]
-        except ValueError:
-            raise InputError(path, "non-numeric cell in t/east_m/north_m/up_m", line=k) from None
-        if not all(map(math.isfinite, values)):
-            raise InputError(path, "NaN or inf cell", line=k)
+        values = []
+        for column, i in zip(LONG_TRUTH_COLUMNS[1:], idx[1:]):
+            try:
+                values.append(float(cells[i]))
+            except ValueError:
+                raise InputError(path, f"non-numeric value {cells[i]!r} in column {column!r}", line=k) from None
+            if not math.isfinite(values[-1]):
+                raise InputError(path, f"non-finite value {cells[i]!r} in column {column!r}", line=k)
         rows.setdefault(name, []).append((k, values))
     out: dict[str, TruthTrack] = {}
     for name, items in rows.items():

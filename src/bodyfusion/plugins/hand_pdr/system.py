@@ -68,20 +68,29 @@ from collections.abc import Callable
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
-from bodyfusion.core.heading import wrap_angle
-from bodyfusion.nav.measurements import chi2_gate
-from bodyfusion.io.phone_log import read_getsensordata
-from bodyfusion.io.imu import read_imu
-from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.core.heading import wrap_angle
+from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.evaluation.consistency import NisTally, nis
+from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
+from bodyfusion.io.imu import read_imu
+from bodyfusion.io.phone_log import read_getsensordata
+from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
 from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
-from bodyfusion.plugins.hand_pdr.magnetometer import MagneticHeading, read_magnetometer_csv
-from bodyfusion.plugins.hand_pdr.pdr import azimuth_increments, detect_steps, held_steadily, step_lengths, up_in_body
+from bodyfusion.plugins.hand_pdr.magnetometer import (
+    MagneticHeading,
+    read_magnetometer_csv,
+)
+from bodyfusion.plugins.hand_pdr.pdr import (
+    azimuth_increments,
+    detect_steps,
+    held_steadily,
+    step_lengths,
+    up_in_body,
+)
 
 E, N, U, PSI, S, B, BE, BN, C, O = range(10)
 NOMINAL = [E, N, U, PSI, B, BE, BN, C]
@@ -145,6 +154,10 @@ class HandPdr(SensorSystem):
         if fixes is not None:
             report = report.merge(fixes.report)
         self._report = report
+        if fixes is not None and len(fixes) and not np.any((fixes.t >= self.t[0]) & (fixes.t <= self.t[-1])):
+            report.warn(f"{name}: none of the {len(fixes)} GNSS fixes ({fixes.t[0]:.6g}–{fixes.t[-1]:.6g} s) falls "
+                        f"within the IMU's time span ({self.t[0]:.6g}–{self.t[-1]:.6g} s): GNSS unused; check the "
+                        "two clocks")
         self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
         self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
         up_b = up_in_body(self.t, acc)

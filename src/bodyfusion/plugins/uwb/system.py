@@ -16,15 +16,17 @@ states (:mod:`bodyfusion.core.fuser`).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
+from bodyfusion.base.types import InputReport
 from bodyfusion.core.system import (
     AidingSource,
     JacobianCase,
     LayoutContext,
     ScalarMeasurement,
 )
-from bodyfusion.base.types import InputReport
 from bodyfusion.evaluation.consistency import NisTally
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
@@ -61,6 +63,9 @@ class UwbTag(AidingSource):
         rc = config.ranges
         self.log = read_ranges(rc.path, self.ids, time_column=rc.time_column, id_column=rc.id_column,
                                range_column=rc.range_column, nlos_column=rc.nlos_column, delimiter=rc.delimiter)
+        if len(self.log) == 0:
+            self.log.report.warn(f"{name}: no usable range in {Path(rc.path).name} "
+                                 f"(dropped: {', '.join(f'{v} {k}' for k, v in self.log.dropped.items() if v) or 'none'})")
         self._anchor_n = np.array(list(config.anchors.values()), dtype=float).reshape(-1, 3)
         self._peer_lever_n = np.array(list(config.peers.values()), dtype=float).reshape(-1, 3)
         self._lever_n = np.asarray(config.lever_arm_m, dtype=float)

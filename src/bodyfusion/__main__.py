@@ -1,0 +1,5 @@
+"""``python -m bodyfusion``: the ``fusion`` command line."""
+
+from bodyfusion.cli import main
+
+main()

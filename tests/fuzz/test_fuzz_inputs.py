@@ -1,0 +1,179 @@
+"""Fuzzing: corrupted IMU, truth, GNSS (CSV, NMEA), phone-log, UWB-range files and layouts, each
+through ``fusion validate`` and ``fusion run`` in-process. A run either refuses the input with
+exit code 2 and one line, or finishes with exit code 0, a trajectories.csv without NaN and a
+metrics.json that is strict JSON; never a traceback, never a hang (60 s per command).
+
+Examples per target: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35; 7 targets → 245 inputs).
+Hypothesis is derandomised: the same inputs every run, so a failure reproduces."""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import csv
+import io
+import json
+import logging
+import math
+import os
+import shutil
+import signal
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, Phase, given, settings
+
+from bodyfusion.cli import main
+from tests.fuzz.corruptions import layout_edits, nmea_edits, text_edits
+from tests.fuzz.recording import write_recording
+
+EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "35"))
+COMMAND_TIMEOUT_S = 60
+
+fuzz = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+                phases=tuple(p for p in Phase if p is not Phase.shrink or not os.environ.get("FUZZ_NO_SHRINK")))
+
+
+class Hang(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def time_limit(seconds: int) -> Iterator[None]:
+    def expire(*_):
+        raise Hang(f"command ran over {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def fusion(*args: str) -> tuple[int, str]:
+    """``fusion ARGS`` in this process → (exit code, stderr). Exceptions other than the CLI's
+    exit propagate: they are the tracebacks the suite looks for."""
+    err = io.StringIO()
+    argv = sys.argv
+    sys.argv = ["fusion", *args]
+    log = logging.getLogger("fusion")
+    handlers, propagate, level = list(log.handlers), log.propagate, log.level
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err), \
+                time_limit(COMMAND_TIMEOUT_S):
+            main()
+        code = 0
+    except SystemExit as exit_:
+        code = exit_.code if isinstance(exit_.code, int) else 1
+    finally:
+        sys.argv = argv
+        log.handlers[:], log.propagate, log.level = handlers, propagate, level  # as the CLI found it
+    return code, err.getvalue()
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"metrics.json holds {name}, not JSON")
+
+
+def check_outcome(layout: Path, out: Path) -> None:
+    """validate then run: exit 0 or 2; a refusal says one ``error:`` line; a finished run wrote
+    finite trajectories and strict JSON."""
+    code, err = fusion("validate", str(layout))
+    assert code in (0, 2), f"validate exit {code}: {err}"
+    code, err = fusion("run", str(layout), "--out", str(out))
+    assert code in (0, 2), f"run exit {code}: {err}"
+    if code == 2:
+        errors = [line for line in err.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1 and "Traceback" not in err, err
+        return
+    json.loads((out / "metrics.json").read_text(), parse_constant=_no_constant)
+    with (out / "trajectories.csv").open() as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        for row in reader:
+            values = [float(v) for v in row[1:]]
+            assert all(math.isfinite(v) for v in values), f"non-finite value in trajectories.csv: {dict(zip(header, row))}"
+
+
+@pytest.fixture(scope="module")
+def recording() -> Iterator[tuple[Path, dict[str, Path]]]:
+    """The clean recording, written once, and its layouts; each clean layout runs (also
+    compiles the kernels before the timed examples)."""
+    folder = Path(tempfile.mkdtemp(prefix="fuzz_recording_"))
+    layouts = write_recording(folder)
+    for name, layout in layouts.items():
+        code, err = fusion("run", str(layout), "--out", str(folder / f"clean_{name}"))
+        assert code == 0, err
+    yield folder, layouts
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def write_text(path: Path, text: str) -> None:
+    try:
+        data = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:
+        data = text.encode("utf-8", "surrogatepass")
+    path.write_bytes(data)
+
+
+def corrupt_and_run(recording: tuple[Path, dict[str, Path]], layout: str, target: str,
+                    edits: list[Callable[[str], str]]) -> None:
+    folder, layouts = recording
+    with tempfile.TemporaryDirectory(prefix="fuzz_case_") as case:
+        case_dir = Path(case)
+        for path in folder.iterdir():
+            if path.is_file():
+                os.link(path, case_dir / path.name)  # hard links: only the corrupted file is new
+        text = (folder / target).read_text()
+        for edit in edits:
+            text = edit(text)
+        (case_dir / target).unlink()
+        write_text(case_dir / target, text)
+        check_outcome(case_dir / layouts[layout].name, case_dir / "out")
+
+
+TARGETS = [("csv", "left_foot_imu.csv"), ("csv", "truth.csv"), ("csv", "hand_phone_gnss.csv"),
+           ("csv", "feet_tags_ranges.csv"), ("phone_log", "hand_phone_log.txt")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("layout", "target"), TARGETS, ids=[t for _, t in TARGETS])
+@fuzz
+@given(edits=text_edits)
+def test_corrupted_file_is_refused_or_run_finite(recording, layout, target, edits):
+    corrupt_and_run(recording, layout, target, edits)
+
+
+@pytest.mark.slow
+@fuzz
+@given(edits=nmea_edits)
+def test_corrupted_nmea_is_refused_or_run_finite(recording, edits):
+    corrupt_and_run(recording, "nmea", "hand_phone_gnss.nmea", edits)
+
+
+@pytest.mark.slow
+@fuzz
+@given(edits=layout_edits)
+def test_corrupted_layout_is_refused_or_run_finite(recording, edits):
+    folder, layouts = recording
+    doc_edits, text_edits_ = edits
+    doc = copy.deepcopy(yaml.safe_load(layouts["csv"].read_text()))
+    for edit in doc_edits:
+        edit(doc)
+    text = yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+    for edit in text_edits_:
+        text = edit(text)
+    with tempfile.TemporaryDirectory(prefix="fuzz_layout_", dir=folder) as case:
+        layout = Path(case) / "layout.yaml"
+        layout.write_text(text)
+        # the layout's data paths are relative to its folder: point them at the recording
+        text = text.replace("path: ", "path: ../")
+        layout.write_text(text)
+        check_outcome(layout, Path(case) / "out")
