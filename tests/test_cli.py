@@ -94,6 +94,18 @@ def test_validate_yaml_syntax_error_names_file_and_line(tmp_path):
     assert_one_line_user_error(fusion("validate", cfg), f"{cfg}:4")
 
 
+def test_validate_warns_of_files_on_another_clock(tmp_path):
+    imu = tmp_path / "imu.csv"
+    imu.write_text(VICON_LEFT.read_text())
+    truth = tmp_path / "truth.csv"
+    truth.write_text("t,x,y,z\n5000,0,0,0\n5100,1,0,0\n")
+    cfg = tmp_path / "clocks.yaml"
+    cfg.write_text(layout_text(imu) + f"truth: {{path: {truth}, time_column: t, systems: {{foot: [x, y, z]}}}}\n")
+    proc = fusion("validate", cfg)
+    assert proc.returncode == 0 and "ok" in proc.stdout
+    assert "warning: systems.foot.data (0–" in proc.stderr and "and truth (5000–5100 s) do not overlap" in proc.stderr
+
+
 def test_validate_missing_config_file(tmp_path):
     assert_one_line_user_error(fusion("validate", tmp_path / "absent.yaml"), "absent.yaml")
 

@@ -117,8 +117,9 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
 @app.command()
 def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
     """Check a layout without reading its data: both stages (layout and each plugin's section),
-    finite numbers, a feasible constraint set, the files it names exist."""
-    from bodyfusion.core.layout import data_files, load_layout
+    finite numbers, a feasible constraint set, the files it names exist, and their time bases
+    overlap (read from each file's first and last lines)."""
+    from bodyfusion.core.layout import data_files, disjoint_time_bases, load_layout
 
     loaded = load_layout(config, set_ or [])
     for key, path in data_files(loaded):
@@ -127,6 +128,8 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         typer.echo(f"warning: fuser.method is none: the {len(loaded.layout.constraints)} constraint(s) are not "
                    "enforced", err=True)
+    for line in disjoint_time_bases(loaded):
+        typer.echo(f"warning: {line}", err=True)
     typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
 
 

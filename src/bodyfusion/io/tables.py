@@ -62,6 +62,25 @@ def read_lines(path: Path) -> list[str]:
     return [ln.removesuffix("\r") for ln in lines]
 
 
+def file_time_span(path: str | Path, time_column: str, *, time_scale: float = 1.0, delimiter: str = ",",
+                   skip_rows: int = 0) -> tuple[float, float] | None:
+    """(first, last) value of ``time_column`` × ``time_scale`` (s) in a delimited file, read from
+    its header, first data line and last line only (the file's tail, not its body): a cheap look
+    at its time base. None when the file or those lines cannot be read as such."""
+    try:
+        with open(path, "rb") as f:
+            head = [line for line in f.read(1 << 16).decode("utf-8-sig", "replace").splitlines()[skip_rows:]
+                    if line.strip()]
+            f.seek(max(0, f.seek(0, 2) - (1 << 16)))
+            tail = [line for line in f.read().decode("utf-8", "replace").splitlines() if line.strip()]
+        header = [clean_cell(c) for c in split_line(head[0], delimiter)]
+        j = header.index(time_column)
+        first, last = (float(split_line(line, delimiter)[j]) * time_scale for line in (head[1], tail[-1]))
+    except (OSError, ValueError, IndexError):
+        return None
+    return (first, last) if math.isfinite(first) and math.isfinite(last) else None
+
+
 def _slow_parse(
     path: Path,
     rows: list[str],
