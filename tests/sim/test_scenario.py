@@ -417,3 +417,17 @@ def test_bad_scenarios_name_the_key(tmp_path, text, key):
     assert err.value.key == key
     assert str(scn) in str(err.value) and "\n" not in str(err.value)
     assert not (tmp_path / "x").exists()
+
+
+def test_a_walk_too_long_to_hold_is_refused_before_it_is_built(tmp_path):
+    scenario = yaml.safe_load((CONFIGS / "sim_dual_foot_square.yaml").read_text())
+    scenario["path"]["laps"] = 10_001
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(scenario))
+    with pytest.raises(ConfigError, match="laps"):
+        simulate(path, tmp_path / "out")
+    scenario["path"]["laps"] = 10_000
+    scenario["gait"]["start_still_s"] = 1e9
+    path.write_text(yaml.safe_dump(scenario))
+    with pytest.raises(ConfigError, match=r"samples are simulated"):
+        simulate(path, tmp_path / "out")

@@ -50,6 +50,9 @@ from bodyfusion.sim.foot_motion import FootMotion, Impact, Roll, ground_motion_s
 from bodyfusion.sim.gait_config import Foot, GaitConfig, PauseConfig, StairsConfig
 from bodyfusion.sim.paths import BodyPath, left_normal
 
+MAX_SAMPLES = 20_000_000
+"""Most samples a simulated walk may have (55 h at 100 Hz; every system holds them in memory)."""
+
 # GaitConfig, StanceNoiseConfig and stance_drift: re-exported for the plugins (see the module docstring)
 __all__ = ["FootTrack", "GaitPlan", "plan_gait"]
 
@@ -151,6 +154,12 @@ def _insert_pauses(k_start: np.ndarray, pauses: list[PauseConfig], rate_hz: floa
     return k
 
 
+def _check_samples(n_samples: int, rate_hz: float) -> None:
+    if n_samples > MAX_SAMPLES:
+        raise ConfigError("path", f"the walk lasts {n_samples / rate_hz / 3600:.1f} h, {n_samples:,} samples at "
+                          f"{rate_hz:g} Hz: at most {MAX_SAMPLES:,} samples are simulated")
+
+
 def plan_gait(path: BodyPath, gait: GaitConfig, rate_hz: float, key: str = "gait") -> GaitPlan:
     """Footprints and swing times of both feet for walking ``path`` (see the module docstring)."""
     cycle, swing = gait.cycle_s()
@@ -178,6 +187,7 @@ def plan_gait(path: BodyPath, gait: GaitConfig, rate_hz: float, key: str = "gait
                           f"a stance of {(n_cycle - n_swing) / rate_hz:.3g} s leaves no rest between "
                           f"{n_after / rate_hz:.3g} s after touchdown and {n_before / rate_hz:.3g} s before toe-off")
     n_steps = max(1, int(round(path.length / (0.5 * gait.stride_m))))
+    _check_samples(n0 + (n_steps // 2 + 1) * n_cycle, rate_hz)  # before the footprints are made
     step = path.length / n_steps
     heights = _footprint_heights(gait.stairs, n_steps, key)
 
@@ -201,4 +211,5 @@ def plan_gait(path: BodyPath, gait: GaitConfig, rate_hz: float, key: str = "gait
                                 gait.lift_m, math.radians(gait.pitch_amplitude_deg), roll=roll, impact=impact)
     last = int(k_event[-1]) + n_swing + n_after
     n_samples = last + int(round(gait.end_still_s * rate_hz)) + 1
+    _check_samples(n_samples, rate_hz)
     return GaitPlan(float(rate_hz), n_samples, {"left": feet["left"], "right": feet["right"]}, path, step, n0)

@@ -61,7 +61,7 @@ class FlightConfig(StrictModel):
     """``steps`` treads ``up``, ``down`` or ``level`` (a landing); no ``steps``: to the end of the walk."""
 
     direction: Literal["up", "down", "level"]
-    steps: int | None = Field(default=None, ge=1)
+    steps: int | None = Field(default=None, ge=1, le=100_000)
 
 
 class StairsConfig(StrictModel):

@@ -124,8 +124,10 @@ class BodyPath:
         idx = np.clip(np.searchsorted(self.s_start, s, side="right") - 1, 0, len(self.segments) - 1)
         xy = np.empty((s.size, 2))
         az = np.empty(s.size)
-        for k in np.unique(idx):
-            m = idx == k
+        order = np.argsort(idx, kind="stable")  # the points of each segment together, in their order
+        first = np.flatnonzero(np.diff(idx[order], prepend=-1))
+        for m in np.split(order, first[1:]):
+            k = int(idx[m[0]])
             seg = self.segments[k]
             sigma = np.clip(s[m] - self.s_start[k], 0.0, seg.length)
             xy[m], az[m] = seg.at(sigma)
@@ -215,7 +217,7 @@ class PolylinePath(StrictModel):
 class _QuadPath(_PathBase):
     """A four-sided loop walked ``laps`` times from a corner; turning right when ``clockwise``."""
 
-    laps: int = Field(default=1, ge=1)
+    laps: int = Field(default=1, ge=1, le=10_000)
     clockwise: bool = True
     start_heading_deg: float = 0.0
     turn_radius_m: float = Field(default=0.5, ge=0)
@@ -262,7 +264,7 @@ class LoopsPath(_PathBase):
 
     kind: Literal["loops"]
     radius_m: float = Field(gt=0)
-    laps: float = Field(default=1, gt=0)
+    laps: float = Field(default=1, gt=0, le=10_000)
     clockwise: bool = True
     start_heading_deg: float = 0.0
 
@@ -280,7 +282,7 @@ class OutAndBackPath(_PathBase):
 
     kind: Literal["out_and_back"]
     length_m: float = Field(gt=0)
-    repeats: int = Field(default=1, ge=1)
+    repeats: int = Field(default=1, ge=1, le=10_000)
     turn: Literal["left", "right"] = "right"
     start_heading_deg: float = 0.0
     turn_radius_m: float = Field(default=0.5, gt=0)
