@@ -86,40 +86,25 @@ LONG_TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
 
 def read_truth_long_csv(path: str | Path, *, sparse: bool = False) -> dict[str, TruthTrack]:
     """Read truth in the long format ``system,t,east_m,north_m,up_m`` (what ``fusion simulate``
-    writes), one :class:`TruthTrack` per system; each system's times must increase strictly."""
+    writes), one :class:`TruthTrack` per system; each system's times must increase strictly.
+    Numbers are read as :func:`~bodyfusion.io.tables.read_table` reads them (a bad cell is
+    refused with its line), the system names from their own column."""
     path = Path(path)
+    arrays, line_no = read_table(path, LONG_TRUTH_COLUMNS[1:])
     lines = read_lines(path)
-    if not lines:
-        raise InputError(path, "empty file")
     header = [clean_cell(c) for c in split_line(lines[0], ",")]
-    missing = [c for c in LONG_TRUTH_COLUMNS if c not in header]
-    if missing:
-        raise InputError(path, f"missing column(s) {missing}; the header has {header}", line=1)
-    idx = [header.index(c) for c in LONG_TRUTH_COLUMNS]
-    rows: dict[str, list[tuple[int, list[float]]]] = {}
-    for k, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        cells = split_line(line, ",")
-        if len(cells) < len(header):
-            raise InputError(path, f"expected {len(header)} fields, found {len(cells)}", line=k)
-        name = clean_cell(cells[idx[0]])
-        values = []
-        for column, i in zip(LONG_TRUTH_COLUMNS[1:], idx[1:]):
-            try:
-                values.append(float(cells[i]))
-            except ValueError:
-                raise InputError(path, f"non-numeric value {cells[i]!r} in column {column!r}", line=k) from None
-            if not math.isfinite(values[-1]):
-                raise InputError(path, f"non-finite value {cells[i]!r} in column {column!r}", line=k)
-        rows.setdefault(name, []).append((k, values))
+    if "system" not in header:
+        raise InputError(path, f"missing column 'system'; the header has {header}", line=1)
+    j = header.index("system")
+    column = np.loadtxt([lines[k - 1] for k in line_no], dtype=str, delimiter=",", usecols=j, ndmin=1,
+                        quotechar='"', comments=None)
+    raw, first, which = np.unique(column, return_index=True, return_inverse=True)
+    data = np.column_stack([arrays[c] for c in LONG_TRUTH_COLUMNS[1:]])
     out: dict[str, TruthTrack] = {}
-    for name, items in rows.items():
-        line_no = np.array([k for k, _ in items])
-        data = np.array([v for _, v in items])
-        kept, _ = apply_timestamp_policy(data[:, 0], "error", path, lines=line_no)
-        out[name] = TruthTrack(t=np.ascontiguousarray(data[kept, 0]), pos_n=np.ascontiguousarray(data[kept, 1:4]),
-                               sparse=sparse)
-    if not out:
-        raise InputError(path, "no data rows")
+    for u in np.argsort(first):  # in the order of their first rows
+        name = clean_cell(str(raw[u]))
+        rows = np.flatnonzero(which == u)
+        kept, _ = apply_timestamp_policy(data[rows, 0], "error", path, lines=line_no[rows])
+        out[name] = TruthTrack(t=np.ascontiguousarray(data[rows[kept], 0]),
+                                    pos_n=np.ascontiguousarray(data[rows[kept], 1:4]), sparse=sparse)
     return out
