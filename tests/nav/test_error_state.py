@@ -13,9 +13,14 @@ from scipy.spatial.transform import Rotation
 
 from bodyfusion.nav.error_state import (
     ERROR_SIZE,
+    P_GYRO_BIAS_DECAY,
+    P_GYRO_RW,
+    PARAMS_SIZE,
+    decay_biases,
     error_between,
     inject,
     inv3_sym,
+    process_noise_diag,
     propagate_covariance,
     update_selected,
 )
@@ -170,6 +175,48 @@ def test_propagate_covariance_equals_dense_F_P_Ft_plus_Q():
     np.testing.assert_allclose(got, expected, atol=1e-13, rtol=0)
 
 
+def test_propagate_covariance_with_gauss_markov_biases_equals_dense_F_P_Ft_plus_Q():
+    """Bias rows of A are −β on the diagonal (β = 1/τ), the process model carrying β_a, β_g
+    after the 15 densities²."""
+    rng = np.random.default_rng(5)
+    C = Rotation.random(random_state=8).as_matrix()
+    f_n = np.array([-0.5, 2.0, 9.0])
+    dt, beta_a, beta_g = 0.01, 1 / 100.0, 1 / 30.0
+    q = np.concatenate([np.abs(rng.normal(0, 1e-2, ERROR_SIZE)), [beta_a, beta_g]])
+    P = random_spd(rng)
+    A = dense_A(C, f_n)
+    A[9:12, 9:12] = -beta_a * np.eye(3)
+    A[12:15, 12:15] = -beta_g * np.eye(3)
+    F = np.eye(ERROR_SIZE) + A * dt
+    got = P.copy()
+    propagate_covariance(got, np.ascontiguousarray(C), f_n, dt, q, np.empty((2, 15, 15)))
+    np.testing.assert_allclose(got, F @ P @ F.T + np.diag(q[:ERROR_SIZE] * dt), atol=1e-13, rtol=0)
+
+
+def test_an_unobserved_gauss_markov_bias_settles_at_its_stationary_variance():
+    """Driving density σ √(2/τ) and decay 1/τ: the bias variance tends to σ² (first-order
+    discretisation: σ² / (1 − β dt / 2)), and the estimate decays as e^(−t/τ)."""
+    params = np.zeros(PARAMS_SIZE)
+    sigma, tau, dt = 6e-5, 100.0, 0.01
+    params[P_GYRO_RW] = sigma * np.sqrt(2.0 / tau)
+    params[P_GYRO_BIAS_DECAY] = 1.0 / tau
+    q = process_noise_diag(params)
+    P = np.zeros((ERROR_SIZE, ERROR_SIZE))
+    x = np.zeros(16)
+    x[6] = 1.0
+    x[13:16] = 1e-3
+    work = np.empty((2, ERROR_SIZE, ERROR_SIZE))
+    C = np.eye(3)
+    f_n = np.array([0.0, 0.0, G])
+    for _ in range(int(10 * tau / dt)):
+        propagate_covariance(P, C, f_n, dt, q, work)
+    decay_biases(x, q, 100.0 * dt)
+    np.testing.assert_allclose(np.diag(P)[12:15], sigma**2 / (1 - 0.5 * dt / tau), rtol=1e-3)
+    assert np.all(np.diag(P)[9:12] == 0.0)
+    np.testing.assert_allclose(x[13:16], 1e-3 * (1 - 1.0 / tau), rtol=1e-12)
+    np.testing.assert_array_equal(x[10:13], 0.0)
+
+
 def test_propagate_covariance_keeps_P_symmetric_psd_over_many_steps():
     rng = np.random.default_rng(2)
     P = random_spd(rng, scale=1e-3)
@@ -279,21 +326,32 @@ def test_update_selected_joseph_form_stays_psd_with_tiny_measurement_noise():
 def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
     rng = np.random.default_rng(12)
     x = random_nominal_state(rng)
-    x[3:6] = [0.3, -0.2, 0.1]
+    x[3:6] = [0.03, -0.02, 0.01]  # a stance sample's drift, m/s
     P = random_spd(rng, scale=1e-2)
     P[3:6, 3:6] += np.eye(3)
     sigma = 1e-3
     v = x[3:6].copy()
-    S = P[3:6, 3:6] + sigma**2 * np.eye(3)
+    H = np.zeros((3, ERROR_SIZE))  # δv and the heading column that hides a rotation about Up
+    H[:, 3:6] = np.eye(3)
+    H[:, 8] = -np.cross([0.0, 0.0, 1.0], v)
+    S = H @ P @ H.T + sigma**2 * np.eye(3)
     nis_expected = float(v @ np.linalg.solve(S, v))  # y = 0 − v̂
     P_before = P.copy()
     dx = np.empty(ERROR_SIZE)
     nis = zero_velocity_update(x, P, sigma, 0.0, dx, np.empty((0, 0)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
-    assert np.linalg.norm(x[3:6]) < 1e-5 * np.linalg.norm(v)
-    np.testing.assert_allclose(dx[3:6], -v, rtol=1e-5)
-    assert np.all(np.diag(P)[3:6] < sigma**2)
-    assert np.all(np.diag(P) <= np.diag(P_before) + 1e-15)
+    # the posterior explains the innovation: what velocity is left is the heading correction's
+    # share, H_v dx_v + H_ψ dx_ψ = −v̂
+    np.testing.assert_allclose(H @ dx, -v, rtol=1e-5)
+    np.testing.assert_allclose(x[3:6], -H[:, 8] * dx[8], atol=1e-5 * np.linalg.norm(v))
+    # Joseph update with that H, then the reset G = I + a e_ψᵀ, a = e_z × dv in the velocity rows
+    K = P_before @ H.T @ np.linalg.inv(S)
+    I_KH = np.eye(ERROR_SIZE) - K @ H
+    P_joseph = I_KH @ P_before @ I_KH.T + sigma**2 * K @ K.T
+    G = np.eye(ERROR_SIZE)
+    G[3:6, 8] = np.cross([0.0, 0.0, 1.0], dx[3:6])
+    np.testing.assert_allclose(P, G @ P_joseph @ G.T, rtol=1e-9, atol=1e-15)
+    assert np.all(np.diag(H @ P_joseph @ H.T) < sigma**2)
     assert np.linalg.norm(x[6:10]) == pytest.approx(1.0, abs=1e-15)
 
 

@@ -391,10 +391,13 @@ def test_written_filter_priors_follow_the_simulated_sensor(tmp_path):
     delta = (ini_off["heading_deg"] - ini["heading_deg"] + 180.0) % 360.0 - 180.0
     assert 0.0 < abs(delta) < 4 * 2.0
     assert off["right_foot"]["initial"] == exact["right_foot"]["initial"]  # its own stream
-    # icm20948: 1 s still window → gyro bias σ = sqrt((N/√1 s)² + σ_GM²); accelerometer
-    # 0.05 m/s² turn-on σ beside its 162 µg Gauss–Markov σ
+    # icm20948: 1 s still window → gyro bias σ² = (N/√1 s)² + the Gauss–Markov bias's move
+    # from the first sample to the window's mean, σ_GM² (1 − 2m + 2 (τ/T)(1 − m)),
+    # m = (τ/T)(1 − e^(−T/τ)), τ = 100 s; accelerometer 0.05 m/s² turn-on σ beside its
+    # 162 µg Gauss–Markov σ
     n_g, gm_g = 0.5 * math.pi / 180 / 60, 13.0 * math.pi / 180 / 3600
-    assert ini["gyro_bias_sd_radps"] == pytest.approx(math.hypot(n_g, gm_g))
+    m = 100.0 * -math.expm1(-1.0 / 100.0)
+    assert ini["gyro_bias_sd_radps"] == pytest.approx(math.hypot(n_g, gm_g * math.sqrt(1 - 2 * m + 200 * (1 - m))))
     assert exact["right_foot"]["initial"]["acc_bias_sd_mps2"] == pytest.approx(math.hypot(0.05, 162e-6 * G))
 
 

@@ -5,8 +5,10 @@ navigation frame, C_nb,true = (I + [δθ×]) C_nb), δb_a (m/s^2, 9:12), δb_g (
 Errors are true minus estimated. Continuous dynamics (Groves 2013, §14.2, ENU form):
 
     δṗ = δv,   δv̇ = −[f_n×] δθ − C_nb δb_a − C_nb w_a,   δθ̇ = −C_nb δb_g − C_nb w_g,
-    δḃ_a = w_ba,   δḃ_g = w_bg.
+    δḃ_a = −β_a δb_a + w_ba,   δḃ_g = −β_g δb_g + w_bg.
 
+The biases are random walks (β = 0) or first-order Gauss–Markov processes of correlation
+time τ = 1/β (their estimates then decay too, b̂̇ = −β b̂: :func:`decay_biases`).
 Discretised to first order, F = I + A dt, Q_d = diag(σ_a², σ_g², σ_ba², σ_bg²) dt per axis
 (noise densities: σ_a m/s^2/√Hz, σ_g rad/s/√Hz, σ_ba m/s^3/√Hz, σ_bg rad/s^2/√Hz).
 The propagation exploits the block sparsity of A (no dense 15×15 products).
@@ -24,11 +26,15 @@ ERROR_SIZE = 15
 
 # The filter parameter vector ``params`` of the compiled 15-state kernels (the foot INS
 # and its smoothers): noise densities, stance-update σs, gravity (m/s^2), Earth rate (ENU),
-# and the zero-velocity gate (chi-square threshold, 0: off; see :mod:`bodyfusion.nav.zupt`).
+# the zero-velocity gate (chi-square threshold, 0: off; see :mod:`bodyfusion.nav.zupt`) and
+# the bias decay rates β = 1/τ (1/s; 0: random walk).
 P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY = range(7)
 P_EARTH_RATE = slice(7, 10)
 P_ZUPT_GATE = 10
-PARAMS_SIZE = 11
+P_ACC_BIAS_DECAY, P_GYRO_BIAS_DECAY = 11, 12
+PARAMS_SIZE = 13
+Q_DECAY = 15
+"""Index in the :func:`process_noise_diag` vector of the decay rates β_a, β_g (after the 15 densities²)."""
 DPOS = slice(0, 3)
 DVEL = slice(3, 6)
 DATT = slice(6, 9)
@@ -38,8 +44,11 @@ DGYRO_BIAS = slice(12, 15)
 
 @numba.njit(cache=True)
 def process_noise_diag(params: np.ndarray) -> np.ndarray:
-    """Diagonal (15,) of the continuous process noise (densities², per Hz) from ``params``."""
-    q = np.zeros(15)
+    """The process model (17,) from ``params``: the diagonal of the continuous process noise
+    of the 15 error states (densities², per Hz), then the bias decay rates β_a, β_g (1/s)."""
+    q = np.zeros(Q_DECAY + 2)
+    q[Q_DECAY] = params[P_ACC_BIAS_DECAY]
+    q[Q_DECAY + 1] = params[P_GYRO_BIAS_DECAY]
     for k in range(3):
         q[3 + k] = params[P_ACC_ND] ** 2
         q[6 + k] = params[P_GYRO_ND] ** 2
@@ -70,8 +79,12 @@ def _apply_A_left(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, out: np.ndarray
 @numba.njit(cache=True)
 def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray,
                          work: np.ndarray) -> None:
-    """P ← F P Fᵀ + Q_d in place, F = I + A dt. ``q_diag`` (15,) holds densities² (per Hz),
-    ``work`` is (2, 15, 15) scratch. Symmetrises the result."""
+    """P ← F P Fᵀ + Q_d in place, F = I + A dt. ``q_diag``: densities² (per Hz) of the 15
+    states, optionally followed by the bias decay rates (:func:`process_noise_diag`); ``work``
+    is (2, 15, 15) scratch. Symmetrises the result.
+
+    The bias rows of A are −β on the diagonal, so F = D F₀ with F₀ the transition of β = 0
+    and D = diag(1, …, 1, 1 − β_a dt, 1 − β_g dt): F P Fᵀ = D (F₀ P F₀ᵀ) D."""
     AP = work[0]
     _apply_A_left(P, C, f_n, AP)
     FP = work[1]
@@ -87,6 +100,11 @@ def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: floa
     for r in range(15):
         for c in range(15):
             P[r, c] = FP[r, c] + dt * AP[c, r]
+    if q_diag.shape[0] > Q_DECAY:
+        decay_bias_rows(P, q_diag, dt)
+        for r in range(15):
+            for c in range(9, 15):
+                P[r, c] *= 1.0 - dt * q_diag[Q_DECAY + c // 12]
     for r in range(15):
         P[r, r] += q_diag[r] * dt
         for c in range(r + 1, 15):
@@ -96,24 +114,31 @@ def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: floa
 
 
 @numba.njit(cache=True)
+def decay_bias_rows(M: np.ndarray, q_diag: np.ndarray, dt: float) -> None:
+    """M ← D M in place, D = diag(1, …, 1, 1 − β_a dt (rows 9:12), 1 − β_g dt (rows 12:15)),
+    β from the process model ``q_diag`` (:func:`process_noise_diag`): the bias decay of F."""
+    for r in range(9, 15):
+        d = 1.0 - dt * q_diag[Q_DECAY + r // 12]
+        for c in range(M.shape[1]):
+            M[r, c] *= d
+
+
+@numba.njit(cache=True)
+def decay_biases(x: np.ndarray, q_diag: np.ndarray, dt: float) -> None:
+    """The nominal biases of x (16,) over dt (s): b̂ ← (1 − β dt) b̂ (β from ``q_diag``)."""
+    for k in range(3):
+        x[10 + k] *= 1.0 - dt * q_diag[Q_DECAY]
+        x[13 + k] *= 1.0 - dt * q_diag[Q_DECAY + 1]
+
+
+@numba.njit(cache=True)
 def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, work: np.ndarray) -> None:
-    """phi ← F phi in place (F = I + A dt); ``work`` is (15, 15) scratch."""
+    """phi ← F₀ phi in place (F₀ = I + A dt without the bias decay, which
+    :func:`decay_bias_rows` applies); ``work`` is (15, 15) scratch."""
     _apply_A_left(phi, C, f_n, work)
     for r in range(15):
         for c in range(15):
             phi[r, c] += dt * work[r, c]
-
-
-@numba.njit(cache=True)
-def accumulate_update(phi: np.ndarray, K: np.ndarray, first: int) -> None:
-    """phi ← (I − K H) phi in place, H selecting states first:first+3."""
-    rows = np.empty((3, 15))
-    for k in range(3):
-        for c in range(15):
-            rows[k, c] = phi[first + k, c]
-    for r in range(15):
-        for c in range(15):
-            phi[r, c] -= K[r, 0] * rows[0, c] + K[r, 1] * rows[1, c] + K[r, 2] * rows[2, c]
 
 
 @numba.njit(cache=True)
@@ -154,62 +179,128 @@ def inv3_sym(S: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
+def quadratic_inverse(S: np.ndarray, y: np.ndarray) -> float:
+    """yᵀ S⁻¹ y for a symmetric positive-definite S (3, 3): the normalised innovation squared."""
+    Si = inv3_sym(S)
+    out = 0.0
+    for r in range(3):
+        for c in range(3):
+            out += y[r] * Si[r, c] * y[c]
+    return out
+
+
+@numba.njit(cache=True)
+def innovation_covariance(P: np.ndarray, cols: np.ndarray, Hc: np.ndarray, r_var: float) -> np.ndarray:
+    """S = H P Hᵀ + r_var I (3, 3) of a 3-D measurement whose Jacobian H (3, 15) is zero but
+    in the columns ``cols`` (m,), where it is ``Hc`` (3, m)."""
+    m = cols.shape[0]
+    S = np.empty((3, 3))
+    for r in range(3):
+        for c in range(r, 3):
+            s = 0.0
+            for a in range(m):
+                row = 0.0
+                for b in range(m):
+                    row += P[cols[a], cols[b]] * Hc[c, b]
+                s += Hc[r, a] * row
+            S[r, c] = s
+            S[c, r] = s
+        S[r, r] += r_var
+    return S
+
+
+@numba.njit(cache=True)
 def nis_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float) -> float:
     """Normalised innovation squared yᵀ S⁻¹ y of a 3-D measurement selecting states
     first:first+3, S = P_sel + r_var I (the chi-square test statistic, 3 degrees of freedom)."""
-    S = np.empty((3, 3))
-    for r in range(3):
+    return quadratic_inverse(innovation_covariance(P, np.arange(first, first + 3), np.eye(3), r_var), y)
+
+
+@numba.njit(cache=True)
+def update_columns(P: np.ndarray, cols: np.ndarray, Hc: np.ndarray, y: np.ndarray, r_var: float, dx: np.ndarray,
+                   phi: np.ndarray) -> float:
+    """Kalman update of a 3-D measurement whose Jacobian H (3, 15) is zero but in the columns
+    ``cols`` (m,), where it is ``Hc`` (3, m); innovation y (3,), isotropic noise variance
+    r_var. Joseph form, P in place, written with M = P Hᵀ and S = H M + R:
+    (I − K H) P (I − K H)ᵀ + K R Kᵀ = P − K Mᵀ − M Kᵀ + K S Kᵀ, K = M S⁻¹. Writes dx = K y
+    (15,) and returns the normalised innovation squared yᵀ S⁻¹ y.
+
+    ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
+    is left-multiplied by (I − K H) in place; pass an empty (0, 0) array when the fuser
+    does not track cross-covariances."""
+    m = cols.shape[0]
+    M = np.empty((15, 3))
+    for r in range(15):
         for c in range(3):
-            S[r, c] = P[first + r, first + c]
-        S[r, r] += r_var
+            s = 0.0
+            for a in range(m):
+                s += P[r, cols[a]] * Hc[c, a]
+            M[r, c] = s
+    S = innovation_covariance(P, cols, Hc, r_var)
     Si = inv3_sym(S)
-    nis = 0.0
-    for r in range(3):
+    K = np.empty((15, 3))
+    KS = np.empty((15, 3))
+    for r in range(15):
         for c in range(3):
-            nis += y[r] * Si[r, c] * y[c]
-    return nis
+            K[r, c] = M[r, 0] * Si[0, c] + M[r, 1] * Si[1, c] + M[r, 2] * Si[2, c]
+        for c in range(3):
+            KS[r, c] = K[r, 0] * S[0, c] + K[r, 1] * S[1, c] + K[r, 2] * S[2, c]
+        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
+    if phi.shape[0] > 0:
+        Hphi = np.empty((3, 15))
+        for r in range(3):
+            for c in range(15):
+                s = 0.0
+                for a in range(m):
+                    s += Hc[r, a] * phi[cols[a], c]
+                Hphi[r, c] = s
+        for r in range(15):
+            for c in range(15):
+                phi[r, c] -= K[r, 0] * Hphi[0, c] + K[r, 1] * Hphi[1, c] + K[r, 2] * Hphi[2, c]
+    for r in range(15):
+        for c in range(r, 15):
+            v = P[r, c]
+            for k in range(3):
+                v += KS[r, k] * K[c, k] - K[r, k] * M[c, k] - M[r, k] * K[c, k]
+            P[r, c] = v
+            P[c, r] = v
+    return quadratic_inverse(S, y)
 
 
 @numba.njit(cache=True)
 def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: np.ndarray,
                     phi: np.ndarray) -> float:
-    """Kalman update for a 3-D measurement that selects states first:first+3 (H = [0 I 0]),
-    innovation y (3,), isotropic noise variance r_var. Joseph form, P in place; writes
-    dx (15,) and returns the normalised innovation squared yᵀ S⁻¹ y.
+    """:func:`update_columns` for a 3-D measurement that selects states first:first+3
+    (H = [0 I 0])."""
+    return update_columns(P, np.arange(first, first + 3), np.eye(3), y, r_var, dx, phi)
 
-    ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
-    is left-multiplied by (I − K H) in place; pass an empty (0, 0) array when the fuser
-    does not track cross-covariances."""
-    S = np.empty((3, 3))
-    for r in range(3):
-        for c in range(3):
-            S[r, c] = P[first + r, first + c]
-        S[r, r] += r_var
-    Si = inv3_sym(S)
-    K = np.empty((15, 3))
+
+@numba.njit(cache=True)
+def keep_yaw_unobservable(P: np.ndarray, dv: np.ndarray, phi: np.ndarray) -> None:
+    """Closed-loop reset of a stance update that moved the velocity by ``dv`` (3,) (m/s).
+
+    A rotation of the whole state about Up by δψ changes the error state along
+    N(x̂) = [e_z × p̂; e_z × v̂; e_z; 0; 0], which no zero-velocity or zero-rate measurement
+    sees, and F N(x̂_k) = N(x̂_{k+1}) (F of :func:`propagate_covariance`; f_n dt is the
+    mechanisation's velocity increment). A correction moves v̂, so the direction the update
+    left unobserved, N(x̂⁻), is not the one the next propagation carries, N(x̂⁺): left as is,
+    every stance sample gains heading information no measurement holds, and the heading
+    variance stops growing. The reset G = I + a e_ψᵀ, a = [0; e_z × dv; 0; 0; 0], maps
+    N(x̂⁻) to N(x̂⁺) (observability-constrained EKF, Hesch et al. 2014; the position part
+    e_z × dp is a translation, unobservable anyway): P ← G P Gᵀ and, unless empty,
+    phi ← G phi."""
+    a0, a1 = -dv[1], dv[0]
+    for c in range(15):
+        P[3, c] += a0 * P[8, c]
+        P[4, c] += a1 * P[8, c]
     for r in range(15):
-        for c in range(3):
-            K[r, c] = P[r, first] * Si[0, c] + P[r, first + 1] * Si[1, c] + P[r, first + 2] * Si[2, c]
-    for r in range(15):
-        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
+        P[r, 3] += a0 * P[r, 8]
+        P[r, 4] += a1 * P[r, 8]
+    P[3, 4] = P[4, 3]  # equal but for rounding: keep P exactly symmetric
     if phi.shape[0] > 0:
-        accumulate_update(phi, K, first)
-    # Joseph: (I − K H) P (I − K H)ᵀ + K R Kᵀ
-    M = P.copy()
-    for r in range(15):
         for c in range(15):
-            M[r, c] -= K[r, 0] * P[first, c] + K[r, 1] * P[first + 1, c] + K[r, 2] * P[first + 2, c]
-    for r in range(15):
-        for c in range(r, 15):
-            v = M[r, c] - (M[r, first] * K[c, 0] + M[r, first + 1] * K[c, 1] + M[r, first + 2] * K[c, 2])
-            v += r_var * (K[r, 0] * K[c, 0] + K[r, 1] * K[c, 1] + K[r, 2] * K[c, 2])
-            P[r, c] = v
-            P[c, r] = v
-    nis = 0.0
-    for r in range(3):
-        for c in range(3):
-            nis += y[r] * Si[r, c] * y[c]
-    return nis
+            phi[3, c] += a0 * phi[8, c]
+            phi[4, c] += a1 * phi[8, c]
 
 
 def error_between(x_true: np.ndarray, x_est: np.ndarray) -> np.ndarray:

@@ -186,14 +186,26 @@ class SensorErrors:
         gm = self.bias_instability * math.sqrt(2.0 / self.bias_tau_s) if self.bias_instability else 0.0
         return math.hypot(gm, self.bias_random_walk)
 
+    @property
+    def gauss_markov_tau_s(self) -> float | None:
+        """τ (s) when the bias is exactly one zero-mean first-order Gauss–Markov process (no
+        turn-on bias, no random walk): a filter can then model it as such; else None."""
+        pure = (self.bias_instability > 0 and self.bias_random_walk == 0 and self.bias_sd == 0
+                and not any(self.bias))
+        return self.bias_tau_s if pure else None
+
     def initial_bias_sd(self, averaged_s: float = 0.0) -> float:
         """One-sigma bias (per axis) a filter starts with: the turn-on bias (the fixed
-        vector's RMS and the drawn σ) and the Gauss–Markov σ, added in quadrature; when
-        the bias is estimated by averaging a still window of ``averaged_s`` seconds, the
-        turn-on terms are replaced by that average's white-noise error N/√T."""
+        vector's RMS and the drawn σ) and the Gauss–Markov σ, added in quadrature. When the
+        bias is estimated by averaging a still window of T = ``averaged_s`` seconds starting
+        at the first sample, what is left is that average's white-noise error N/√T and the
+        Gauss–Markov bias's move from the first sample to the window's mean,
+        var(b_0 − b̄) = σ² (1 − 2 m + 2 (τ/T)(1 − m)), m = (τ/T)(1 − e^(−T/τ))."""
         gm = self.bias_instability
         if averaged_s > 0:
-            return math.hypot(self.noise_density / math.sqrt(averaged_s), gm)
+            m = self.bias_tau_s / averaged_s * -math.expm1(-averaged_s / self.bias_tau_s)
+            moved = gm * math.sqrt(max(1.0 - 2.0 * m + 2.0 * self.bias_tau_s / averaged_s * (1.0 - m), 0.0))
+            return math.hypot(self.noise_density / math.sqrt(averaged_s), moved)
         fixed = math.sqrt(sum(b * b for b in self.bias) / 3.0)
         return math.sqrt(fixed**2 + self.bias_sd**2 + gm**2)
 

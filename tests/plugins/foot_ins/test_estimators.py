@@ -18,13 +18,15 @@ from scipy.spatial.transform import Rotation
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
 from bodyfusion.core.run import build_systems, layout_context, run_layout
-from bodyfusion.nav.error_state import accumulate_propagation, process_noise_diag
+from bodyfusion.nav.error_state import PARAMS_SIZE, accumulate_propagation, process_noise_diag
 from bodyfusion.plugins.foot_ins import FootIns
 from bodyfusion.plugins.foot_ins.coloured import (
     coloured_zero_velocity_update,
     velocity_rows_of_inverse_transition,
 )
-from bodyfusion.testing import check_system, default_context, with_value
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE, run_foot_ins,
+                                                 run_foot_ins_coloured)
+from bodyfusion.testing import check_system, default_context, random_nominal_state, with_value
 from tests.paths import ROOT
 
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"
@@ -78,16 +80,25 @@ def test_inverse_transition_rows_are_exact():
     np.testing.assert_allclose(rows, np.linalg.inv(F)[3:6], atol=1e-15)
 
 
+def filter_params(zupt_sigma: float) -> np.ndarray:
+    """A ``params`` vector (bodyfusion.nav.error_state layout): the default densities, ZUPT σ
+    (m/s), no ZARU, g = 9.8 m/s², no Earth rate, no gate, random-walk biases."""
+    params = np.zeros(PARAMS_SIZE)
+    params[:7] = (0.02, 0.002, 1e-4, 1e-5, zupt_sigma, 0.0, 9.8)
+    return params
+
+
 def test_coloured_update_matches_the_dense_equations():
-    """Kernel against eqs. 7–12 written densely: H̄ = H − αHF⁻¹, θ = Q T̄ᵀ, correlated-noise gain."""
+    """Kernel against eqs. 7–12 written densely: H̄ = H − αHF⁻¹ with the heading column that
+    hides a rotation about Up (−(1 − α) e_z × v̂), θ = Q T̄ᵀ, correlated-noise gain, then the
+    reset G = I + (e_z × δv̂) e_ψᵀ of bodyfusion.nav.error_state.keep_yaw_unobservable."""
     rng = np.random.default_rng(0)
     A = rng.normal(0, 0.1, (15, 15))
     P = A @ A.T + 1e-4 * np.eye(15)
     C = Rotation.random(random_state=1).as_matrix()
     f_n = np.array([0.2, 0.1, 9.8])
     dt, alpha, sigma = 0.01, 0.7, 0.005
-    params = np.array([0.02, 0.002, 1e-4, 1e-5, sigma, 0, 9.8, 0, 0, 0])
-    q = process_noise_diag(params)
+    q = process_noise_diag(filter_params(sigma))
     x = np.zeros(16)
     x[3:6] = [0.01, -0.02, 0.005]
     x[6] = 1.0
@@ -98,22 +109,63 @@ def test_coloured_update_matches_the_dense_equations():
     H[:, 3:6] = np.eye(3)
     T = alpha * H @ np.linalg.inv(F)
     Hb = H - T
-    Q = np.diag(q * dt)
+    Hb[:, 8] = -(1.0 - alpha) * np.cross([0.0, 0.0, 1.0], x[3:6])
+    Q = np.diag(q[:15] * dt)
     theta = Q @ T.T
     Rb = T @ theta + sigma**2 * np.eye(3)
     S = Hb @ P @ Hb.T + Rb + Hb @ theta + theta.T @ Hb.T
     K = (P @ Hb.T + theta) @ np.linalg.inv(S)
     y = alpha * v_prev - x[3:6]
     E = np.eye(15) - K @ Hb
-    P_want = E @ P @ E.T + K @ Rb @ K.T - E @ theta @ K.T - K @ theta.T @ E.T
+    G = np.eye(15)
+    G[3:6, 8] = np.cross([0.0, 0.0, 1.0], (K @ y)[3:6])
+    P_want = G @ (E @ P @ E.T + K @ Rb @ K.T - E @ theta @ K.T - K @ theta.T @ E.T) @ G.T
     P_got = P.copy()
     dx = np.empty(15)
     phi = np.eye(15)
     nis = coloured_zero_velocity_update(x.copy(), P_got, v_prev, C, f_n, dt, q, alpha, sigma, 0.0, dx, phi)
     np.testing.assert_allclose(dx, K @ y, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(P_got, P_want, rtol=1e-9, atol=1e-15)
-    np.testing.assert_allclose(phi, E, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(phi, G @ E, rtol=1e-12, atol=1e-15)
     assert nis == pytest.approx(y @ np.linalg.solve(S, y), rel=1e-9)
+
+
+def test_ckf_first_stance_sample_takes_the_stationary_noise():
+    """A stance phase's first sample has no previous measurement to difference with: the ckf
+    applies the ordinary ZUPT with the stationary variance σ_ξ² / (1 − α²) of the AR(1) noise
+    v_k = α v_{k−1} + ξ_k, not σ_ξ², and records its covariance for the smoothers."""
+    rng = np.random.default_rng(7)
+    t = np.array([0.0, 0.01])
+    acc, gyro = np.array([[0.0, 0.0, 9.8], [0.3, -0.2, 9.9]]), np.array([[0.0, 0.0, 0.0], [0.02, -0.01, 0.03]])
+    stance = np.array([False, True])
+    x0 = random_nominal_state(rng)
+    x0[3:6] = [0.02, -0.01, 0.005]
+    A = rng.normal(0, 0.03, (15, 15))
+    P0 = A @ A.T + 1e-6 * np.eye(15)
+    alpha, sigma = 0.9, 0.005
+    params = filter_params(sigma)
+
+    def run(kernel, sigma_ekf: float | None = None):
+        x, P = x0.copy(), P0.copy()
+        hist_x, hist_cov, counters = np.zeros((2, 16)), np.zeros((2, 4)), np.zeros(COUNTERS_SIZE)
+        if sigma_ekf is None:
+            post_idx, post_P = np.zeros(1, dtype=np.int64), np.zeros((1, 15, 15))
+            kernel(x, P, t, acc, gyro, stance, 1, 2, params, alpha, np.zeros(6), np.empty((0, 0)), hist_x, hist_cov,
+                   counters, post_idx, post_P)
+            return x, P, counters, post_idx, post_P
+        kernel(x, P, t, acc, gyro, stance, 1, 2, filter_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
+               hist_cov, counters)
+        return x, P
+
+    x, P, counters, post_idx, post_P = run(run_foot_ins_coloured)
+    x_want, P_want = run(run_foot_ins, sigma / np.sqrt(1.0 - alpha**2))
+    np.testing.assert_allclose(P, P_want, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(x, x_want, rtol=1e-12, atol=1e-15)
+    _, P_driving = run(run_foot_ins, sigma)
+    assert not np.allclose(P, P_driving, rtol=1e-3, atol=0)
+    assert counters[C_ZUPTS] == 1 and counters[C_COLOURED] == 0
+    assert counters[C_CALL_RECORDS] == 1 and post_idx[0] == 1
+    np.testing.assert_array_equal(post_P[0], P)
 
 
 @pytest.mark.parametrize("method", ["none", "projection"])

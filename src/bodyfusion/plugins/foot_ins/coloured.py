@@ -16,11 +16,17 @@ posterior as the de-correlated form with Λ of eqs. 15–18):
     S = H̄ P⁻ H̄ᵀ + R̄ + H̄ θ + θᵀ H̄ᵀ,   K = (P⁻ H̄ᵀ + θ) S⁻¹,
     P⁺ = (I − K H̄) P⁻ (I − K H̄)ᵀ + K R̄ Kᵀ − (I − K H̄) θ Kᵀ − K θᵀ (I − K H̄)ᵀ.
 
-With the error-state model of :mod:`bodyfusion.nav.error_state` (A nilpotent, A⁴ = 0) the
-velocity rows of F⁻¹ = I − A dt + (A dt)² are exact:
-H F⁻¹ = [0, I, dt [f_n×], dt C_nb, dt² [f_n×] C_nb]. In closed loop the innovation is
+With the error-state model of :mod:`bodyfusion.nav.error_state` and random-walk biases
+(A nilpotent, A⁴ = 0) the velocity rows of F⁻¹ = I − A dt + (A dt)² are exact:
+H F⁻¹ = [0, I, dt [f_n×], dt C_nb, dt² [f_n×] C_nb] (with decaying Gauss–Markov biases
+the bias columns are first order in β dt). In closed loop the innovation is
 m̄_k − H̄ x̂_k⁻ = α v̂⁺_{k−1} − v̂⁻_k (v̂⁺_{k−1}: the velocity after every update and
 correction at the previous sample). With α = 0 every term reduces to the ordinary ZUPT.
+
+Heading stays unobservable as in :mod:`bodyfusion.nav.zupt`: the heading column of H̄ is
+replaced by the one with H̄ N(x̂⁻) = 0, −(1 − α) e_z × v̂⁻
+(:func:`bodyfusion.nav.zupt.unobservable_yaw_column`), and the update ends with the reset of
+:func:`bodyfusion.nav.error_state.keep_yaw_unobservable`.
 """
 
 from __future__ import annotations
@@ -28,13 +34,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import inject, inv3_sym
+from bodyfusion.nav.error_state import inject, inv3_sym, keep_yaw_unobservable
+from bodyfusion.nav.zupt import unobservable_yaw_column
 
 
 @numba.njit(cache=True)
 def velocity_rows_of_inverse_transition(C: np.ndarray, f_n: np.ndarray, dt: float, out: np.ndarray) -> None:
     """out (3, 15) = H F⁻¹ = [0, I, dt [f_n×], dt C_nb, dt² [f_n×] C_nb] for the first-order
-    transition F = I + A dt of :mod:`bodyfusion.nav.error_state` (exact: A⁴ = 0)."""
+    transition F = I + A dt of :mod:`bodyfusion.nav.error_state` (exact for random-walk biases: A⁴ = 0)."""
     for r in range(3):
         for c in range(15):
             out[r, c] = 0.0
@@ -77,6 +84,9 @@ def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarr
             T[r, c] *= alpha
             Hb[r, c] = -T[r, c]
         Hb[r, 3 + r] += 1.0
+    yaw = np.empty(3)
+    unobservable_yaw_column(Hb[:, 3:6], x[3:6], yaw)
+    Hb[:, 8] = yaw
     # θ = Q T̄ᵀ (15, 3); R̄ = T̄ θ + R (eq. 10)
     theta = np.empty((15, 3))
     for r in range(15):
@@ -167,5 +177,6 @@ def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarr
             v = 0.5 * (a + b)
             P[r, c] = v
             P[c, r] = v
+    keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis

@@ -36,6 +36,12 @@ class FootFilterConfig(StrictModel):
     """Accelerometer bias random walk, m/s^3/√Hz."""
     gyro_bias_random_walk: float = Field(default=1e-5, ge=0)
     """Gyroscope bias random walk, rad/s^2/√Hz."""
+    acc_bias_tau_s: float | None = Field(default=None, gt=0)
+    """Correlation time τ of a first-order Gauss–Markov accelerometer bias, s: the bias and
+    its estimate decay as e^(−t/τ), driven by ``acc_bias_random_walk`` (σ √(2/τ) for a
+    stationary σ). null: a random walk. The ensemble kinds keep the random walk."""
+    gyro_bias_tau_s: float | None = Field(default=None, gt=0)
+    """Correlation time τ of a first-order Gauss–Markov gyroscope bias, s (as ``acc_bias_tau_s``)."""
     zupt_sigma_mps: float = Field(default=0.01, gt=0)
     """Zero-velocity pseudo-measurement noise, m/s; for ckf and cenekf the σ of the white
     driving noise ξ of the coloured noise."""

@@ -8,8 +8,8 @@ policy and the record the smoothers rebuild from, and never asks which kind it r
 * :class:`ErrorStateEkf` (``ekf``): the 15-state error-state EKF, compiled per-sample loop
   (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`) with the gated ZUPT.
 * :class:`ColouredEkf` (``ckf``): the same with the zero-velocity update under coloured noise
-  ([Xu2024] eqs. 5–18); the smoothers rebuild ordinary ZUPTs, so it keeps its covariance after
-  every coloured update for them.
+  ([Xu2024] eqs. 5–18); the smoothers rebuild ordinary ZUPTs with σ_ξ, so it keeps its
+  covariance after every stance update for them.
 * :class:`EnsembleEkf` (``enekf``, ``cenekf``): M members carrying the attitude quaternion
   ([Deng2026] eqs. 1–19); ``x`` is their mean, ``P`` the sample covariance of their error-state
   deviations (15, or 18 with the coloured noise δV). Not smoothable, no error-state transition
@@ -28,8 +28,7 @@ from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
 from bodyfusion.plugins.foot_ins.ensemble import Ensemble
-from bodyfusion.plugins.foot_ins.kernels import (C_CALL_COLOURED, differenced_samples, run_foot_ins,
-                                                 run_foot_ins_coloured)
+from bodyfusion.plugins.foot_ins.kernels import C_CALL_RECORDS, run_foot_ins, run_foot_ins_coloured
 
 
 @dataclass
@@ -88,16 +87,16 @@ class ErrorStateEkf(Estimator):
 
 class ColouredEkf(Estimator):
     """``ckf``: the EKF with the zero-velocity update under coloured noise of colour factor
-    ``filter.colour_factor``; records the covariance after each coloured update."""
+    ``filter.colour_factor``; records the covariance after each stance update."""
 
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
-        bound = differenced_samples(data.stance, i0, i1).size
+        bound = int(np.count_nonzero(data.stance[i0:i1]))
         post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
         run_foot_ins_coloured(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
                               self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_cov,
                               data.counters, post_idx, post_P)
-        k = int(data.counters[C_CALL_COLOURED])
-        if k:  # the smoother rebuilds ordinary ZUPTs: it takes the ckf's covariances here
+        k = int(data.counters[C_CALL_RECORDS])
+        if k:  # the smoother rebuilds ZUPTs with σ_ξ: it takes the ckf's covariances here
             data.override_idx.append(post_idx[:k])
             data.override_P.append(post_P[:k])
 

@@ -17,7 +17,8 @@ from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
 from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.earth import earth_rate_enu
-from bodyfusion.nav.error_state import DATT, DPOS, DVEL, P_EARTH_RATE, P_ZUPT_GATE, PARAMS_SIZE, rotate_about_up
+from bodyfusion.nav.error_state import (DATT, DPOS, DVEL, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY,
+                                       P_ZUPT_GATE, PARAMS_SIZE, rotate_about_up)
 from bodyfusion.nav.frames import apply_axis_map
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
                                               find_still_interval, heading_axis, mean_standard_error)
@@ -147,6 +148,8 @@ class FootIns(SensorSystem):
             p[P_EARTH_RATE] = earth_rate_enu(self.context.latitude_deg)
         if f.zupt_gate_probability is not None:
             p[P_ZUPT_GATE] = chi2_gate(f.zupt_gate_probability, 3)
+        for index, tau in ((P_ACC_BIAS_DECAY, f.acc_bias_tau_s), (P_GYRO_BIAS_DECAY, f.gyro_bias_tau_s)):
+            p[index] = 0.0 if tau is None else 1.0 / tau
         return p
 
     def _find_still_interval(self) -> StillInterval:
