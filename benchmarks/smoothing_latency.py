@@ -3,9 +3,10 @@
 Simulates ``configs/fbrts_paper_sim.yaml`` (one seed) in a temporary directory with
 :func:`bodyfusion.sim.simulate`, runs the forward filter once (``smoother.kind=none``), then
 :func:`bodyfusion.plugins.foot_ins.smoothing.smooth_record` with ``kind=fb-rts`` on its record and prints the
-per-segment compute time (forward re-run, backward pass, both RTS sweeps and the fusion
-of one segment: the latency after the segment's last sample). The first segment is left
-out of the statistics: it includes numba's compilation (or cache load) of the kernels.
+per-segment compute time (the filter's replay, the backward pass, both RTS sweeps, the
+fusion and the position of one segment: the latency after the segment's last sample). The
+first segment is left out of the statistics: it includes numba's compilation (or cache load)
+of the kernels.
 
 Run: python benchmarks/smoothing_latency.py [--seed 0]
 Last line: ``fbrts_segment_ms=<median> segments=<n>`` (n: the segments counted).

@@ -97,23 +97,37 @@ class FuserConfig(StrictModel):
 
 class SmootherConfig(StrictModel):
     """Smoothing of the systems that support it (the foot INS), after the fuser
-    (:mod:`bodyfusion.plugins.foot_ins.smoothing`).
+    (:mod:`bodyfusion.plugins.foot_ins.smoothing`, [Shen2025] §3).
 
-    ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward
-    filter's error states); ``fb`` (forward–backward navigation, covariance-weighted
-    fusion, position re-integrated); ``fb-rts`` ([Shen2025]: both passes RTS-smoothed
-    before the fusion). Segments run between stance midpoints (stance runs shorter than
-    ``min_stance_s`` are ignored; segments longer than ``max_segment_s`` are split).
-    ``span`` (``rts`` only): ``whole`` smooths the whole run, ``segment`` each segment on
-    its own. Distance constraints act in the forward pass through the fuser
+    ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward filter's
+    error states); ``fb`` (forward–backward: the filter and a backward navigation started
+    without information, fused by covariance, position recomputed from the fused velocity);
+    ``fb-rts`` (both passes RTS-smoothed before the fusion). Segments run between stance
+    midpoints (stance runs shorter than ``min_stance_s`` are ignored; segments longer than
+    ``max_segment_s`` are split).
+
+    ``span``: ``whole`` (the default of ``rts``: one RTS sweep over the whole run) or
+    ``segment`` (each segment on its own, the paper's segmented RTS; ``fb`` and ``fb-rts``
+    always run per segment). Distance constraints act in the forward pass through the fuser
     (``fuser.method``); ``constrain_smoothed`` applies them again on the smoothed tracks.
     """
 
     kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
-    span: Literal["whole", "segment"] = "whole"
+    span: Literal["whole", "segment"] | None = None
     min_stance_s: float = Field(default=0.04, ge=0)
     max_segment_s: float = Field(default=10.0, gt=0)
     constrain_smoothed: bool = False
+
+    @model_validator(mode="after")
+    def _span_of_kind(self) -> "SmootherConfig":
+        if self.kind in ("fb", "fb-rts") and self.span == "whole":
+            raise KeyedError("span", f"{self.kind} runs per segment ([Shen2025]); whole applies to rts only")
+        return self
+
+    @property
+    def segmented(self) -> bool:
+        """Every segment smoothed on its own (``fb``, ``fb-rts``, ``rts`` with ``span: segment``)."""
+        return self.kind != "rts" or self.span == "segment"
 
 
 class HeadingAlignmentConfig(StrictModel):

@@ -65,5 +65,5 @@ def constrain_trajectories(trajectories: Mapping[str, Trajectory], smoothed: Set
     for k, name in enumerate(order):
         tr = trajectories[name]
         dp = np.column_stack([np.interp(tr.t, grid, corr[:, 3 * k + ax]) for ax in range(3)])
-        out[name] = Trajectory(tr.t, tr.pos_n + dp, tr.pos_sd)
+        out[name] = Trajectory(tr.t, tr.pos_n + dp, tr.pos_sd, tr.pos_cov_en)
     return out, {"constrained_samples": count, "method": method}

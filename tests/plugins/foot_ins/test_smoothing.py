@@ -1,4 +1,4 @@
-"""Smoothers of the foot INS (bodyfusion.plugins.foot_ins.smoothing): RTS, FB, FB-RTS."""
+"""Smoothers of the foot INS (bodyfusion.plugins.foot_ins.smoothing): RTS, FB, FB-RTS ([Shen2025])."""
 
 from __future__ import annotations
 
@@ -9,16 +9,15 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.core.run import run_layout
 from bodyfusion.nav.strapdown import integrate
-from bodyfusion.plugins.foot_ins.smoothing import segment_bounds, smooth_record
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (
-    backward_block,
-    forward_rerun_block,
-    rts_block,
-)
+from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, backward_prior, segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing_kernels import fuse_block, rts_block
 from bodyfusion.sim import simulate
 from tests.paths import ROOT
 
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"
+VICON_DATA = ROOT / "examples" / "data" / "dual_foot_vicon_hu2025"
+KINDS = {"rts": SmootherConfig(kind="rts"), "rts-segment": SmootherConfig(kind="rts", span="segment"),
+         "fb": SmootherConfig(kind="fb"), "fb-rts": SmootherConfig(kind="fb-rts")}
 
 WALK = """
 name: walk
@@ -32,26 +31,65 @@ layout:
     foot: {detector: {kind: labels}}
 """
 
+# The filter told the simulated sensor's own error model: biases that random-walk with the
+# filter's densities (the preset's Gauss-Markov instability off), a turn-on accelerometer
+# bias drawn with the filter's prior sigma, and a foot whose stance velocity is white noise
+# of the ZUPT's sigma (0.01 m/s).
+MATCHED_WALK = """
+name: matched_walk
+rate_hz: 100
+path: {kind: rectangle, length_m: 10, width_m: 6, laps: 2, clockwise: true, turn_radius_m: 1.0}
+gait: {start_still_s: 2, end_still_s: 1}
+systems:
+  foot:
+    kind: foot_imu
+    foot: left
+    imu: {preset: icm20948, gyro_bias_instability_radps: 0, acc_bias_instability_mps2: 0,
+          gyro_bias_random_walk: 2.0e-5, acc_bias_random_walk: 5.0e-4, acc_bias_sd_mps2: 0.05}
+    stance_noise: {colour_factor: 0, sigma_mps: 0.01}
+layout:
+  systems:
+    foot: {detector: {kind: labels}}
+"""
+
+
+def _simulate(tmp_path_factory, text: str, seed: int):
+    d = tmp_path_factory.mktemp("sim")
+    scn = d / "scenario.yaml"
+    scn.write_text(text)
+    return simulate(scn, d / "out", seed=seed)
+
+
+def _record_and_truth(result, name="foot"):
+    rec = result.systems[name].smoothing_record()
+    truth = result.truths[name]
+    pos = np.column_stack([np.interp(rec["t"], truth.t, truth.pos_n[:, k]) for k in range(3)])
+    return rec, pos
+
 
 @pytest.fixture(scope="module")
 def walk(tmp_path_factory):
-    d = tmp_path_factory.mktemp("walk")
-    scn = d / "walk.yaml"
-    scn.write_text(WALK)
-    sim = simulate(scn, d / "out", seed=3)
+    sim = _simulate(tmp_path_factory, WALK, 3)
     # the filter starts from a foot INS's generic bias priors, not the simulator's: it leaves
     # in-stride errors while its bias estimates settle — the errors smoothing is for
     result = run_layout(load_layout(sim.config_path, ["systems.foot.initial.gyro_bias_sd_radps=1e-3",
                                                       "systems.foot.initial.acc_bias_sd_mps2=0.05"]))
-    system = result.systems["foot"]
-    truth = result.truths["foot"]
-    rec = system.smoothing_record()
-    pos = np.column_stack([np.interp(rec["t"], truth.t, truth.pos_n[:, k]) for k in range(3)])
+    rec, pos = _record_and_truth(result)
     return sim, rec, pos
 
 
 def _rmse(x, pos):
     return float(np.sqrt(np.mean(np.sum((x[:, 0:2] - pos[:, 0:2]) ** 2, axis=1))))
+
+
+def _stride_error(x, pos, bounds):
+    """RMS horizontal error of the track relative to its position at each segment start
+    (the error a stride adds; the heading drift that no smoother can observe is left out)."""
+    errs = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        d = (x[a:b + 1, 0:2] - x[a, 0:2]) - (pos[a:b + 1, 0:2] - pos[a, 0:2])
+        errs.append(np.sum(d**2, axis=1))
+    return float(np.sqrt(np.mean(np.concatenate(errs))))
 
 
 # --------------------------------------------------------------------------- RTS kernel
@@ -93,99 +131,128 @@ def test_rts_kernel_equals_textbook_rts_on_a_linear_gaussian_toy():
     Pprior = np.asarray([np.eye(n)] + Pp_f[1:])
     dxs = np.zeros((L + 1, n))
     Pss = np.zeros((L + 1, n, n))
-    assert rts_block(Ppost, Pprior, Phis, dx, L, np.zeros(n), Ppost[L].copy(), dxs, Pss) == 0
+    assert rts_block(Ppost, Pprior, Phis, dx, np.zeros((L + 1, 2)), L, np.zeros(n), Ppost[L].copy(), dxs, Pss) == 0
     for j in range(L + 1):
         np.testing.assert_allclose(xs_f[j] + dxs[j], xs[j], atol=1e-9)
         np.testing.assert_allclose(Pss[j], Ps[j], atol=1e-9)
 
 
-# --------------------------------------------------------------------------- backward mechanisation
+# --------------------------------------------------------------------------- one step: filter = replay
 
 
-def test_backward_mechanisation_retraces_a_forward_trajectory(walk):
+def _replay(rec: dict) -> tuple[_Pass, np.ndarray]:
+    r = _Record(rec)
+    buf = _Pass(r.n)
+    return buf, r.forward(0, r.n - 1, r.P0, True, buf)
+
+
+def test_the_smoothers_replay_is_the_filter_bit_for_bit(walk):
     _, rec, _ = walk
-    t, acc, gyro = rec["t"], rec["acc"], rec["gyro"]
+    buf, P_end = _replay(rec)
+    assert np.array_equal(buf.xs, rec["hist_x"])
+    assert np.array_equal(P_end, rec["P_end"])
+    for kind, cfg in KINDS.items():
+        d = smooth_record(rec, cfg).diagnostics
+        assert d["state_rebuild_max_abs_error"] == 0.0 and d["covariance_rebuild_rel_error"] == 0.0, kind
+
+
+def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(tmp_path):
+    """The first 30 s of the Vicon walk, both feet within 0.6 m (the fuser corrects both),
+    the left IMU with 0.5 s of samples cut out (the gap policy inflates its covariance)."""
+    left = (VICON_DATA / "imuMeasLeft.csv").read_text().splitlines()
+    right = (VICON_DATA / "imuMeasRight.csv").read_text().splitlines()
+    (tmp_path / "left.csv").write_text("\n".join(left[:901] + left[931:1801]) + "\n")
+    (tmp_path / "right.csv").write_text("\n".join(right[:1801]) + "\n")
+    res = run_layout(load_layout(VICON_CFG, [f"systems.left_foot.data.path={tmp_path / 'left.csv'}",
+                                             f"systems.right_foot.data.path={tmp_path / 'right.csv'}",
+                                             "smoother.kind=rts"]))
+    for foot in ("left_foot", "right_foot"):
+        rec = res.systems[foot].smoothing_record()
+        assert rec["override_idx"].size > 5
+        buf, P_end = _replay(rec)
+        assert np.array_equal(buf.xs, rec["hist_x"]) and np.array_equal(P_end, rec["P_end"]), foot
+        assert res.systems[foot].diagnostics()["smoothing"]["warnings"] == 0
+    rec = res.systems["left_foot"].smoothing_record()
+    assert rec["gap_idx"].size == 1
+    g, dP = int(rec["gap_idx"][0]), rec["gap_dP"][0]
+    buf, _ = _replay(rec)
+    # the inflation is process noise of the step across the gap, not uncertainty before it
+    assert buf.Ppost[g - 1, 0, 0] < 0.5 * dP[0, 0] < buf.Pprior[g, 0, 0]
+
+
+# --------------------------------------------------------------------------- backward navigation
+
+
+def test_backward_navigation_retraces_a_forward_trajectory(walk):
+    _, rec, _ = walk
+    r = _Record(dict(rec, stance=np.zeros_like(rec["stance"])))
     a, b = 150, 650  # through a swing
-    params = rec["params"].copy()
-    x0 = rec["hist_x"][a].copy()
-    fwd = integrate(x0, t[a:b + 1], acc[a:b + 1], gyro[a:b + 1], params[6], params[7:10].copy())
-    L = b - a
-    xb = np.zeros((L + 1, 16))
-    bufs = [np.zeros((L + 1, 15, 15)) for _ in range(3)]
-    no_stance = np.zeros_like(rec["stance"])
-    backward_block(fwd[-1], np.eye(15) * 1e-4, t, acc, gyro, no_stance, params, a, b, xb, bufs[0], bufs[1],
-                   bufs[2], np.zeros((L + 1, 15)), np.zeros(1))
-    back = xb[::-1]
+    params = r.params
+    fwd = integrate(r.hist_x[a].copy(), r.t[a:b + 1], r.acc[a:b + 1], r.gyro[a:b + 1], params[6], params[7:10].copy())
+    buf = _Pass(b - a + 1)
+    r.backward(a, b, fwd[-1], np.eye(15) * 1e-4, buf)
+    back = buf.xs[::-1]
+    back[:, 3:6] *= -1.0  # backward form: velocity negated
     assert np.max(np.abs(back[:, 0:3] - fwd[:, 0:3])) < 2e-3  # m, over 5 s of free navigation
-    np.testing.assert_allclose(back[:, 3:6], -fwd[:, 3:6], atol=2e-3)  # velocities opposite
-    dq = np.abs(np.sum(back[:, 6:10] * fwd[:, 6:10], axis=1))
-    assert np.min(dq) > 1 - 1e-8  # same attitude
+    np.testing.assert_allclose(back[:, 3:6], fwd[:, 3:6], atol=2e-3)
+    assert np.min(np.abs(np.sum(back[:, 6:10] * fwd[:, 6:10], axis=1))) > 1 - 1e-8  # same attitude
 
 
 # --------------------------------------------------------------------------- smoothing a walk
 
 
-def _stride_error(x, pos, bounds):
-    """RMS horizontal error of the track relative to its position at each segment start
-    (the error a stride adds; the heading drift that no smoother can observe is left out)."""
-    errs = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        d = (x[a:b + 1, 0:2] - x[a, 0:2]) - (pos[a:b + 1, 0:2] - pos[a, 0:2])
-        errs.append(np.sum(d**2, axis=1))
-    return float(np.sqrt(np.mean(np.concatenate(errs))))
-
-
-def test_smoothing_reduces_error_on_a_short_simulated_walk(walk):
+def test_smoothing_reduces_the_in_stride_error_on_a_short_walk(walk):
     _, rec, pos = walk
     bounds = segment_bounds(rec["stance"], rec["rate_hz"], 0.04, 10.0)
     filt = _stride_error(rec["hist_x"], pos, bounds)
     out = {}
-    for kind in ("rts", "fb", "fb-rts"):
-        res = smooth_record(rec, SmootherConfig(kind=kind))
+    for kind, cfg in KINDS.items():
+        res = smooth_record(rec, cfg)
         assert res.x is not None and res.diagnostics["warnings"] == 0
-        assert res.diagnostics["covariance_rebuild_rel_error"] < 1e-9  # same covariances as the filter
         assert res.diagnostics["segments"] >= 10
         out[kind] = _stride_error(res.x, pos, bounds)
-    assert out["rts"] < 0.8 * filt, (filt, out)
-    # FB / FB-RTS keep the fused position (not re-integrated from velocity) and re-seed
-    # each segment: on this short walk they gain less per stride than RTS, but still gain
-    assert out["fb"] < filt and out["fb-rts"] < filt, (filt, out)
-    seg = smooth_record(rec, SmootherConfig(kind="rts", span="segment"))
-    assert seg.x is not None and seg.diagnostics["span"] == "segment"
-    lat = smooth_record(rec, SmootherConfig(kind="fb-rts")).diagnostics["latency_ms"]
+    assert all(v < 0.8 * filt for v in out.values()), (filt, out)
+    lat = smooth_record(rec, KINDS["fb-rts"]).diagnostics["latency_ms"]
     assert lat["segments"] >= 10 and lat["mean_ms"] > 0
 
 
-def test_forward_rerun_from_the_filter_seed_reproduces_the_filter(walk):
+def test_fb_position_is_recomputed_from_the_fused_velocity(walk):
     _, rec, _ = walk
+    x = smooth_record(rec, KINDS["fb"]).x
     bounds = segment_bounds(rec["stance"], rec["rate_hz"], 0.04, 10.0)
-    a, b = 0, int(bounds[2])  # the first two segments, from the filter's initial state
-    L = b - a
-    xf = np.zeros((L + 1, 16))
-    bufs = [np.zeros((L + 1, 15, 15)) for _ in range(3)]
-    P_b = np.zeros((15, 15))
-    forward_rerun_block(rec["hist_x"][0].copy(), rec["P0"], rec["hist_x"], rec["t"], rec["acc"], rec["gyro"],
-                        rec["stance"], rec["params"], a, b, rec["P0"], rec["override_idx"], rec["override_P"], xf,
-                        bufs[0], bufs[1], bufs[2], np.zeros((L + 1, 15)), P_b)
-    np.testing.assert_allclose(xf, rec["hist_x"][a:b + 1], atol=1e-9)
-    np.testing.assert_allclose(bufs[0][L], P_b, atol=1e-12)  # re-run and rebuilt original agree
+    a, b = int(bounds[5]), int(bounds[6])  # sample b belongs to the next segment
+    dt = np.diff(rec["t"][a:b])[:, None]
+    np.testing.assert_allclose(np.diff(x[a:b, 0:3], axis=0), 0.5 * (x[a:b - 1, 3:6] + x[a + 1:b, 3:6]) * dt,
+                               rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("kind", ["fb", "fb-rts"])
-def test_fb_forward_pass_is_rerun_from_the_fused_seed_not_the_filter_history(walk, kind):
-    """Each segment's forward pass starts from the previous segment's fused end state and
-    runs the filter itself: the recorded filter states (but the first, and those at
-    fuser/fix corrections, none here) do not enter the result."""
+def test_fb_passes_are_independent_nothing_shrinks_at_segment_boundaries(walk):
+    """The backward pass starts without information: fused with the forward pass it leaves the
+    yaw σ (which neither pass can observe) where the filter has it, the fused state at each
+    segment end is the filter's, and every segment starts from the filter's own covariance
+    (so the replayed filter ends on its last covariance, bit for bit)."""
     _, rec, _ = walk
-    assert rec["override_idx"].size == 0
-    ref = smooth_record(rec, SmootherConfig(kind=kind))
-    hx = rec["hist_x"].copy()
-    hx[1:, 0:3] += [3.0, -2.0, 0.5]
-    hx[1:, 3:6] += 0.1
-    alt = smooth_record(dict(rec, hist_x=hx), SmootherConfig(kind=kind))
-    np.testing.assert_allclose(alt.x, ref.x, atol=1e-9)
-    # the per-segment compute times come with the result
-    assert ref.segment_latency_ms is not None and ref.segment_latency_ms.size == ref.diagnostics["segments"]
+    r = _Record(rec)
+    bounds = segment_bounds(r.stance, r.rate_hz, 0.04, 10.0)
+    size = int(np.max(np.diff(bounds))) + 1
+    fw, bw = _Pass(size), _Pass(size)
+    fused_x, fused_P = r.hist_x.copy(), np.zeros((size, 15, 15))
+    P = r.P0.copy()
+    for k in range(bounds.size - 1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        L = b - a
+        P_b = r.forward(a, b, P, True, fw)
+        r.backward(a, b, r.hist_x[b], backward_prior(P_b, r.P0), bw)
+        assert fuse_block(fw.xs, fw.Ppost, bw.xp, bw.Pprior, L, fused_x, fused_P, a) == 0
+        yaw_f, yaw_g = np.sqrt(fw.Ppost[:L + 1, 8, 8]), np.sqrt(fused_P[:L + 1, 8, 8])
+        assert np.all(yaw_g >= 0.99 * yaw_f)
+        assert np.all(yaw_g <= yaw_f * (1 + 1e-12))
+        sd = np.sqrt(np.diag(fw.Ppost[L]))
+        assert np.max(np.abs(fused_P[L] - fw.Ppost[L]) / np.outer(sd, sd)) < 0.02  # the fused end is the forward one
+        P = P_b
+    assert np.array_equal(P, r.P_end)
+    for kind in ("fb", "fb-rts"):
+        assert smooth_record(rec, KINDS[kind]).diagnostics["covariance_rebuild_rel_error"] == 0.0
 
 
 def test_segments_split_at_stance_midpoints():
@@ -197,16 +264,37 @@ def test_segments_split_at_stance_midpoints():
     assert np.all(np.diff(b) <= 20) and b[0] == 0 and b[-1] == 99
 
 
+# --------------------------------------------------------------------------- never worse than the filter
+
+
+@pytest.mark.slow
+def test_rts_is_not_worse_than_its_filter_on_a_matched_model_walk(tmp_path_factory):
+    """Simulation and filter share one error model: the whole-run RTS must not lose to the
+    filter, on average and in most seeds, and its σ never exceeds the filter's."""
+    filt, rts = [], []
+    for seed in range(6):
+        result = run_layout(load_layout(_simulate(tmp_path_factory, MATCHED_WALK, seed).config_path))
+        rec, pos = _record_and_truth(result)
+        res = smooth_record(rec, KINDS["rts"])
+        filt.append(_rmse(rec["hist_x"], pos))
+        rts.append(_rmse(res.x, pos))
+        var_f = result.systems["foot"].hist_pos_cov[:, :2]
+        assert np.all(res.pos_var[:, :2] <= var_f * (1 + 1e-9) + 1e-15)
+    filt, rts = np.asarray(filt), np.asarray(rts)
+    assert rts.mean() <= filt.mean(), (filt, rts)
+    assert np.sum(rts <= filt) >= 4, (filt, rts)  # on average, and in most seeds
+
+
 # --------------------------------------------------------------------------- never fail
 
 
 def test_too_short_or_no_stance_gives_the_filter_result_and_a_counted_warning(walk):
     sim, rec, _ = walk
     short = {k: (v[:5] if isinstance(v, np.ndarray) and v.shape[:1] == rec["t"].shape else v) for k, v in rec.items()}
-    res = smooth_record(short, SmootherConfig(kind="fb-rts"))
+    res = smooth_record(short, KINDS["fb-rts"])
     assert res.x is None and res.diagnostics["warnings"] == 1
     still = dict(rec, stance=np.zeros_like(rec["stance"]))
-    res = smooth_record(still, SmootherConfig(kind="rts"))
+    res = smooth_record(still, KINDS["rts"])
     assert res.x is None and res.diagnostics["warnings"] == 1
     assert "no stance" in res.diagnostics["warning_messages"][0]
     # through a run: a detector that finds no stance
@@ -226,6 +314,14 @@ def test_smoother_kind_accepted(kind):
     assert load_layout(VICON_CFG, [f"smoother.kind={kind}"]).layout.smoother.kind == kind
 
 
+def test_span_names_what_runs():
+    smoother = load_layout(VICON_CFG, ["smoother.kind=rts"]).layout.smoother
+    assert smoother.span is None and not smoother.segmented  # rts: the whole run
+    assert load_layout(VICON_CFG, ["smoother.kind=rts", "smoother.span=segment"]).layout.smoother.segmented
+    assert load_layout(VICON_CFG, ["smoother.kind=fb", "smoother.span=segment"]).layout.smoother.segmented
+    assert load_layout(VICON_CFG, ["smoother.kind=fb-rts"]).layout.smoother.segmented
+
+
 @pytest.mark.parametrize("override,key", [("smoother.kind=fbrts", "smoother.kind"),
                                           ("smoother.span=all", "smoother.span"),
                                           ("smoother.colour=red", "smoother.colour")])
@@ -233,3 +329,10 @@ def test_bad_smoother_settings_are_refused_with_the_key_path(override, key):
     with pytest.raises(ConfigError) as ei:
         load_layout(VICON_CFG, [override])
     assert key in str(ei.value)
+
+
+@pytest.mark.parametrize("kind", ["fb", "fb-rts"])
+def test_whole_run_span_is_refused_for_the_segmented_kinds(kind):
+    with pytest.raises(ConfigError) as ei:
+        load_layout(VICON_CFG, [f"smoother.kind={kind}", "smoother.span=whole"])
+    assert "smoother.span" in str(ei.value) and "per segment" in str(ei.value)

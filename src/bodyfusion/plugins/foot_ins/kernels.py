@@ -7,6 +7,12 @@ first stance sample of a stance phase has no previous measurement to difference 
 takes the ordinary ZUPT, with the stationary variance of the AR(1) noise
 v_k = α v_{k−1} + ξ_k, R = σ_ξ² / (1 − α²) (:func:`stationary_zupt_params`).
 
+One sample of the ekf is :func:`ekf_step`, the only place its per-sample recursion is written:
+the filter (:func:`run_foot_ins`) and the smoothers' passes
+(:mod:`bodyfusion.plugins.foot_ins.smoothing_kernels`: the covariance rebuild, the backward
+navigation) all call it, so a change to the propagation or to the zero-velocity update
+changes them all.
+
 Every stance update is chi-square gated with bounded influence (``params[P_ZUPT_GATE]``,
 0: off; :mod:`bodyfusion.nav.zupt`): a stance sample whose NIS exceeds the gate is counted and
 de-weighted, and gets no ZARU (the foot is not at rest there).
@@ -17,8 +23,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, accumulate_propagation,
-                                       decay_bias_rows, decay_biases, process_noise_diag, propagate_covariance)
+from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, _apply_A_left,
+                                       accumulate_propagation, decay_bias_rows, decay_biases, process_noise_diag,
+                                       propagate_covariance)
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import stance_update, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
@@ -53,6 +60,53 @@ def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.nda
         decay_bias_rows(phi, q_diag, dt)
     propagate_covariance(P, C, f_n, dt, q_diag, work)
     return C
+
+
+@numba.njit(cache=True)
+def transition(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, Phi: np.ndarray,
+               work: np.ndarray) -> None:
+    """Phi (15, 15) = I + A dt, the first-order error-state transition of one step (C_nb and
+    f_n as :func:`bodyfusion.nav.strapdown.mechanise` returns them, dt s, the bias decay of the
+    process model ``q_diag``, :func:`bodyfusion.nav.error_state.process_noise_diag`); ``work``
+    (15, 15) scratch."""
+    for r in range(15):
+        for c in range(15):
+            work[r, c] = 1.0 if r == c else 0.0
+    _apply_A_left(work, C, f_n, Phi)
+    for r in range(15):
+        for c in range(15):
+            Phi[r, c] = (1.0 if r == c else 0.0) + dt * Phi[r, c]
+    decay_bias_rows(Phi, q_diag, dt)
+
+
+NO_STANCE = -1.0
+"""What :func:`ekf_step` returns at a swing sample (a NIS is never negative)."""
+
+
+@numba.njit(inline="always")
+def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
+             stance: np.ndarray, i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray,
+             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, x_prior: np.ndarray,
+             P_prior: np.ndarray, Phi: np.ndarray) -> float:
+    """One sample i of the ekf: mechanise from t[i-1] to t[i], propagate P, and at a stance
+    sample the gated ZUPT (and ZARU) of :func:`bodyfusion.nav.zupt.stance_update`.
+
+    x (16,), P (15, 15), ``mech_memory`` (6,) and ``phi`` (the transition accumulated for the
+    fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch. For the smoothers, when
+    ``Phi`` is not empty ((0, 0): off), the step also writes its prior nominal state
+    ``x_prior`` (16,), prior covariance ``P_prior`` (15, 15) and transition ``Phi`` (15, 15,
+    :func:`transition`). Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
+    C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
+    if Phi.shape[0] > 0:
+        transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
+        for r in range(15):
+            for c in range(15):
+                P_prior[r, c] = P[r, c]
+        for k in range(16):
+            x_prior[k] = x[k]
+    if stance[i]:
+        return stance_update(x, P, gyro_b[i], params, dx, phi)
+    return NO_STANCE
 
 
 @numba.njit(inline="always")
@@ -93,10 +147,12 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
+    off = np.empty((0, 0))
     for i in range(i0, i1):
-        _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
-        if stance[i]:
-            _count(params, stance_update(x, P, gyro_b[i], params, dx, phi), counters)
+        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, dx, off,
+                       off)
+        if nis != NO_STANCE:
+            _count(params, nis, counters)
         _record_sample(x, P, i, hist_x, hist_pos_cov)
 
 

@@ -1,69 +1,74 @@
-"""Smoothing of foot-mounted INS runs: RTS, forward–backward (FB) and FB-RTS.
+"""Smoothing of foot-mounted INS runs: RTS, forward–backward (FB) and FB-RTS ([Shen2025] §3).
 
-Runs after the fuser (``smoother.kind`` in the layout, :class:`bodyfusion.core.layout.SmootherConfig`):
+Runs after the fuser (``smoother`` in the layout, :class:`bodyfusion.core.layout.SmootherConfig`):
 the core calls :meth:`bodyfusion.plugins.foot_ins.system.FootIns.smooth`, which hands its
 :meth:`~bodyfusion.plugins.foot_ins.system.FootIns.smoothing_record` to :func:`smooth_record`.
-The filter keeps no N×15×15 history: the smoother rebuilds the forward filter's
-covariances block by block from the recorded nominal states (``hist_x``), the IMU
-samples, the stance flags and the few covariances set outside the compiled loop (fuser
-constraint corrections, position fixes) — the same functions in the same order, so the
-rebuilt covariances are the filter's (``covariance_rebuild_rel_error`` in the
-diagnostics checks the last one). Only the current block is held (buffers of
-O(longest block) × 15 × 15 floats).
+
+The forward pass is the filter itself. The filter keeps no N×15×15 history: its run is
+replayed block by block (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass`)
+from its recorded state and mechanisation memory at the block start, with the filter's own
+compiled step (:func:`bodyfusion.plugins.foot_ins.kernels.ekf_step`), the gap policy's
+inflations and the covariances set outside the compiled loop (fuser corrections, position
+fixes, the ckf's coloured updates): the same numbers, bit for bit
+(``state_rebuild_max_abs_error`` and ``covariance_rebuild_rel_error`` in the diagnostics: the
+replayed against the recorded states, and the last covariance). Only the current block is
+held (O(longest block) × 15 × 15 floats).
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
-``min_stance_s`` are ignored so a one-sample detector flicker does not cut a stride;
-gaps longer than ``max_segment_s`` are cut evenly). Each segment then holds one swing
-with half a stance at either end.
+``min_stance_s`` are ignored so a one-sample detector flicker does not cut a stride; gaps
+longer than ``max_segment_s`` are cut evenly). Each segment holds one swing with half a
+stance at either end.
 
-Kinds ([Shen2025] §3):
+Kinds:
 
-* ``rts``: fixed-interval RTS over the closed-loop error states (:func:`rts_block`),
-  over the whole run (``span: whole``, the backward sweep carried across blocks, each
-  block's forward covariances rebuilt from a checkpoint) or each segment on its own.
-  The filter's error estimate is zero after every injection, so the recursion runs on
-  the injected corrections: δx_{k|N} = K_k (δx_{k+1|N} + dx_{k+1}).
-* ``fb``: per segment, a forward pass — the filter re-run over the segment
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.forward_rerun_block`) from the previous segment's
-  fused end state (attitude, velocity, position, biases and the 15×15 covariance as
-  fused; the first segment from the filter's initial state, so it is the filter) — and a
-  backward navigation (mechanisation backward in time: negated angular rates, Earth rate
-  and velocity, same specific force) with its own error filter and ZUPTs, started from
-  the forward pass's state and covariance at the segment end; the two fused by
-  covariance (paper eqs. of §3.3). The fused end state seeds the next segment.
-* ``fb-rts``: as ``fb`` with both passes RTS-smoothed over the segment first (the paper's
-  scheme).
+* ``rts`` (§3.2): Rauch–Tung–Striebel over the closed-loop error states
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`); ``span: whole`` (the
+  default) carries the backward sweep across the blocks — the fixed-interval smoother of the
+  whole run; ``span: segment`` smooths every segment on its own — the paper's segmented RTS,
+  which at a segment's end is the filter.
+* ``fb`` (§3.1, §3.3): per segment a–b, the forward pass (the filter) and a backward
+  navigation (the filter's step on the time-reversed samples: angular rates, Earth rate,
+  velocity and gyro bias negated, the same specific force) with its own error filter and
+  ZUPTs, fused by covariance. The passes are independent. The backward pass starts at b
+  from the forward nominal state — a linearisation point, not information: its prior
+  (:func:`backward_prior`) is diffuse on every state but the yaw, which it shares with the
+  forward pass (a foot INS cannot observe it; a diffuse yaw would only gather the EKF's
+  spurious yaw information), and the fusion removes that shared yaw error
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fuse_block`). At each sample the
+  forward posterior is fused with the backward prior (before its update at that sample), so
+  no sample is counted twice: the two-filter form of the smoother given the data up to b. At
+  b the fused state is the forward one, and the next segment continues from the filter's
+  own state and covariance — nothing shrinks at segment boundaries.
+* ``fb-rts`` (Fig. 3): as ``fb`` with both passes RTS-smoothed over the segment before the
+  fusion. Both smoothed passes hold the segment's samples, so the fusion's own covariance
+  would count them twice; the reported covariance is the forward pass's RTS covariance, the
+  information the two together hold.
 
-Choices where the paper is vague (documented here, stated in the report):
+Position (``fb``, ``fb-rts``). The backward pass cannot observe position; the fused position
+is recomputed from the fused velocity by the mechanisation's trapezoid (the paper's
+re-forward navigation, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.integrate_position`),
+from the fused position at the segment start, plus the position the filter's corrections
+outside its loop moved (fuser constraints, position fixes: the backward pass cannot replay
+them, so FB keeps them as the filter made them; FB-RTS spreads them through the forward RTS).
+Started instead from the previous segment's recomputed end, as the paper chains its
+segments, the track would be a pure integral of velocity whose small per-segment
+differences from the smoothed position add up over the run. Its covariance is the fused one.
 
-* The backward pass starts from the forward pass's state and covariance at the segment
-  end (velocity and gyro bias negated). The paper does not say how the backward pass is
-  initialised; at a stance midpoint the ZUPTs have pinned the velocity and the level, so
-  this costs little and keeps one estimate of heading and position.
-* Fusion: the backward pass's p, v, θ are a measurement of the forward pass's (the
-  paper fuses attitude, velocity and position); the biases move with their forward
-  cross-covariances. The two passes share the data (and the backward pass starts from
-  the forward end state), so the fused covariance is optimistic — the paper's scheme
-  counts it so too, and it is what seeds the next segment.
-* Corrections made outside the filter's compiled loop (fuser constraints, position
-  fixes) are carried into the forward re-run: the original filter's correction at that
-  sample is injected into the re-run state and its covariance replaced by the one the
-  correction left. The record does not hold the other feet or the fixes, so they are
-  not recomputed for the re-run state.
-* Constraints: the fuser applies them in the forward pass (``fuser.method``); with
-  ``smoother.constrain_smoothed`` the core applies them again to the smoothed tracks
-  (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
+Corrections made outside the filter's compiled loop are part of the filter's record: RTS
+smooths through them as through any update (the state jumps by the recorded correction, the
+covariance becomes the recorded one); the gap policy's inflation is process noise of the
+step across the gap. With ``smoother.constrain_smoothed`` the core applies the constraints
+again to the smoothed tracks (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
 
-Streaming. FB and FB-RTS run segment by segment in time order and need only the
-segment's samples, the previous segment's fused end state and the filter's corrections
-made outside its loop: a segment's smoothed output is available as soon as its last
-sample has arrived (one stride after its start). The compute time of each segment (the
-latency after the segment's last sample) is measured and reported (``latency_ms``: mean,
-p95, max; every segment's in :attr:`SmoothingResult.segment_latency_ms`;
+Streaming. FB, FB-RTS and the segmented RTS run segment by segment in time order and need
+only the segment's samples and the filter's state and covariance at its start: a segment's
+smoothed output is available as soon as its last sample has arrived. The compute time of
+each segment (the latency after its last sample) is measured (``latency_ms``: mean, p95,
+max; every segment's in :attr:`SmoothingResult.segment_latency_ms`;
 ``benchmarks/smoothing_latency.py``).
 
-Smoothing never fails a run: a run too short, without stance or where anything
-raises, keeps the filter's result and counts a warning (``warnings`` in the system's
+Smoothing never fails a run: a run too short, without stance or where anything raises,
+keeps the filter's result and counts a warning (``warnings`` in the system's
 ``diagnostics()['smoothing']``, hence metrics.json).
 """
 
@@ -75,22 +80,32 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bodyfusion.nav import detectors
 from bodyfusion.core.layout import SmootherConfig
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, backward_block, forward_block, forward_rerun_block, fuse_block,
-                                     rts_block)
+from bodyfusion.nav import detectors
+from bodyfusion.nav.error_state import P_EARTH_RATE
+from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, filter_pass, fuse_block,
+                                                           integrate_position, position_covariance, rts_block)
 
 log = logging.getLogger(__name__)
 
 MIN_SAMPLES = 10
 """Runs with fewer samples are not smoothed (warning)."""
 
+DIFFUSE_SCALE = 10.0
+"""The backward pass's prior σ of each state but the yaw: this many times the larger of the
+forward σ at the segment end and the filter's initial σ (information ≤ 1 % of the forward
+pass's)."""
+
+_BACKWARD_SIGN = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
+"""Error-state signs of the backward form: velocity and gyro bias negated."""
+
 
 @dataclass
 class SmoothingResult:
-    """Smoothed nominal states (n, 16) and position variances (n, 3), or None (the filter's
-    result stands), with the run's diagnostics; for FB and FB-RTS also the compute time
-    of every segment in time order (ms; the diagnostics keep only its summary)."""
+    """Smoothed nominal states (n, 16) and position covariances (n, 4: variances east, north,
+    up and the east–north covariance, m²), or None (the filter's result stands), with the
+    run's diagnostics; for the segmented kinds also the compute time of every segment in
+    time order (ms; the diagnostics keep only its summary)."""
 
     x: np.ndarray | None
     pos_var: np.ndarray | None
@@ -120,19 +135,106 @@ def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_
     return np.asarray(out, dtype=np.int64)
 
 
-class _Buffers:
-    """Block-local buffers (one set per pass)."""
+def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
+    """The backward pass's prior covariance (15, 15) at a segment end: diagonal, each σ
+    :data:`DIFFUSE_SCALE` times the larger of the forward pass's σ there (``P_end``) and the
+    filter's initial σ (``P0``) — diffuse around the forward nominal state, which is only the
+    backward pass's linearisation point — but the yaw's zero: the backward pass starts from
+    the forward yaw and shares its error, which the fusion removes
+    (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fuse_block`). Diagonal, so the
+    backward form needs no sign flips."""
+    var = DIFFUSE_SCALE**2 * np.maximum(np.diag(P_end), np.diag(P0))
+    var[YAW] = 0.0
+    return np.diag(var)
+
+
+class _Pass:
+    """Block buffers of one pass (see :mod:`~bodyfusion.plugins.foot_ins.smoothing_kernels`)."""
 
     def __init__(self, size: int) -> None:
+        self.xs = np.zeros((size, 16))
+        self.xp = np.zeros((size, 16))
         self.Ppost = np.zeros((size, 15, 15))
         self.Pprior = np.zeros((size, 15, 15))
         self.Phi = np.zeros((size, 15, 15))
         self.dx = np.zeros((size, 15))
+        self.jump = np.zeros((size, 3))
+        self.yaw_reset = np.zeros((size, 2))
         self.dxs = np.zeros((size, 15))
         self.Ps = np.zeros((size, 15, 15))
-        self.x = np.zeros((size, 16))
-        self.xs = np.zeros((size, 16))
-        self.var = np.zeros((size, 4))
+        self.smoothed = np.zeros((size, 16))
+
+    def rts(self, L: int) -> int:
+        """Smooth the block on its own (RTS from its end); the states into ``smoothed``."""
+        failed = rts_block(self.Ppost, self.Pprior, self.Phi, self.dx, self.yaw_reset, L, np.zeros(15), self.Ppost[L].copy(),
+                           self.dxs, self.Ps)
+        apply_smoothed(self.xs, 0, L, self.dxs, self.smoothed, 0)
+        return failed
+
+
+class _Record:
+    """The filter's record as the compiled passes take it."""
+
+    def __init__(self, rec: dict) -> None:
+        f64 = np.float64
+        self.hist_x = np.ascontiguousarray(rec["hist_x"], dtype=f64)
+        self.t = np.ascontiguousarray(rec["t"], dtype=f64)
+        self.acc = np.ascontiguousarray(rec["acc"], dtype=f64)
+        self.gyro = np.ascontiguousarray(rec["gyro"], dtype=f64)
+        self.stance = np.ascontiguousarray(rec["stance"], dtype=np.bool_)
+        self.params = np.ascontiguousarray(rec["params"], dtype=f64)
+        self.P0 = np.ascontiguousarray(rec["P0"], dtype=f64)
+        self.P_end = np.asarray(rec["P_end"], dtype=f64)
+        self.ov_idx = np.ascontiguousarray(rec["override_idx"], dtype=np.int64)
+        self.ov_P = np.ascontiguousarray(rec["override_P"], dtype=f64)
+        self.gap_idx = np.ascontiguousarray(rec.get("gap_idx", np.empty(0)), dtype=np.int64)
+        self.gap_dP = np.ascontiguousarray(rec.get("gap_dP", np.empty((0, 15, 15))), dtype=f64)
+        self.rate_hz = float(rec["rate_hz"])
+        self.n = self.hist_x.shape[0]
+        self.state_error = 0.0
+        """Largest |replayed − recorded| nominal state element over the stored forward passes."""
+
+    def memory(self, a: int) -> np.ndarray:
+        """The filter's mechanisation memory before the step to a + 1: the bias-corrected
+        increments of sample a with the biases the filter held then (after sample a − 1)."""
+        m = np.zeros(6)
+        if a >= 1:
+            dt = self.t[a] - self.t[a - 1]
+            m[0:3] = (self.gyro[a] - self.hist_x[a - 1, 13:16]) * dt
+            m[3:6] = (self.acc[a] - self.hist_x[a - 1, 10:13]) * dt
+        return m
+
+    def forward(self, a: int, b: int, P_a: np.ndarray, store: bool, buf: _Pass) -> np.ndarray:
+        """The filter over a < i ≤ b from its recorded state at a and the covariance P_a;
+        returns the covariance at b (with ``store``, :attr:`state_error` is updated)."""
+        P_b = filter_pass(self.hist_x[a], P_a, self.memory(a), self.t, self.acc, self.gyro, self.stance, self.params,
+                          a, b, self.hist_x, self.ov_idx, self.ov_P, self.gap_idx, self.gap_dP, store, buf.xs, buf.xp,
+                          buf.Ppost, buf.Pprior, buf.Phi, buf.dx, buf.jump, buf.yaw_reset)
+        if store:
+            self.state_error = max(self.state_error, float(np.max(np.abs(buf.xs[:b - a + 1] - self.hist_x[a:b + 1]))))
+        return P_b
+
+    def backward(self, a: int, b: int, x_b: np.ndarray, P_b: np.ndarray, buf: _Pass) -> None:
+        """Backward navigation over b ≥ i ≥ a (j = b − i) from the state x_b and covariance P_b
+        at b (forward form; turned into the backward form here): the filter's step on the
+        time-reversed samples — step j covers (t_{i}, t_{i+1}] with sample i + 1's specific force
+        and negated rate, the stance update at j is sample i's."""
+        j = np.arange(b - a + 1)
+        i = b - j
+        src = np.minimum(i + 1, b)
+        params = self.params.copy()
+        params[P_EARTH_RATE] *= -1.0
+        x0 = x_b.copy()
+        x0[3:6] *= -1.0
+        x0[13:16] *= -1.0
+        sign = np.outer(_BACKWARD_SIGN, _BACKWARD_SIGN)
+        gaps = (self.gap_idx > a) & (self.gap_idx <= b)
+        gap_j = np.ascontiguousarray((b - self.gap_idx[gaps] + 1)[::-1])
+        gap_dP = np.ascontiguousarray((self.gap_dP[gaps] * sign)[::-1])
+        filter_pass(x0, P_b * sign, np.zeros(6), -self.t[i], self.acc[src], -self.gyro[src],
+                    np.ascontiguousarray(self.stance[i]), params, 0, b - a, self.hist_x, np.empty(0, dtype=np.int64),
+                    np.empty((0, 15, 15)), gap_j, gap_dP, True, buf.xs, buf.xp, buf.Ppost, buf.Pprior, buf.Phi,
+                    buf.dx, buf.jump, buf.yaw_reset)
 
 
 def _latency(ms: list[float]) -> dict:
@@ -141,6 +243,76 @@ def _latency(ms: list[float]) -> dict:
     a = np.asarray(ms)
     return {"segments": int(a.size), "mean_ms": float(a.mean()), "p95_ms": float(np.percentile(a, 95)),
             "max_ms": float(a.max())}
+
+
+def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
+         diag: dict) -> tuple[np.ndarray, list[float]]:
+    """RTS over the whole run (the sweep carried across blocks, each block replayed from a
+    checkpoint of the filter's covariance) or per segment. Returns the filter's last
+    covariance as replayed and the per-segment latencies (segmented only)."""
+    size = int(np.max(np.diff(bounds))) + 1
+    fw = _Pass(size)
+    failed = 0
+    latencies: list[float] = []
+    if not whole:
+        P = r.P0.copy()
+        for k in range(bounds.size - 1):
+            a, b = int(bounds[k]), int(bounds[k + 1])
+            t0 = time.perf_counter_ns()
+            P = r.forward(a, b, P, True, fw)
+            failed += fw.rts(b - a)
+            out_x[a:b + 1] = fw.smoothed[:b - a + 1]
+            position_covariance(fw.Ps, b - a, out_var, a)
+            latencies.append((time.perf_counter_ns() - t0) / 1e6)
+        diag["rts_gain_failures"] = failed
+        return P, latencies
+    ckpt = np.empty((bounds.size, 15, 15))
+    ckpt[0] = r.P0
+    for k in range(bounds.size - 1):
+        ckpt[k + 1] = r.forward(int(bounds[k]), int(bounds[k + 1]), ckpt[k], False, fw)
+    carry_dx, carry_P = np.zeros(15), None
+    for k in range(bounds.size - 2, -1, -1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        L = b - a
+        r.forward(a, b, ckpt[k], True, fw)
+        end_P = fw.Ppost[L].copy() if carry_P is None else carry_P
+        failed += rts_block(fw.Ppost, fw.Pprior, fw.Phi, fw.dx, fw.yaw_reset, L, carry_dx, end_P, fw.dxs, fw.Ps)
+        carry_dx, carry_P = fw.dxs[0].copy(), fw.Ps[0].copy()
+        apply_smoothed(fw.xs, 0, L, fw.dxs, out_x, a)
+        position_covariance(fw.Ps, L, out_var, a)
+    diag["rts_gain_failures"] = failed
+    return ckpt[-1], latencies
+
+
+def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
+        diag: dict) -> tuple[np.ndarray, list[float]]:
+    """FB or FB-RTS segment by segment in time order (see the module docstring). Returns
+    the filter's last covariance as replayed and the per-segment latencies."""
+    size = int(np.max(np.diff(bounds))) + 1
+    fw, bw = _Pass(size), _Pass(size)
+    fused_P = np.zeros((size, 15, 15))
+    gain_failures = fusion_failures = 0
+    latencies: list[float] = []
+    P = r.P0.copy()
+    for k in range(bounds.size - 1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        L = b - a
+        t0 = time.perf_counter_ns()
+        P_b = r.forward(a, b, P, True, fw)
+        r.backward(a, b, r.hist_x[b], backward_prior(P_b, r.P0), bw)
+        if with_rts:
+            gain_failures += fw.rts(L) + bw.rts(L)
+            fusion_failures += fuse_block(fw.smoothed, fw.Ps, bw.smoothed, bw.Ps, L, out_x, fused_P, a)
+            position_covariance(fw.Ps, L, out_var, a)
+        else:
+            fusion_failures += fuse_block(fw.xs, fw.Ppost, bw.xp, bw.Pprior, L, out_x, fused_P, a)
+            position_covariance(fused_P, L, out_var, a)
+        integrate_position(out_x, r.t, a, b, out_x[a, 0:3].copy(), fw.jump)
+        P = P_b
+        latencies.append((time.perf_counter_ns() - t0) / 1e6)
+    diag["rts_gain_failures"] = gain_failures
+    diag["fusion_failures"] = fusion_failures
+    return P, latencies
 
 
 def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
@@ -153,93 +325,29 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
         log.warning("smoothing: %s; keeping the filter's result", msg)
         return SmoothingResult(None, None, diag)
 
-    hist_x = np.ascontiguousarray(rec["hist_x"], dtype=np.float64)
-    n = hist_x.shape[0]
-    if n < MIN_SAMPLES:
-        return warn(f"run too short to smooth ({n} samples, need {MIN_SAMPLES})")
-    stance = np.ascontiguousarray(rec["stance"], dtype=np.bool_)
-    if not stance[1:].any():
+    r = _Record(rec)
+    if r.n < MIN_SAMPLES:
+        return warn(f"run too short to smooth ({r.n} samples, need {MIN_SAMPLES})")
+    if not r.stance[1:].any():
         return warn("no stance found")
-    bounds = segment_bounds(stance, rec["rate_hz"], cfg.min_stance_s, cfg.max_segment_s)
+    bounds = segment_bounds(r.stance, r.rate_hz, cfg.min_stance_s, cfg.max_segment_s)
     if bounds.size < 2:
         return warn("no segment to smooth")
     diag["segments"] = int(bounds.size - 1)
-    t = np.ascontiguousarray(rec["t"], dtype=np.float64)
-    acc = np.ascontiguousarray(rec["acc"], dtype=np.float64)
-    gyro = np.ascontiguousarray(rec["gyro"], dtype=np.float64)
-    params = np.ascontiguousarray(rec["params"], dtype=np.float64)
-    ov_idx, ov_P = rec["override_idx"], rec["override_P"]
-    size = int(np.max(np.diff(bounds))) + 1
-    fw = _Buffers(size)
-    out_x = hist_x.copy()
-    out_var = np.zeros((n, 4))
-    empty = np.zeros(15)
-    gain_failures = 0
-    fusion_failures = 0
-    P_last = None
-    latencies = None
+    diag["span"] = "segment" if cfg.segmented else "whole"
+    out_x = r.hist_x.copy()
+    out_var = np.zeros((r.n, 4))
     if cfg.kind == "rts":
-        # checkpoints: the filter's posterior covariance at every boundary
-        ckpt = np.empty((bounds.size, 15, 15))
-        ckpt[0] = rec["P0"]
-        for k in range(bounds.size - 1):
-            ckpt[k + 1] = forward_block(hist_x, t, acc, gyro, stance, params, int(bounds[k]), int(bounds[k + 1]),
-                                        ckpt[k], ov_idx, ov_P, False, fw.Ppost, fw.Pprior, fw.Phi, fw.dx)
-        P_last = ckpt[-1]
-        carry_dx, carry_P = empty.copy(), None
-        for k in range(bounds.size - 2, -1, -1):
-            a, b = int(bounds[k]), int(bounds[k + 1])
-            L = b - a
-            forward_block(hist_x, t, acc, gyro, stance, params, a, b, ckpt[k], ov_idx, ov_P, True,
-                          fw.Ppost, fw.Pprior, fw.Phi, fw.dx)
-            if cfg.span == "segment" or carry_P is None:
-                end_dx, end_P = empty, fw.Ppost[L].copy()
-            else:
-                end_dx, end_P = carry_dx, carry_P
-            gain_failures += rts_block(fw.Ppost, fw.Pprior, fw.Phi, fw.dx, L, end_dx, end_P, fw.dxs, fw.Ps)
-            carry_dx, carry_P = fw.dxs[0].copy(), fw.Ps[0].copy()
-            apply_smoothed(hist_x, a, L, fw.dxs, fw.Ps, out_x, out_var, a)
-        diag["span"] = cfg.span
+        P_last, latencies = _rts(r, bounds, not cfg.segmented, out_x, out_var, diag)
     else:
-        use_rts = cfg.kind == "fb-rts"
-        bw = _Buffers(size)
-        counters = np.zeros(1)
-        latencies = []
-        P_a = np.ascontiguousarray(rec["P0"], dtype=np.float64)  # the original filter's, at a
-        P_b = np.empty((15, 15))
-        x_seed = hist_x[0].copy()  # the forward pass's seed: the filter's initial state, then
-        P_seed = P_a.copy()        # the previous segment's fused end state
-        P_fused = np.empty((15, 15))
-        for k in range(bounds.size - 1):
-            a, b = int(bounds[k]), int(bounds[k + 1])
-            L = b - a
-            t0 = time.perf_counter_ns()
-            forward_rerun_block(x_seed, P_seed, hist_x, t, acc, gyro, stance, params, a, b, P_a, ov_idx, ov_P,
-                                fw.x, fw.Ppost, fw.Pprior, fw.Phi, fw.dx, P_b)
-            backward_block(fw.x[L], fw.Ppost[L], t, acc, gyro, stance, params, a, b, bw.x, bw.Ppost, bw.Pprior,
-                           bw.Phi, bw.dx, counters)
-            if use_rts:
-                gain_failures += rts_block(fw.Ppost, fw.Pprior, fw.Phi, fw.dx, L, empty, fw.Ppost[L], fw.dxs, fw.Ps)
-                gain_failures += rts_block(bw.Ppost, bw.Pprior, bw.Phi, bw.dx, L, empty, bw.Ppost[L], bw.dxs, bw.Ps)
-                apply_smoothed(fw.x, 0, L, fw.dxs, fw.Ps, fw.xs, fw.var, 0)
-                apply_smoothed(bw.x, 0, L, bw.dxs, bw.Ps, bw.xs, bw.var, 0)
-                fusion_failures += fuse_block(fw.xs, fw.Ps, bw.xs, bw.Ps, L, a, out_x, out_var, P_fused)
-            else:
-                fusion_failures += fuse_block(fw.x, fw.Ppost, bw.x, bw.Ppost, L, a, out_x, out_var, P_fused)
-            latencies.append((time.perf_counter_ns() - t0) / 1e6)
-            x_seed = out_x[b].copy()
-            P_seed = P_fused.copy()
-            P_a = P_b.copy()
-        P_last = P_a
-        diag["backward_zupts"] = int(counters[0])
+        P_last, latencies = _fb(r, bounds, cfg.kind == "fb-rts", out_x, out_var, diag)
+    if latencies:
         diag["latency_ms"] = _latency(latencies)
-    diag["rts_gain_failures"] = int(gain_failures)
-    diag["fusion_failures"] = int(fusion_failures)
-    P_end = rec["P_end"]
-    diag["covariance_rebuild_rel_error"] = float(np.max(np.abs(P_last - P_end)) / max(np.max(np.abs(P_end)), 1e-300))
+    diag["covariance_rebuild_rel_error"] = float(np.max(np.abs(P_last - r.P_end)) / max(np.max(np.abs(r.P_end)), 1e-300))
+    diag["state_rebuild_max_abs_error"] = r.state_error
     if not np.all(np.isfinite(out_x)) or not np.all(np.isfinite(out_var)):
         return warn("smoother produced non-finite states")
-    return SmoothingResult(out_x, out_var, diag, None if latencies is None else np.asarray(latencies))
+    return SmoothingResult(out_x, out_var, diag, np.asarray(latencies) if latencies else None)
 
 
 def smooth_system(system, cfg: SmootherConfig) -> SmoothingResult:

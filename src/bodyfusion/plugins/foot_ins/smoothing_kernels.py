@@ -1,18 +1,17 @@
-"""Compiled per-sample loops of the smoothers (:mod:`bodyfusion.plugins.foot_ins.smoothing`).
+"""Compiled passes of the smoothers (:mod:`bodyfusion.plugins.foot_ins.smoothing`), [Shen2025] §3.
 
-All kernels work on one *block* of samples a ≤ i ≤ b at a time and on block-local
-buffers indexed in the filter's own time order, j = 0 … L (L = b − a):
+Every pass steps the filter's own per-sample recursion,
+:func:`bodyfusion.plugins.foot_ins.kernels.ekf_step` (mechanisation, covariance propagation,
+gated ZUPT/ZARU): the covariance rebuild of the forward filter and the backward navigation
+cannot drift from the filter.
 
-* forward pass: j = i − a;   backward pass: j = b − i.
-
-Buffers (float64): ``Ppost`` (L+1, 15, 15) a-posteriori covariance, ``Pprior``
-(L+1, 15, 15) a-priori covariance, ``Phi`` (L+1, 15, 15) the transition from j−1 to j,
-``dx`` (L+1, 15) the correction injected at j (posterior ⊖ prior nominal). Only one
-block is held at a time, so memory is O(longest block), never N×15×15.
-
-Scalar loops only (array expressions cost numba compile time); the mechanisation and
-the error model are those of the forward filter (:func:`bodyfusion.nav.strapdown.mechanise`,
-:mod:`bodyfusion.nav.error_state`, :mod:`bodyfusion.nav.zupt`).
+Block buffers (float64), j = 0 … L over the samples of one block in the pass's own time order
+(forward j = i − a; backward j = b − i): ``xs`` (L+1, 16) posterior and ``xp`` (L+1, 16) prior
+nominal states, ``Ppost`` / ``Pprior`` (L+1, 15, 15) posterior / prior covariances, ``Phi``
+(L+1, 15, 15) the transition from j−1 to j, ``dx`` (L+1, 15) the correction injected at j
+(posterior ⊖ prior nominal), ``jump`` (L+1, 3) the position moved by a correction made
+outside the filter's loop. Only one block is held at a time: O(longest block) memory, never
+N×15×15. Scalar loops only (array expressions cost numba compile time).
 """
 
 from __future__ import annotations
@@ -22,18 +21,17 @@ import math
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, _apply_A_left, inject,
-                                process_noise_diag, propagate_covariance, update_selected)
 from bodyfusion.nav.attitude import quat_multiply
-from bodyfusion.nav.strapdown import mechanise
-from bodyfusion.nav.zupt import gated_noise_variance, stance_update
+from bodyfusion.nav.error_state import inject, process_noise_diag
+from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
 
-@numba.njit(cache=True)
-def _copy15(dst: np.ndarray, src: np.ndarray) -> None:
-    """dst[:, :] = src for 15×15 matrices (element loops: no slice assignment in kernels)."""
-    for r in range(15):
-        for c in range(15):
-            dst[r, c] = src[r, c]
+YAW = 8
+"""Error-state index of the yaw (the rotation about Up, δθ_U): the one attitude direction a
+foot INS cannot observe; the backward pass shares it with the forward pass."""
+FUSED = np.array([3, 4, 5, 6, 7, 9, 10, 11, 12, 13, 14], dtype=np.int64)
+"""States the backward pass informs and the fusion takes from it: δv, roll and pitch,
+δb_a, δb_g. Not position (no dynamics or update of the pass depends on it, so it learns
+nothing of it) nor the shared yaw."""
 
 
 @numba.njit(cache=True)
@@ -60,30 +58,24 @@ def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
-def transition(C: np.ndarray, f_n: np.ndarray, dt: float, Phi: np.ndarray, work: np.ndarray) -> None:
-    """Phi (15, 15) = I + A dt (the filter's first-order transition)."""
-    for r in range(15):
-        for c in range(15):
-            work[r, c] = 1.0 if r == c else 0.0
-    _apply_A_left(work, C, f_n, Phi)
-    for r in range(15):
-        for c in range(15):
-            Phi[r, c] = (1.0 if r == c else 0.0) + dt * Phi[r, c]
-
-
-@numba.njit(cache=True)
 def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, n: int, m: int, Lw: np.ndarray) -> bool:
     """Solve A X = B for symmetric positive-definite A (n×n, top-left block used) and
-    B (n×m); Cholesky in ``Lw`` (n×n scratch). A tiny diagonal jitter is added when the
-    factorisation meets a non-positive pivot; returns False if it still fails."""
+    B (n×m), Jacobi-scaled (A's diagonal may span many decades: diffuse and pinned states)
+    before the Cholesky factorisation in ``Lw`` (n×n scratch). A tiny diagonal jitter is
+    added when the factorisation meets a non-positive pivot; returns False if it still fails."""
+    d = np.empty(n)
+    for r in range(n):
+        if not A[r, r] > 0.0:
+            return False
+        d[r] = 1.0 / math.sqrt(A[r, r])
     for attempt in range(3):
         jitter = 0.0 if attempt == 0 else 1e-12 * (10.0 ** (4 * attempt))
         ok = True
         for r in range(n):
             for c in range(r + 1):
-                s = A[r, c]
+                s = A[r, c] * d[r] * d[c]
                 if r == c:
-                    s += jitter * max(abs(A[r, r]), 1e-30)
+                    s += jitter
                 for k in range(c):
                     s -= Lw[r, k] * Lw[c, k]
                 if r == c:
@@ -98,7 +90,7 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, n: int, m: int, Lw: 
         if ok:
             for col in range(m):
                 for r in range(n):
-                    s = B[r, col]
+                    s = B[r, col] * d[r]
                     for k in range(r):
                         s -= Lw[r, k] * X[k, col]
                     X[r, col] = s / Lw[r, r]
@@ -107,215 +99,109 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, n: int, m: int, Lw: 
                     for k in range(r + 1, n):
                         s -= Lw[k, r] * X[k, col]
                     X[r, col] = s / Lw[r, r]
+                for r in range(n):
+                    X[r, col] *= d[r]
             return True
     return False
 
 
 @numba.njit(cache=True)
-def _prior_from_history(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, i: int,
-                        g: float, w_ie: np.ndarray, xprior: np.ndarray, f_n: np.ndarray) -> np.ndarray:
-    """Re-mechanise the recorded posterior at i−1 to the prior at i, exactly as the filter
-    did (the two-sample memory rebuilt from sample i−1 and the biases at i−2)."""
-    prev = np.zeros(6)
-    if i >= 2:
-        dtp = t[i - 1] - t[i - 2]
-        for k in range(3):
-            prev[k] = (gyro[i - 1, k] - hist_x[i - 2, 13 + k]) * dtp
-            prev[3 + k] = (acc[i - 1, k] - hist_x[i - 2, 10 + k]) * dtp
-    for k in range(16):
-        xprior[k] = hist_x[i - 1, k]
-    return mechanise(xprior, acc[i], gyro[i], t[i] - t[i - 1], g, w_ie, f_n, prev)
+def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
+                gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, i0: int, i1: int, recorded_x: np.ndarray,
+                ov_idx: np.ndarray, ov_P: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, store: bool,
+                xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray,
+                dx: np.ndarray, jump: np.ndarray, yaw_reset: np.ndarray) -> np.ndarray:
+    """The ekf over i0 < i ≤ i1 (:func:`~bodyfusion.plugins.foot_ins.kernels.ekf_step`) from
+    the nominal state x0 (16,), covariance P0 (15, 15) and mechanisation memory ``memory0``
+    (6,) at i0, replaying what the filter did outside its compiled loop:
 
+    * before the step to a gap sample (``gap_idx``, sorted), P += ``gap_dP`` (the gap policy's
+      inflation: process noise of the step across the gap);
+    * after the step at an override sample (``ov_idx``, sorted: fuser corrections, position
+      fixes, the ckf's coloured updates), the state becomes the recorded one
+      (``recorded_x[i]``) and the covariance the one the correction left (the last ``ov_P``
+      at i).
 
-@numba.njit(cache=True)
-def forward_block(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
-                  params: np.ndarray, a: int, b: int, P_a: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray,
-                  store: bool, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """Rebuild the forward filter's covariances over a < i ≤ b from P_a (the posterior at a)
-    and the recorded nominal history: the same propagation, ZUPT/ZARU Joseph updates at
-    stance samples, and at sample indices in ``ov_idx`` (sorted) the covariance the fuser
-    or a position fix left (``ov_P``). With ``store`` the block buffers are filled
-    (j = i − a). Returns the posterior covariance at b."""
+    From the filter's recorded state and memory at i0 this is the filter itself, bit for
+    bit; on time-reversed samples it is the backward navigation. With ``store`` the block
+    buffers (j = i − i0) are filled, ``jump`` (L+1, 3) with the position the overrides
+    moved (m, zero elsewhere) and ``yaw_reset`` (L+1, 2) with the east and north velocity
+    rows a = e_z × Δv of the heading reset G = I + a e_ψᵀ the stance update made at j
+    (:func:`bodyfusion.nav.error_state.keep_yaw_unobservable`; Δv the update's velocity
+    correction, zero off stance). Returns the covariance at i1."""
     q_diag = process_noise_diag(params)
-    g = params[P_GRAVITY]
-    w_ie = params[7:10].copy()
-    zs = params[P_ZUPT_SIGMA]
-    zr = params[P_ZARU_SIGMA]
-    P = P_a.copy()
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
-    xprior = np.empty(16)
-    tmp = np.empty(15)
-    y = np.zeros(3)
-    v = np.empty(3)
-    gate = params[P_ZUPT_GATE]
-    empty = np.empty((0, 0))
-    ptr = np.searchsorted(ov_idx, a + 1)
+    scratch = np.empty(15)
+    x = x0.copy()
+    P = P0.copy()
+    memory = memory0.copy()
+    no_phi = np.empty((0, 0))
+    x_prior = np.empty(16)
+    P_prior = np.empty((15, 15))
+    Phi_j = np.empty((15, 15))
+    ptr = np.searchsorted(ov_idx, i0 + 1)
+    gptr = np.searchsorted(gap_idx, i0 + 1)
     if store:
-        _copy15(Ppost[0], P)
-    for i in range(a + 1, b + 1):
-        dt = t[i] - t[i - 1]
-        C = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xprior, f_n)
-        propagate_covariance(P, C, f_n, dt, q_diag, work)
-        j = i - a
-        if store:
-            transition(C, f_n, dt, Phi[j], work[0])
-            _copy15(Pprior[j], P)
-        if stance[i]:  # the filter's gated ZUPT: its noise from the prior velocity, as the filter had it
-            for k in range(3):
-                v[k] = -xprior[3 + k]
-            r_var = gated_noise_variance(P, np.int64(3), v, zs * zs, gate)
-            update_selected(P, np.int64(3), y, r_var, tmp, empty)
-            if zr > 0 and r_var == zs * zs:
-                update_selected(P, np.int64(12), y, zr * zr, tmp, empty)
-        while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+        for k in range(16):
+            xs[0, k] = x[k]
+            xp[0, k] = x[k]
+        for k in range(15):
+            dx[0, k] = 0.0
+        for k in range(3):
+            jump[0, k] = 0.0
+        yaw_reset[0, 0] = yaw_reset[0, 1] = 0.0
+        for r in range(15):
+            for c in range(15):
+                Ppost[0, r, c] = P[r, c]
+                Pprior[0, r, c] = P[r, c]
+                Phi[0, r, c] = 1.0 if r == c else 0.0
+    for i in range(i0 + 1, i1 + 1):
+        while gptr < gap_idx.shape[0] and gap_idx[gptr] == i:
             for r in range(15):
                 for c in range(15):
-                    P[r, c] = ov_P[ptr, r, c]
-            ptr += 1
+                    P[r, c] += gap_dP[gptr, r, c]
+            gptr += 1
+        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior,
+                       P_prior, Phi_j)
+        j = i - i0
         if store:
-            boxminus(hist_x[i], xprior, dx[j])
-            _copy15(Ppost[j], P)
+            for k in range(3):
+                jump[j, k] = 0.0
+            stanced = nis != NO_STANCE
+            yaw_reset[j, 0] = -(x[4] - x_prior[4]) if stanced else 0.0
+            yaw_reset[j, 1] = (x[3] - x_prior[3]) if stanced else 0.0
+        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+                ptr += 1
+            if store:
+                for k in range(3):
+                    jump[j, k] = recorded_x[i, k] - x[k]
+            for k in range(16):
+                x[k] = recorded_x[i, k]
+            for r in range(15):
+                for c in range(15):
+                    P[r, c] = ov_P[ptr - 1, r, c]
+        if store:
+            for k in range(16):
+                xs[j, k] = x[k]
+                xp[j, k] = x_prior[k]
+            for r in range(15):
+                for c in range(15):
+                    Ppost[j, r, c] = P[r, c]
+                    Pprior[j, r, c] = P_prior[r, c]
+                    Phi[j, r, c] = Phi_j[r, c]
+            boxminus(x, x_prior, scratch)
+            for k in range(15):
+                dx[j, k] = scratch[k]
     return P
 
 
 @numba.njit(cache=True)
-def forward_rerun_block(x_a: np.ndarray, P_a: np.ndarray, hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray,
-                        gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, a: int, b: int,
-                        Porig_a: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, xf: np.ndarray,
-                        Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray,
-                        Porig_b: np.ndarray) -> None:
-    """Forward filter re-run over a ≤ i ≤ b from the seed x_a / P_a (FB, FB-RTS: the previous
-    segment's fused end state), j = i − a.
-
-    The filter's steps: mechanisation (two-sample memory started from sample a with the
-    seed's biases), covariance propagation, ZUPT/ZARU (state and covariance) at stance
-    samples. Corrections made outside the compiled loop (fuser constraints, position fixes;
-    sample indices ``ov_idx``) are carried over: the original filter's correction there,
-    recorded posterior ⊖ (recorded prior after its own ZUPT/ZARU), is injected into the
-    re-run state and the covariance becomes the one the correction left (``ov_P``). For
-    that, the original filter's covariance is rebuilt alongside from ``Porig_a`` (as in
-    :func:`forward_block`); its value at b goes to ``Porig_b``.
-
-    Fills ``xf`` (nominal states), ``Ppost``, ``Pprior``, ``Phi``, ``dx`` (0 … L)."""
-    q_diag = process_noise_diag(params)
-    g = params[P_GRAVITY]
-    w_ie = params[7:10].copy()
-    x = x_a.copy()
-    P = P_a.copy()
-    Po = Porig_a.copy()
-    work = np.empty((2, 15, 15))
-    f_n = np.empty(3)
-    fo = np.empty(3)
-    xprior = np.empty(16)
-    xo = np.empty(16)
-    tmp = np.empty(15)
-    dext = np.empty(15)
-    empty = np.empty((0, 0))
-    prev = np.zeros(6)
-    if a >= 1:
-        dtp = t[a] - t[a - 1]
-        for k in range(3):
-            prev[k] = (gyro[a, k] - x[13 + k]) * dtp
-            prev[3 + k] = (acc[a, k] - x[10 + k]) * dtp
-    ptr = np.searchsorted(ov_idx, a + 1)
-    for k in range(16):
-        xf[0, k] = x[k]
-    _copy15(Ppost[0], P)
-    for i in range(a + 1, b + 1):
-        j = i - a
-        dt = t[i] - t[i - 1]
-        C = mechanise(x, acc[i], gyro[i], dt, g, w_ie, f_n, prev)
-        transition(C, f_n, dt, Phi[j], work[0])
-        propagate_covariance(P, C, f_n, dt, q_diag, work)
-        _copy15(Pprior[j], P)
-        for k in range(16):
-            xprior[k] = x[k]
-        Co = _prior_from_history(hist_x, t, acc, gyro, i, g, w_ie, xo, fo)
-        propagate_covariance(Po, Co, fo, dt, q_diag, work)
-        if stance[i]:
-            stance_update(x, P, gyro[i], params, tmp, empty)
-            stance_update(xo, Po, gyro[i], params, tmp, empty)
-        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-            boxminus(hist_x[i], xo, dext)
-            inject(x, dext)
-            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-                ptr += 1
-            for r in range(15):
-                for c in range(15):
-                    P[r, c] = ov_P[ptr - 1, r, c]
-                    Po[r, c] = ov_P[ptr - 1, r, c]
-        boxminus(x, xprior, dx[j])
-        for k in range(16):
-            xf[j, k] = x[k]
-        _copy15(Ppost[j], P)
-    _copy15(Porig_b, Po)
-
-
-@numba.njit(cache=True)
-def backward_block(x_end: np.ndarray, P_end: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
-                   stance: np.ndarray, params: np.ndarray, a: int, b: int, xb: np.ndarray, Ppost: np.ndarray,
-                   Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, counters: np.ndarray) -> None:
-    """Backward navigation with its own error filter over b ≥ i ≥ a (j = b − i).
-
-    Started from the forward state x_end / P_end at b, expressed in backward form: velocity
-    and gyro bias negated (so are the matching rows/columns of P). Each step runs
-    :func:`bodyfusion.nav.strapdown.mechanise` from t_i to t_{i−1} on sample i with the angular
-    rate negated, the same specific force, the Earth rate negated; the error model has the
-    same form (paper §3.1). ZUPT (and ZARU on the negated rate) at stance samples.
-    ``xb`` (L+1, 16) receives the backward nominal states (backward form).
-    counters[0] += ZUPTs applied."""
-    q_diag = process_noise_diag(params)
-    g = params[P_GRAVITY]
-    w_neg = np.empty(3)
-    for k in range(3):
-        w_neg[k] = -params[7 + k]
-    x = x_end.copy()
-    for k in range(3):
-        x[3 + k] = -x[3 + k]
-        x[13 + k] = -x[13 + k]
-    P = P_end.copy()
-    for r in range(15):
-        sr = -1.0 if (3 <= r < 6 or r >= 12) else 1.0
-        for c in range(15):
-            sc = -1.0 if (3 <= c < 6 or c >= 12) else 1.0
-            P[r, c] *= sr * sc
-    work = np.empty((2, 15, 15))
-    f_n = np.empty(3)
-    prev = np.zeros(6)
-    gneg = np.empty(3)
-    tmp = np.empty(15)
-    empty = np.empty((0, 0))
-    xprior = np.empty(16)
-    for k in range(16):
-        xb[0, k] = x[k]
-    _copy15(Ppost[0], P)
-    for i in range(b, a, -1):
-        j = b - i + 1
-        dt = t[i] - t[i - 1]
-        for k in range(3):
-            gneg[k] = -gyro[i, k]
-        C = mechanise(x, acc[i], gneg, dt, g, w_neg, f_n, prev)
-        transition(C, f_n, dt, Phi[j], work[0])
-        propagate_covariance(P, C, f_n, dt, q_diag, work)
-        _copy15(Pprior[j], P)
-        for k in range(16):
-            xprior[k] = x[k]
-        if stance[i - 1]:
-            for k in range(3):
-                gneg[k] = -gyro[i - 1, k]
-            stance_update(x, P, gneg, params, tmp, empty)
-            counters[0] += 1
-        boxminus(x, xprior, dx[j])
-        for k in range(16):
-            xb[j, k] = x[k]
-        _copy15(Ppost[j], P)
-
-
-@numba.njit(cache=True)
-def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, L: int,
+def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, yaw_reset: np.ndarray, L: int,
               dx_end: np.ndarray, P_end: np.ndarray, dxs: np.ndarray, Ps: np.ndarray) -> int:
-    """Rauch–Tung–Striebel backward sweep over a block of a closed-loop error-state filter.
+    """Rauch–Tung–Striebel backward sweep over a block of a closed-loop error-state filter
+    ([Shen2025] §3.2).
 
     The filter's own error estimates are zero after every injection, so with dxs[j] the
     smoothed error relative to the posterior nominal at j:
@@ -325,7 +211,10 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
         Ps_j = P⁺_j + K_j (Ps_{j+1} − P⁻_{j+1}) K_jᵀ
 
     starting from dxs_L = dx_end, Ps_L = P_end (zeros and P⁺_L for a block smoothed on
-    its own). Returns the number of steps whose gain could not be formed (then
+    its own). A stance update's heading reset G_{j+1} = I + a e_ψᵀ (``yaw_reset``, see
+    :func:`filter_pass`) changed the coordinates of the error after it: dxs_{j+1} and
+    Ps_{j+1} are taken back to the update's by G⁻¹ = I − a e_ψᵀ (e_ψᵀ a = 0) before the
+    step. Returns the number of steps whose gain could not be formed (then
     dxs_j = 0, Ps_j = P⁺_j)."""
     M = np.empty((15, 15))
     Kt = np.empty((15, 15))
@@ -353,8 +242,21 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
                 for c in range(15):
                     Ps[j, r, c] = Ppost[j, r, c]
             continue
+        a0, a1 = yaw_reset[j + 1, 0], yaw_reset[j + 1, 1]
+        for r in range(15):
+            for c in range(15):
+                D[r, c] = Ps[j + 1, r, c]
+        if a0 != 0.0 or a1 != 0.0:  # G⁻¹ Ps G⁻ᵀ
+            for c in range(15):
+                D[3, c] -= a0 * D[8, c]
+                D[4, c] -= a1 * D[8, c]
+            for r in range(15):
+                D[r, 3] -= a0 * D[r, 8]
+                D[r, 4] -= a1 * D[r, 8]
         for k in range(15):
             e[k] = dxs[j + 1, k] + dx[j + 1, k]
+        e[3] -= a0 * dxs[j + 1, 8]
+        e[4] -= a1 * dxs[j + 1, 8]
         for r in range(15):
             s = 0.0
             for k in range(15):
@@ -362,7 +264,7 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
             dxs[j, r] = s
         for r in range(15):
             for c in range(15):
-                D[r, c] = Ps[j + 1, r, c] - Pprior[j + 1, r, c]
+                D[r, c] -= Pprior[j + 1, r, c]
         # KD = K D
         for r in range(15):
             for c in range(15):
@@ -382,47 +284,58 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
 
 
 @numba.njit(cache=True)
-def apply_smoothed(hist_x: np.ndarray, a: int, L: int, dxs: np.ndarray, Ps: np.ndarray,
-                   out_x: np.ndarray, out_var: np.ndarray, out_a: int) -> None:
-    """out_x[out_a+j] = hist_x[a+j] ⊞ dxs[j]; out_var[out_a+j] = the position variances and the
-    east–north covariance of Ps[j], 0 ≤ j ≤ L."""
-    x = np.empty(16)
+def apply_smoothed(x: np.ndarray, a: int, L: int, dxs: np.ndarray, out_x: np.ndarray, out_a: int) -> None:
+    """out_x[out_a + j] = x[a + j] ⊞ dxs[j], 0 ≤ j ≤ L."""
+    y = np.empty(16)
     d = np.empty(15)
     for j in range(L + 1):
         for k in range(16):
-            x[k] = hist_x[a + j, k]
+            y[k] = x[a + j, k]
         for k in range(15):
             d[k] = dxs[j, k]
-        inject(x, d)
+        inject(y, d)
         for k in range(16):
-            out_x[out_a + j, k] = x[k]
-        for k in range(3):
-            out_var[out_a + j, k] = Ps[j, k, k]
-        out_var[out_a + j, 3] = Ps[j, 0, 1]
+            out_x[out_a + j, k] = y[k]
 
 
 @numba.njit(cache=True)
-def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L: int, a: int,
-               out_x: np.ndarray, out_var: np.ndarray, P_end: np.ndarray) -> int:
-    """Covariance-weighted fusion of the forward (j = i − a) and backward (j = b − i)
-    estimates (paper §3.3), the backward pass's δp, δv, δθ taken as a measurement of the
-    forward state's:
+def position_covariance(P: np.ndarray, L: int, out_var: np.ndarray, out_a: int) -> None:
+    """out_var[out_a + j] = (var east, var north, var up, cov east–north) of P[j], m²."""
+    for j in range(L + 1):
+        for k in range(3):
+            out_var[out_a + j, k] = P[j, k, k]
+        out_var[out_a + j, 3] = P[j, 0, 1]
 
-        P_g = (P_f⁻¹ + P_b⁻¹)⁻¹,  x_g = P_g (P_f⁻¹ x_f + P_b⁻¹ x_b)   (over p, v, θ)
 
-    computed as x_g = x_f ⊞ P_f[:, nav] S⁻¹ (x_b ⊖ x_f)_nav, P_g = P_f − P_f[:, nav] S⁻¹
-    P_f[nav, :] with S = P_f + P_b over the nine navigation states; the biases move with
-    their forward cross-covariances. Writes the fused states out_x[a:a+L+1], their
-    position variances, and the fused 15×15 covariance at the end (j = L, the next
-    segment's seed) to ``P_end``. Returns the number of samples where the fusion failed
-    (the forward estimate is kept there)."""
-    S = np.empty((9, 9))
-    Lw = np.empty((9, 9))
-    Z = np.empty((9, 16))
-    B = np.empty((9, 16))
+@numba.njit(cache=True)
+def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L: int, out_x: np.ndarray,
+               out_P: np.ndarray, a: int) -> int:
+    """Covariance-weighted fusion of the forward (j = i − a) and backward (j = b − i,
+    backward form: velocity and gyro bias negated) estimates of one segment, [Shen2025] §3.3,
+    P_g = (P_f⁻¹ + P_b⁻¹)⁻¹, x_g = P_g (P_f⁻¹ x_f + P_b⁻¹ x_b), with the shared part removed.
+
+    The backward pass starts from the forward yaw, so both carry the same yaw error e_ψ:
+    e_f = g e_ψ + n_f with n_f independent of it, and the difference of the passes holds no
+    e_ψ. The forward covariance is therefore conditioned on the yaw, N_f = P_f −
+    P_f[:, ψ] P_f[ψ, :] / P_f[ψ, ψ] (the covariance of n_f), and over the :data:`FUSED` states
+    S:  x_g = x_f ⊞ N_f[:, S] (N_f + P_b)_SS⁻¹ (x_b ⊖ x_f)_S,
+        P_g = P_f − N_f[:, S] (N_f + P_b)_SS⁻¹ N_f[S, :].
+    The yaw and its σ stay the forward ones; position moves with its forward cross-covariances.
+    Writes out_x[a + j] (16,) and out_P[j] (15, 15). Returns the number of samples where the
+    fusion failed (the forward estimate is kept there)."""
+    n = FUSED.shape[0]
+    S = np.empty((n, n))
+    Lw = np.empty((n, n))
+    Z = np.empty((n, 16))
+    B = np.empty((n, 16))
+    N = np.empty((15, 15))
     xbf = np.empty(16)
     d = np.empty(15)
     x = np.empty(16)
+    sign = np.ones(15)
+    for k in range(3):
+        sign[3 + k] = -1.0
+        sign[12 + k] = -1.0
     failed = 0
     for j in range(L + 1):
         jb = L - j
@@ -433,47 +346,54 @@ def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L
             xbf[3 + k] = -xbf[3 + k]
             xbf[13 + k] = -xbf[13 + k]
         boxminus(xbf, x, d)
-        for r in range(9):
-            sr = -1.0 if 3 <= r < 6 else 1.0
-            for c in range(9):
-                sc = -1.0 if 3 <= c < 6 else 1.0
-                S[r, c] = Pf[j, r, c] + sr * sc * Pb[jb, r, c]
+        pyy = Pf[j, YAW, YAW]
+        for r in range(15):
             for c in range(15):
-                B[r, c] = Pf[j, r, c]
-            B[r, 15] = d[r]
-        ok = chol_solve(S, B, Z, 9, 16, Lw)
-        for k in range(15):
-            d[k] = 0.0
+                N[r, c] = Pf[j, r, c] - (Pf[j, r, YAW] * Pf[j, YAW, c] / pyy if pyy > 0.0 else 0.0)
+        for r in range(n):
+            fr = FUSED[r]
+            for c in range(n):
+                fc = FUSED[c]
+                S[r, c] = N[fr, fc] + sign[fr] * sign[fc] * Pb[jb, fr, fc]
+            for c in range(15):
+                B[r, c] = N[fr, c]
+            B[r, 15] = d[fr]
+        ok = chol_solve(S, B, Z, n, 16, Lw)
+        for r in range(15):
+            d[r] = 0.0
+            for c in range(15):
+                out_P[j, r, c] = Pf[j, r, c]
         if ok:
-            # δ = P_f[:, nav] Z[:, 15];  P_g = P_f − P_f[:, nav] Z[:, :15]
+            # δ = N[:, S] Z[:, 15];  P_g = P_f − N[:, S] Z[:, :15]
             for r in range(15):
                 s = 0.0
-                for k in range(9):
-                    s += Pf[j, r, k] * Z[k, 15]
+                for k in range(n):
+                    s += N[r, FUSED[k]] * Z[k, 15]
                 d[r] = s
-            for r in range(3):
-                s = 0.0
-                for k in range(9):
-                    s += Pf[j, r, k] * Z[k, r]
-                out_var[a + j, r] = Pf[j, r, r] - s
+                for c in range(r, 15):
+                    s = 0.0
+                    for k in range(n):
+                        s += N[r, FUSED[k]] * Z[k, c]
+                    out_P[j, r, c] = Pf[j, r, c] - s
+                    out_P[j, c, r] = out_P[j, r, c]
         else:
             failed += 1
-            for r in range(3):
-                out_var[a + j, r] = Pf[j, r, r]
-        if j == L:
-            for r in range(15):
-                for c in range(15):
-                    s = 0.0
-                    if ok:
-                        for k in range(9):
-                            s += Pf[j, r, k] * Z[k, c]
-                    P_end[r, c] = Pf[j, r, c] - s
-            for r in range(15):
-                for c in range(r + 1, 15):
-                    v = 0.5 * (P_end[r, c] + P_end[c, r])
-                    P_end[r, c] = v
-                    P_end[c, r] = v
         inject(x, d)
         for k in range(16):
             out_x[a + j, k] = x[k]
     return failed
+
+
+@numba.njit(cache=True)
+def integrate_position(x: np.ndarray, t: np.ndarray, a: int, b: int, p_a: np.ndarray, jump: np.ndarray) -> None:
+    """Position recomputed from the velocity ([Shen2025] §3.3, the re-forward navigation of the
+    fused state) by the mechanisation's own trapezoid (:mod:`bodyfusion.nav.strapdown`):
+    x[a, 0:3] = p_a, x[i, 0:3] = x[i−1, 0:3] + ½ (v_{i−1} + v_i)(t_i − t_{i−1}) + jump[i − a] for
+    a < i ≤ b, ``jump`` (m) the position the filter's corrections outside its loop moved there
+    (fuser constraints, position fixes: measurements the velocity does not carry)."""
+    for k in range(3):
+        x[a, k] = p_a[k]
+    for i in range(a + 1, b + 1):
+        dt = t[i] - t[i - 1]
+        for k in range(3):
+            x[i, k] = x[i - 1, k] + 0.5 * (x[i - 1, 3 + k] + x[i, 3 + k]) * dt + jump[i - a, k]

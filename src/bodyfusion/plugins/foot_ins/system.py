@@ -413,21 +413,31 @@ class FootIns(SensorSystem):
 
     # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) ---------------------------------------------
     def smoothing_record(self) -> dict:
-        """What the smoother needs to rebuild this filter's run (nothing is copied but the
-        few covariances set outside the compiled loop): IMU samples, stance flags, filter
-        parameters, the recorded nominal history, the initial covariance, and the sample
-        indices (sorted) with the covariance left there by a fuser correction or a fix (and,
-        for the ckf, after every coloured update). Ensemble kinds have no such record."""
+        """What the smoothers need to replay this filter's run (nothing is copied but the few
+        covariances set outside the compiled loop): IMU samples, stance flags, filter
+        parameters, the recorded nominal history, the initial covariance, the gaps (sample
+        index after each gap, sorted, and the covariance the gap policy added before the step
+        to it: process noise of that step), and the sample indices (sorted) with the
+        covariance left there by a fuser correction or a fix (and, for the ckf, after every
+        coloured update). Ensemble kinds have no such record."""
         if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
         idx = np.concatenate([np.empty(0, dtype=np.int64), *self.run_data.override_idx])
         Ps = np.concatenate([np.empty((0, 15, 15)), *self.run_data.override_P])
         order = np.argsort(idx, kind="stable")
+        idx, Ps = idx[order], Ps[order]
+        gaps = self._gap_index <= self._i
+        gap_idx = self._gap_index[gaps]
+        # the gap policy's inflation went through apply_correction: the last override at g − 1
+        keep = np.ones(idx.size, dtype=bool)
+        keep[np.searchsorted(idx, gap_idx - 1, side="right") - 1] = False
         return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
-                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[order]),
-                "override_P": np.ascontiguousarray(Ps[order]), "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
+                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[keep]),
+                "override_P": np.ascontiguousarray(Ps[keep]), "gap_idx": np.ascontiguousarray(gap_idx),
+                "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
+                "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
 
     def smooth(self, cfg: SmootherConfig) -> dict | None:
         """RTS, FB or FB-RTS over this run (:mod:`bodyfusion.plugins.foot_ins.smoothing`);
