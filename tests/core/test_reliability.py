@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import yaml
+from pydantic import ValidationError
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.cli import counted_policies
@@ -145,3 +145,15 @@ def test_a_range_file_with_no_usable_range_is_warned(recording, tmp_path):
 def test_constraints_left_unenforced_are_warned_at_run(recording, caplog):
     run_layout(load_layout(recording, ["fuser.method=none"]))
     assert any("the 2 constraint(s) of the layout are not enforced" in r.message for r in caplog.records)
+
+
+@pytest.mark.parametrize(("key", "value"), [("filter.members", 100000), ("detector.window", 5000)])
+def test_size_fields_of_the_foot_filter_are_capped(key, value, tmp_path):
+    """An ensemble or detector window too large to run is refused at validation, by its key."""
+    from bodyfusion.plugins.foot_ins.config import FootInsConfig
+
+    section = {"plugin": "foot_ins", "data": {"path": "imu.csv"}}
+    head, field = key.split(".")
+    section[head] = {field: value}
+    with pytest.raises(ValidationError, match=rf"{field}\n  Input should be less than or equal to"):
+        FootInsConfig.model_validate(section)

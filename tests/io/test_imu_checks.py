@@ -145,8 +145,31 @@ def test_the_foot_ins_inflates_its_covariance_across_a_gap(tmp_path, write_yaml)
         cfg = write_yaml({"systems": {"foot": {"plugin": "foot_ins", "data": {"path": name, **section}}}}, f"{name}.yaml")
         runs[name] = run_layout(load_layout(cfg))
     gap, whole = runs["imu.csv"].systems["foot"], runs["whole.csv"].systems["foot"]
-    i = int(gap.stream.checks.gap_index[0])
-    before, after = gap.hist_pos_cov[i - 1, :3].sum(), gap.hist_pos_cov[i, :3].sum()
+    i = int(gap.stream.checks.gap_index[0])  # the inflation lands before the step to i (row i − 1)
+    before, after = gap.hist_pos_cov[i - 2, :3].sum(), gap.hist_pos_cov[i, :3].sum()
     j = int(np.searchsorted(whole.stream.t, gap.stream.t[i]))
-    assert after - before > 100 * (whole.hist_pos_cov[j, :3].sum() - whole.hist_pos_cov[j - 1, :3].sum())
+    assert after - before > 10 * (whole.hist_pos_cov[j, :3].sum() - whole.hist_pos_cov[j - 2, :3].sum())
     assert gap.diagnostics()["input_checks"]["gaps"] == 1
+
+
+def test_a_foot_at_rest_through_a_long_gap_stays_where_it_was(tmp_path, write_yaml):
+    """A minute with no samples is not integrated as one 60 s step (0.02 m/s^2 of noise held
+    for 60 s would move the foot 36 m): the gap step takes the nominal period, and the
+    uncertainty the gap adds is bounded by a walker's speed."""
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.core.run import run_layout
+    from bodyfusion.plugins.foot_ins.system import GAP_SPEED_SD_MPS
+
+    t, acc, gyro = walking_imu(seconds=20.0)
+    acc[:, 0:2] = acc[0, 0:2] + np.random.default_rng(1).normal(0, 0.02, (t.size, 2))
+    acc[:, 2] = 9.81 + np.random.default_rng(2).normal(0, 0.02, t.size)
+    gyro[:] = np.random.default_rng(3).normal(0, 0.003, gyro.shape)
+    t[1000:] += 60.0
+    write_csv(tmp_path / "gap.csv", t, acc, gyro)
+    section = {"time_column": "t", "acc_columns": ["ax", "ay", "az"], "gyro_columns": ["gx", "gy", "gz"]}
+    cfg = write_yaml({"systems": {"foot": {"plugin": "foot_ins", "data": {"path": "gap.csv", **section}}}})
+    track = run_layout(load_layout(cfg)).trajectories["foot"]
+    np.testing.assert_allclose(track.t, t, atol=1e-9)  # output times are the recording's
+    assert np.max(np.abs(track.pos_n)) < 0.05
+    assert track.pos_sd[1000, 0] > 1.0
+    assert np.all(track.pos_sd <= GAP_SPEED_SD_MPS * 60.0)

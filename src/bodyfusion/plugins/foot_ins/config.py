@@ -13,6 +13,11 @@ from bodyfusion.io.imu import ImuCsvConfig
 
 ENSEMBLE_KINDS = ("enekf", "cenekf")
 COLOURED_KINDS = ("ckf", "cenekf")
+MAX_MEMBERS = 2000
+"""Largest ensemble: 2000 members run about 300 samples/s (100 members: 5,300), so a minute of
+100 Hz data per foot takes 20 s; larger ensembles would run for hours on a walk."""
+MAX_WINDOW = 1000
+"""Largest stance-detector window, samples (10 s at 100 Hz: longer than any stance)."""
 
 
 class FootFilterConfig(StrictModel):
@@ -26,8 +31,8 @@ class FootFilterConfig(StrictModel):
     ensemble filter with the coloured noise in an augmented state, eqs. 5–7)."""
     colour_factor: float = Field(default=0.0, ge=0, lt=1)
     """Colour factor α of the stance noise v_k = α v_{k−1} + ξ_k, in [0, 1) (ckf, cenekf)."""
-    members: int = Field(default=100, ge=2)
-    """Ensemble size M, at least 2 (enekf, cenekf)."""
+    members: int = Field(default=100, ge=2, le=MAX_MEMBERS)
+    """Ensemble size M, 2 to :data:`MAX_MEMBERS` (enekf, cenekf)."""
     acc_noise_density: float = Field(default=0.02, gt=0)
     """Accelerometer white noise, m/s^2/√Hz."""
     gyro_noise_density: float = Field(default=0.002, gt=0)
@@ -70,8 +75,9 @@ class DetectorConfig(StrictModel):
 
     kind: Literal["adaptive", "labels", "shoe", "magnitude", "axes_band"] = "adaptive"
     """adaptive, labels, shoe, magnitude or axes_band."""
-    window: int | None = Field(default=None, ge=1)
-    """Samples per test window (shoe, magnitude, axes_band: default 5; adaptive: 25 ms)."""
+    window: int | None = Field(default=None, ge=1, le=MAX_WINDOW)
+    """Samples per test window, at most :data:`MAX_WINDOW` (shoe, magnitude, axes_band:
+    default 5; adaptive: 25 ms)."""
     motion_threshold: float = Field(default=1e5, gt=0)
     """adaptive: the SHOE statistic above which a sample is never stance."""
     margin_decades: float = Field(default=1.0, gt=0)

@@ -32,6 +32,12 @@ from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
+GAP_SPEED_SD_MPS = 3.0
+"""One-sigma speed (m/s) of a foot over a gap in its IMU stream: a brisk run; bounds the
+position and velocity uncertainty a gap adds."""
+GAP_ATTITUDE_SD_RAD = 0.5
+"""Largest one-sigma attitude error (rad) a gap adds: the error-state model is small-angle, and
+the stance updates that follow re-level roll and pitch."""
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
 
@@ -102,6 +108,7 @@ class FootIns(SensorSystem):
         self._params = self._filter_params()
         self.still = self._find_still_interval()
         self._gap_index, self._gap_P = self._gap_inflation()
+        self._t_nav = self._navigation_clock()
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
         self._fix_sigma = fx.sigma_m if fx is not None else 0.0
@@ -179,10 +186,14 @@ class FootIns(SensorSystem):
         return still
 
     def _gap_inflation(self) -> tuple[np.ndarray, np.ndarray]:
-        """Gap policy: before the step across a gap of Δ missing seconds the covariance grows by
-        an unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
-        σ_ω = rms(‖ω‖): δp += (σ_f Δ²/2)², δv += (σ_f Δ)², δθ += (σ_ω Δ)² per axis. Returns the
-        gap sample indices and the (K, 15, 15) covariance increments."""
+        """Gap policy: the step across a gap is mechanised over one nominal period
+        (:meth:`_navigation_clock`: nothing is integrated over time with no samples), and before
+        it the covariance grows by what the foot may have done in the Δ missing seconds: an
+        unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
+        σ_ω = rms(‖ω‖), bounded by a walker's reach: σ_p = min(σ_f Δ²/2, v_max Δ),
+        σ_v = min(σ_f Δ, v_max), σ_θ = min(σ_ω Δ, θ_max) per axis (:data:`GAP_SPEED_SD_MPS`,
+        :data:`GAP_ATTITUDE_SD_RAD`). Returns the gap sample indices and the (K, 15, 15)
+        covariance increments."""
         checks = self.stream.checks
         if checks is None or checks.gap_index.size == 0:
             return np.empty(0, dtype=np.int64), np.empty((0, 15, 15))
@@ -191,10 +202,23 @@ class FootIns(SensorSystem):
         sigma_w = float(np.sqrt(np.mean(np.sum(self.stream.gyro_b**2, axis=1))))
         dP = np.zeros((checks.gap_index.size, 15, 15))
         for k, missing in enumerate(checks.gap_missing_s):
-            for block, var in ((DPOS, (sigma_f * missing**2 / 2) ** 2), (DVEL, (sigma_f * missing) ** 2),
-                               (DATT, (sigma_w * missing) ** 2)):
-                dP[k, block, block] = var * np.eye(3)
+            for block, sd in ((DPOS, min(sigma_f * missing**2 / 2, GAP_SPEED_SD_MPS * missing)),
+                              (DVEL, min(sigma_f * missing, GAP_SPEED_SD_MPS)),
+                              (DATT, min(sigma_w * missing, GAP_ATTITUDE_SD_RAD))):
+                dP[k, block, block] = sd**2 * np.eye(3)
         return checks.gap_index, dP
+
+    def _navigation_clock(self) -> np.ndarray:
+        """The sample times the filter integrates over (s): the recording's, with every gap
+        step shortened to the nominal period (the time after a gap moves back by the missing
+        Δ), so a gap is one ordinary step plus the covariance of :meth:`_gap_inflation`.
+        Output times stay the recording's."""
+        checks = self.stream.checks
+        if checks is None or checks.gap_index.size == 0:
+            return self.stream.t
+        missing = np.zeros(len(self.stream))
+        missing[checks.gap_index] = checks.gap_missing_s
+        return self.stream.t - np.cumsum(missing)
 
     def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """The state at the first sample: levelled (TRIAD on the mean specific force) and the
@@ -246,7 +270,7 @@ class FootIns(SensorSystem):
         xb[3:6] *= -1.0
         xb[13:16] *= -1.0
         Pb = P_s * flip
-        t_r, acc_r, gyro_r = -st.t[s - r], st.acc_b[src], -st.gyro_b[src]
+        t_r, acc_r, gyro_r = -self._t_nav[s - r], st.acc_b[src], -st.gyro_b[src]
         stance_r = np.ascontiguousarray(self.stance[s - r])
         hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
@@ -268,7 +292,7 @@ class FootIns(SensorSystem):
         n = len(self.stream)
         self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
                                                                      self.context.seed, self.name)
-        self.run_data = RunData(self.stream.t, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
+        self.run_data = RunData(self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
                                 np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.zeros(COUNTERS_SIZE))
         self.run_data.hist_x[0] = self.x
         self._record_position_covariance(0)
@@ -432,7 +456,7 @@ class FootIns(SensorSystem):
         # the gap policy's inflation went through apply_correction: the last override at g − 1
         keep = np.ones(idx.size, dtype=bool)
         keep[np.searchsorted(idx, gap_idx - 1, side="right") - 1] = False
-        return {"t": self.stream.t[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
+        return {"t": self._t_nav[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
                 "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[keep]),
                 "override_P": np.ascontiguousarray(Ps[keep]), "gap_idx": np.ascontiguousarray(gap_idx),
