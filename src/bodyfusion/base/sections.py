@@ -22,9 +22,11 @@ DataPath = Annotated[Path, AfterValidator(_resolve_path)]
 
 
 class StrictModel(BaseModel):
-    """Base of every layout section: unknown keys are errors, and so are NaN and infinite numbers."""
+    """Base of every layout section: unknown keys are errors, and so are NaN and infinite numbers;
+    a field set on a built model is validated like the file's (``layout.fuser.method = "bogus"``
+    raises :class:`pydantic.ValidationError`)."""
 
-    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False, validate_assignment=True)
 
 
 class KeyedError(ValueError):

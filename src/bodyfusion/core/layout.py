@@ -9,6 +9,8 @@ dotted path of the offending key. Relative paths resolve against the config file
 from __future__ import annotations
 
 import hashlib
+import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -346,11 +348,14 @@ def _unshared_copy(node: Any) -> Any:
     return node
 
 
-def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
-    """Set dotted paths in a raw layout dict (lists by integer index); returns a copy."""
+def apply_overrides(raw: dict[str, Any], overrides: Sequence[str] | Mapping[str, Any]) -> dict[str, Any]:
+    """Set dotted paths in a raw layout dict (lists by integer index); returns a copy. Overrides
+    are ``KEY=VALUE`` strings (VALUE read as YAML) or a mapping of dotted key → value."""
     out = _unshared_copy(raw)
-    for item in overrides:
-        key, value = parse_override(item)
+    pairs = overrides.items() if isinstance(overrides, Mapping) else map(parse_override, overrides)
+    for key, value in pairs:
+        if not key or any(not part for part in key.split(".")):
+            raise ConfigError(key, "empty part in the dotted key")
         node: Any = out
         parts = key.split(".")
         for depth, part in enumerate(parts):
@@ -454,27 +459,88 @@ def read_yaml(path: Path) -> dict[str, Any]:
     return raw
 
 
+def plain(node: Any, base_dir: Path | None = None) -> Any:
+    """Models, tuples and paths as plain YAML/JSON values: dicts, lists, strings (a path under
+    ``base_dir`` relative to it)."""
+    if isinstance(node, BaseModel):
+        node = node.model_dump()
+    if isinstance(node, dict):
+        return {str(k): plain(v, base_dir) for k, v in node.items()}
+    if isinstance(node, (list, tuple)):
+        return [plain(v, base_dir) for v in node]
+    if isinstance(node, Path):
+        if base_dir is not None and node.is_relative_to(base_dir):
+            return node.relative_to(base_dir).as_posix()
+        return node.as_posix()
+    return node
+
+
 class LoadedLayout:
     """A validated layout with each system's section validated by its plugin.
 
-    Attributes: ``path`` (file), ``layout`` (:class:`Layout`), ``system_configs``
-    (name → plugin config model), ``raw`` (the dict after overrides), ``sha256``.
+    Attributes: ``path`` (its file; None for a layout built in code), ``base_dir`` (the folder
+    relative paths resolve against), ``layout`` (:class:`Layout`), ``system_configs`` (name →
+    plugin config model), ``raw`` (the dict it was validated from, after overrides), ``tables``
+    (dotted key of a table section → the in-memory table given for it). Every model validates a
+    field set on it (``loaded.fuser.method = "bogus"`` raises :class:`pydantic.ValidationError`);
+    a :class:`Layout` field read or set on the loaded layout is the :attr:`layout`'s, and
+    :attr:`systems` are the plugin models. :meth:`checked` validates the whole again (the
+    cross-field and plugin checks) and :attr:`sha256` hashes the models as they are now.
     """
 
-    def __init__(self, path: Path, layout: Layout, system_configs: dict[str, BaseModel], raw: dict[str, Any]) -> None:
+    def __init__(self, path: Path | None, layout: Layout, system_configs: dict[str, BaseModel], raw: dict[str, Any],
+                 base_dir: Path | None = None, tables: dict[str, Any] | None = None) -> None:
         self.path = path
+        self.base_dir = base_dir if base_dir is not None else (path.resolve().parent if path else Path.cwd())
         self.layout = layout
         self.system_configs = system_configs
         self.raw = raw
-        self.sha256 = hashlib.sha256(yaml.safe_dump(raw, sort_keys=True).encode()).hexdigest()
+        self.tables = dict(tables or {})
+
+    def __getattr__(self, name: str) -> Any:
+        layout = self.__dict__.get("layout")
+        if layout is not None and name in Layout.model_fields:
+            return getattr(layout, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in Layout.model_fields and name != "systems" and "layout" in self.__dict__:
+            setattr(self.layout, name, value)
+        else:
+            super().__setattr__(name, value)
 
     @property
     def name(self) -> str:
-        return self.layout.name or self.path.stem
+        return self.layout.name or (self.path.stem if self.path is not None else "layout")
+
+    @property
+    def systems(self) -> dict[str, BaseModel]:
+        """Name → the system's plugin config model (:attr:`system_configs`)."""
+        return self.system_configs
+
+    def to_dict(self) -> dict[str, Any]:
+        """The layout as its models hold it now, as a plain dict (every field, defaults included;
+        paths under :attr:`base_dir` relative to it)."""
+        out = plain(self.layout, self.base_dir)
+        out["systems"] = {name: plain(cfg, self.base_dir) for name, cfg in self.system_configs.items()}
+        return out
+
+    @property
+    def sha256(self) -> str:
+        """SHA-256 (hex) of :meth:`to_dict`, computed when asked: an edited model is never stale.
+        In-memory tables are named by their sections, not hashed."""
+        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
+
+    def checked(self) -> LoadedLayout:
+        """The layout validated again as a whole from its models (after fields were set on them):
+        every cross-field and plugin check; the tables are kept."""
+        return validate_layout(self.to_dict(), self.path, self.base_dir, tables=self.tables)
 
 
-def load_layout(path: str | Path, overrides: list[str] | None = None, registry: Any = None) -> LoadedLayout:
-    """Read, override, and validate a layout file (both stages)."""
+def load_layout(path: str | Path, overrides: Sequence[str] | Mapping[str, Any] | None = None,
+                registry: Any = None) -> LoadedLayout:
+    """Read, override, and validate a layout file (both stages); every table section it has
+    names its file."""
     path = Path(path)
     try:
         raw = apply_overrides(read_yaml(path), overrides or [])
@@ -482,7 +548,13 @@ def load_layout(path: str | Path, overrides: list[str] | None = None, registry: 
         if err.path is not None:
             raise
         raise ConfigError(err.key, err.reason, path) from None
-    base_dir = path.resolve().parent
+    return validate_layout(raw, path, path.resolve().parent, registry)
+
+
+def validate_layout(raw: dict[str, Any], path: Path | None, base_dir: Path, registry: Any = None,
+                    tables: dict[str, Any] | None = None) -> LoadedLayout:
+    """Validate a raw layout dict (both stages); relative paths resolve against ``base_dir``;
+    ``path``: the file it came from, named in errors (None: built in code)."""
     layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
     registry = registry or plugin_registry.get_registry()
     system_configs: dict[str, BaseModel] = {}
@@ -496,7 +568,7 @@ def load_layout(path: str | Path, overrides: list[str] | None = None, registry: 
             except KeyedError as err:
                 raise ConfigError(err.key, str(err), path) from None
     _check_aiding_references(layout, system_configs, registry, path)
-    return LoadedLayout(path, layout, system_configs, raw)
+    return LoadedLayout(path, layout, system_configs, raw, base_dir, tables)
 
 
 def _nodes(loaded: LoadedLayout) -> list[tuple[str, Any]]:

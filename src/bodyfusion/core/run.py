@@ -30,7 +30,7 @@ def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
     outages: dict[str, tuple[tuple[float, float], ...]] = {}
     for o in lay.outages:
         outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
-    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.path.resolve().parent,
+    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.base_dir,
                          seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages)
 
 
@@ -70,9 +70,12 @@ def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None =
 
 
 def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
-    """Run a validated layout in-process (no files written)."""
+    """Run a validated layout in-process (no files written). The layout is validated again as a
+    whole first (:meth:`~bodyfusion.core.layout.LoadedLayout.checked`: fields set on its models
+    since it was loaded pass every cross-field and plugin check)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    loaded = loaded.checked()
     context = layout_context(loaded, seed)
     built = build_systems(loaded, context)
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}
@@ -84,7 +87,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     t0 = time.perf_counter()
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         LOG.warning("%s: fuser.method is none: the %d constraint(s) of the layout are not enforced",
-                    loaded.path.name, len(loaded.layout.constraints))
+                    loaded.path.name if loaded.path else loaded.name, len(loaded.layout.constraints))
     rotations = align_headings(systems, loaded.layout.heading_alignment)
     monitors = {name: CovarianceMonitor(s) for name, s in systems.items()}
     report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
