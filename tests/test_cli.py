@@ -13,6 +13,7 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
+import pyarrow.parquet as pq
 import pytest
 
 from tests.paths import ROOT
@@ -204,6 +205,15 @@ def test_run_xio_trajectories_csv_has_the_contract_header(xio_run):
     first, last = rows[0], rows[-1]
     gap = ((float(last[2]) - float(first[2])) ** 2 + (float(last[3]) - float(first[3])) ** 2) ** 0.5
     assert gap == pytest.approx(doc["systems"]["foot"]["loop_closure_m"], abs=1e-4)
+
+
+def test_run_xio_writes_parquet_and_tum_and_no_geojson_without_a_geodetic_origin(xio_run):
+    _, out = xio_run
+    with (out / "trajectories.csv").open() as fh:
+        rows = sum(1 for _ in fh) - 1
+    assert pq.read_metadata(out / "trajectories.parquet").num_rows == rows
+    assert [p.name for p in (out / "tum").iterdir()] == ["foot.txt"]  # no truth, no truth file
+    assert not (out / "track.geojson").exists()
 
 
 def test_run_xio_prints_a_summary(xio_run):

@@ -1,19 +1,23 @@
 """Writers of the run outputs named in docs/contract.md: metrics.json (with each system's
-consistency ``health``), trajectories.csv, plots (nees.png where truth exists)."""
+consistency ``health``), the trajectory files (:mod:`bodyfusion.core.exports`: trajectories.csv
+and .parquet, tum/, track.geojson), plots (nees.png where truth exists)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.core.exports import (
+    write_geojson,
+    write_trajectories_csv,
+    write_trajectories_parquet,
+    write_tum,
+)
 from bodyfusion.core.result import RunResult
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
-from bodyfusion.io.gnss import enu_to_geodetic
-
-
-TRAJECTORY_HEADER = "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
 
 
 def _json_safe(value):
@@ -110,37 +114,20 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     return doc
 
 
-def write_trajectories(path: Path, result: RunResult, decimate: int = 1) -> None:
-    """Long-format trajectories in the navigation frame, before any evaluation alignment."""
-    with path.open("w") as fh:
-        fh.write(TRAJECTORY_HEADER + "\n")
-        for name, traj in result.trajectories.items():
-            block = np.column_stack([traj.t, traj.pos_n, traj.pos_sd])[::decimate]
-            np.savetxt(fh, block, fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
-
-
-def write_geojson(path: Path, result: RunResult, decimate: int = 1) -> None:
-    """track.geojson: one WGS84 LineString per system (lon, lat, height), when the run has a
-    geodetic origin."""
-    features = []
-    for name, traj in result.trajectories.items():
-        llh = enu_to_geodetic(traj.pos_n[::decimate], result.geodetic_origin)
-        coords = [[round(float(lon), 8), round(float(lat), 8), round(float(h), 3)] for lat, lon, h in llh]
-        features.append({"type": "Feature", "properties": {"system": name},
-                         "geometry": {"type": "LineString", "coordinates": coords}})
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n")
-
-
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float) -> None:
-    """metrics.json, trajectories.csv and (unless switched off) the PNG plots."""
+    """metrics.json, the trajectory files and (unless switched off) the PNG plots."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     output = result.loaded.layout.output
-    write_trajectories(out_dir / "trajectories.csv", result, output.decimate)
+    write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
+    write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
+                               config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
+    write_tum(out_dir / "tum", result.trajectories, result.truths, output.decimate)
     if result.geodetic_origin is not None:
-        write_geojson(out_dir / "track.geojson", result, output.decimate)
+        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin,
+                      output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     if output.plots:

@@ -1,0 +1,177 @@
+"""The trajectory files other tools read (bodyfusion.core.exports): trajectories.parquet beside
+the CSV, TUM files for evo, track.geojson with times and truth, and the reader of both tables."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pymap3d
+import pytest
+
+import bodyfusion
+from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.core.exports import (
+    GEOJSON_STEP_S,
+    read_trajectories,
+    write_geojson,
+    write_trajectories_csv,
+    write_trajectories_parquet,
+    write_tum,
+)
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.output import write_outputs
+from bodyfusion.core.result import RunResult
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+from tests.paths import CONFIGS
+
+ORIGIN = (49.4613, 11.1109, 390.0)
+
+
+@pytest.fixture(scope="module")
+def geo_run(tmp_path_factory) -> tuple[RunResult, Path]:
+    """A 40 m foot + hand-phone walk about ``ORIGIN`` with truth, and the folder its outputs went to."""
+    tmp = tmp_path_factory.mktemp("geo")
+    sim = simulate(CONFIGS / "foot_hand_gnss_outage.yaml", tmp / "sim", seed=0,
+                   overrides=["path.length_m=12", "path.width_m=6", "path.laps=1", "path.turn_radius_m=1",
+                              "systems.hand_phone.gnss.outages=[]"])
+    result = run_layout(load_layout(sim.config_path, ["output.plots=false"]))
+    write_outputs(result, tmp / "out", "walk", 1.0)
+    return result, tmp / "out"
+
+
+def synthetic(n: int = 50) -> dict[str, Trajectory]:
+    """Two systems, one giving its east-north covariance."""
+    rng = np.random.default_rng(1)
+    t = np.arange(n) * 0.01 + 3.0
+    return {"foot": Trajectory(t, rng.normal(0, 5, (n, 3)), rng.uniform(0.1, 1, (n, 3)), rng.normal(0, 0.01, n)),
+            "hand": Trajectory(t[::2], rng.normal(0, 5, (n // 2, 3)), rng.uniform(0.1, 1, (n // 2, 3)))}
+
+
+def read_csv_rows(path: Path) -> tuple[list[str], np.ndarray]:
+    with path.open() as fh:
+        rows = list(csv.reader(fh))[1:]
+    return [r[0] for r in rows], np.array([[float(v) for v in r[1:]] for r in rows])
+
+
+# --------------------------------------------------------------------------- trajectories.parquet
+
+
+def test_parquet_holds_the_csv_values_typed_with_units_frame_and_provenance(geo_run):
+    result, out = geo_run
+    table = pq.read_table(out / "trajectories.parquet")
+    names, values = read_csv_rows(out / "trajectories.csv")
+    assert table.column_names[:8] == ["system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m",
+                                      "sd_up_m"]
+    assert table.schema.field("system").type == pa.dictionary(pa.int32(), pa.string())
+    assert all(table.schema.field(c).type == pa.float64() for c in table.column_names[1:])
+    assert table.column("system").to_pylist() == names
+    parquet = np.column_stack([table.column(c).to_numpy() for c in table.column_names[1:8]])
+    np.testing.assert_allclose(parquet, values, rtol=0, atol=5e-6)  # the CSV prints µs and 10 µm
+    cov = table.column("cov_east_north_m2").to_numpy(zero_copy_only=False)
+    np.testing.assert_array_equal(cov, np.concatenate([tr.pos_cov_en for tr in result.trajectories.values()]))
+
+    units = {f.name: f.metadata[b"unit"].decode() for f in table.schema if f.metadata and b"unit" in f.metadata}
+    assert units == {"t": "s", "east_m": "m", "north_m": "m", "up_m": "m", "sd_east_m": "m", "sd_north_m": "m",
+                     "sd_up_m": "m", "cov_east_north_m2": "m^2"}
+    meta = {k.decode(): v.decode() for k, v in table.schema.metadata.items()}
+    assert meta["bodyfusion.version"] == bodyfusion.__version__
+    assert meta["bodyfusion.config_sha256"] == result.loaded.sha256
+    assert meta["bodyfusion.format_version"] == "1"
+    frame = json.loads(meta["bodyfusion.frame"])
+    assert frame["name"] == "ENU" and frame["unit"] == "m"
+    assert frame["geodetic_origin"] == {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "height_m": ORIGIN[2]}
+
+
+def test_read_trajectories_round_trips_the_parquet_exactly_and_the_csv_to_its_precision(tmp_path):
+    trajs = synthetic()
+    write_trajectories_parquet(tmp_path / "t.parquet", trajs, config_sha256="0" * 64, geodetic_origin=None)
+    write_trajectories_csv(tmp_path / "t.csv", trajs)
+    from_parquet = read_trajectories(tmp_path / "t.parquet")
+    from_csv = read_trajectories(tmp_path / "t.csv")
+    assert list(from_parquet) == list(from_csv) == ["foot", "hand"]
+    for name, tr in trajs.items():
+        back = from_parquet[name]
+        np.testing.assert_array_equal(back.t, tr.t)
+        np.testing.assert_array_equal(back.pos_n, tr.pos_n)
+        np.testing.assert_array_equal(back.pos_sd, tr.pos_sd)
+        assert (back.pos_cov_en is None) == (tr.pos_cov_en is None)
+        if tr.pos_cov_en is not None:
+            np.testing.assert_array_equal(back.pos_cov_en, tr.pos_cov_en)
+        np.testing.assert_allclose(from_csv[name].pos_n, tr.pos_n, rtol=0, atol=5e-6)
+        assert from_csv[name].pos_cov_en is None  # the CSV has no covariance column
+    frame = json.loads(pq.read_schema(tmp_path / "t.parquet").metadata[b"bodyfusion.frame"])
+    assert frame["geodetic_origin"] is None
+
+
+# --------------------------------------------------------------------------- TUM
+
+
+def test_tum_files_are_eight_columns_increasing_times_unit_quaternions_and_the_positions(geo_run):
+    result, out = geo_run
+    expected = {**{n: tr for n, tr in result.trajectories.items()},
+                **{f"{n}_truth": tr for n, tr in result.truths.items()}}
+    assert {p.stem for p in (out / "tum").glob("*.txt")} == set(expected) == {
+        "left_foot", "hand_phone", "left_foot_truth", "hand_phone_truth"}
+    for name, track in expected.items():
+        rows = np.loadtxt(out / "tum" / f"{name}.txt", ndmin=2)
+        assert rows.shape == (len(track.t), 8)
+        assert np.all(np.diff(rows[:, 0]) > 0)
+        np.testing.assert_array_equal(rows[:, 0], track.t)  # full precision
+        np.testing.assert_array_equal(rows[:, 1:4], track.pos_n)
+        np.testing.assert_allclose(np.linalg.norm(rows[:, 4:8], axis=1), 1.0)
+        np.testing.assert_array_equal(rows[:, 4:8], np.tile([0.0, 0.0, 0.0, 1.0], (len(rows), 1)))  # qx qy qz qw
+
+
+def test_tum_writes_a_truth_without_heights_at_zero_height(tmp_path):
+    t = np.arange(5.0)
+    truth = TruthTrack(t, np.column_stack([t, 2 * t, np.full(5, np.nan)]), sparse=True)
+    write_tum(tmp_path, {}, {"foot": truth}, decimate=2)  # surveyed points are never decimated
+    rows = np.loadtxt(tmp_path / "foot_truth.txt")
+    np.testing.assert_array_equal(rows[:, :4], np.column_stack([t, t, 2 * t, np.zeros(5)]))
+
+
+# --------------------------------------------------------------------------- GeoJSON
+
+
+def test_geojson_lines_carry_times_and_sigma_and_round_trip_to_enu_within_a_millimetre(geo_run):
+    result, out = geo_run
+    doc = json.loads((out / "track.geojson").read_text())
+    assert doc["type"] == "FeatureCollection"
+    lines = {(f["properties"]["system"], f["properties"]["role"]): f for f in doc["features"]}
+    assert set(lines) == {(n, r) for n in result.trajectories for r in ("estimate", "truth")}
+    for (name, role), feature in lines.items():
+        track = result.trajectories[name] if role == "estimate" else result.truths[name]
+        geom, props = feature["geometry"], feature["properties"]
+        assert feature["type"] == "Feature" and geom["type"] == "LineString"
+        coords = np.array(geom["coordinates"])
+        times = np.array(props["times"])
+        assert coords.shape == (len(times), 3)
+        assert np.all(np.abs(coords[:, 0] - ORIGIN[1]) < 0.01) and np.all(np.abs(coords[:, 1] - ORIGIN[0]) < 0.01)
+        interval = np.floor((times[:-1] - times[0]) / GEOJSON_STEP_S + 1e-6)  # one vertex each, then the last
+        assert np.all(np.diff(interval) > 0) and times[-1] > times[-2] and times[-1] == pytest.approx(track.t[-1])
+        k = np.searchsorted(track.t, times - 1e-6)
+        np.testing.assert_allclose(track.t[k], times, atol=1e-6)
+        enu = np.column_stack(pymap3d.geodetic2enu(coords[:, 1], coords[:, 0], coords[:, 2], *ORIGIN))
+        assert np.max(np.abs(enu - track.pos_n[k])) < 1e-3
+        if role == "estimate":
+            for axis, key in enumerate(("sd_east_m", "sd_north_m", "sd_up_m")):
+                np.testing.assert_allclose(props[key], track.pos_sd[k, axis], atol=1e-5)
+
+
+def test_geojson_gives_surveyed_truth_as_timed_points_and_2d_positions_without_heights(tmp_path):
+    t = np.array([1.0, 5.0, 9.0])
+    truth = TruthTrack(t, np.array([[0.0, 0.0, np.nan], [10.0, 0.0, np.nan], [10.0, 10.0, np.nan]]), sparse=True)
+    write_geojson(tmp_path / "track.geojson", synthetic(), {"foot": truth}, ORIGIN)
+    points = [f for f in json.loads((tmp_path / "track.geojson").read_text())["features"]
+              if f["properties"]["role"] == "truth"]
+    assert [p["properties"]["t"] for p in points] == [1.0, 5.0, 9.0]
+    assert all(p["geometry"]["type"] == "Point" and len(p["geometry"]["coordinates"]) == 2 for p in points)
+    lon, lat = points[1]["geometry"]["coordinates"]
+    e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *ORIGIN)
+    assert abs(e - 10.0) < 1e-3 and abs(n) < 1e-3
