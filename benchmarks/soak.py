@@ -93,11 +93,14 @@ def main() -> None:
         print(f"simulate: wall {sim_s:.1f} s, peak RSS {sim_mb:.0f} MB")
         print(f"run:      wall {run_s:.1f} s, peak RSS {run_mb:.0f} MB "
               f"(navigation {doc['runtime']['navigation_s']:.1f} s, {doc['runtime']['samples_per_s']:,.0f} samples/s)")
-        health = doc.get("health", {})
-        print("health:", json.dumps(health, sort_keys=True))
         for name, block in doc["systems"].items():
-            h = block.get("horizontal_error_m", {})
-            print(f"{name}: h-RMSE {h.get('rmse', float('nan')):.2f} m, h-max {h.get('max', float('nan')):.2f} m")
+            h, health = block.get("horizontal_error_m", {}), block.get("health", {})
+            cov, nees = health.get("covariance", {}), health.get("nees", {})
+            print(f"{name}: h-RMSE {h.get('rmse', float('nan')):.2f} m, h-max {h.get('max', float('nan')):.2f} m; "
+                  f"covariance checks {cov.get('checks', 0)}, PSD violations {cov.get('violations', 0)}, "
+                  f"min eigenvalue {cov.get('min_eigenvalue', float('nan')):.3g}; "
+                  f"|q| - 1 max {health.get('quaternion_norm_max_deviation', float('nan')):.1e}; "
+                  f"NEES mean {nees.get('mean', float('nan')):.2f} (in 95 % band {nees.get('in_band_fraction', 0):.0%})")
     finally:
         if args.keep is None:
             shutil.rmtree(folder, ignore_errors=True)
