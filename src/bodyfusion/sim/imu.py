@@ -246,6 +246,23 @@ PRESETS: dict[str, dict[str, float]] = {
         "acc_bias_tau_s": 100.0,
         "acc_bias_sd_mps2": 5000.0 * _UG,
     },
+    # A consumer-grade MEMS IMU, the dual-foot papers' class of sensor (MPU-6050 /
+    # MPU-9250-class low-cost parts, not factory-calibrated over temperature): an order of
+    # magnitude worse than the ICM-20948 in bias instability. Gyroscope: angle random walk
+    # 1 °/√h (0.017 °/s/√Hz), bias instability 100 °/h (Gauss–Markov, τ = 100 s), turn-on
+    # bias σ 1 °/s; accelerometer: 400 µg/√Hz (the MPU-6050 datasheet's noise density), bias
+    # instability 2 mg (τ = 100 s), turn-on bias σ 20 mg (the datasheet's ±50 mg initial
+    # tolerance as ≈ 2.5 σ).
+    "consumer": {
+        "gyro_noise_density": 1.0 * _DEG / 60.0,           # °/√h → rad/s/√Hz
+        "gyro_bias_instability_radps": 100.0 * _DEG / 3600.0,  # °/h → rad/s
+        "gyro_bias_tau_s": 100.0,
+        "gyro_bias_sd_radps": 1.0 * _DEG,                 # °/s → rad/s
+        "acc_noise_density": 400.0 * _UG,                 # µg/√Hz → m/s^2/√Hz
+        "acc_bias_instability_mps2": 2000.0 * _UG,         # µg → m/s^2
+        "acc_bias_tau_s": 100.0,
+        "acc_bias_sd_mps2": 20000.0 * _UG,
+    },
 }
 """Named error sets; any field of :class:`ImuErrorConfig` given beside ``preset`` overrides it."""
 
@@ -257,7 +274,7 @@ class ImuErrorConfig(StrictModel):
     Misalignment: six small angles (mrad) for the off-diagonal entries xy, xz, yx, yz, zx, zy.
     """
 
-    preset: Literal["perfect", "icm20948", "phone"] = "perfect"
+    preset: Literal["perfect", "icm20948", "phone", "consumer"] = "perfect"
     acc_noise_density: float | None = Field(default=None, ge=0)
     gyro_noise_density: float | None = Field(default=None, ge=0)
     acc_bias_instability_mps2: float | None = Field(default=None, ge=0)
