@@ -185,6 +185,9 @@ def test_failing_run_is_recorded_with_its_error_and_the_study_goes_on(tmp_path):
     assert rows["broken"]["status"] == "failed" and "no_such.csv" in rows["broken"]["error"]
     assert rows["walk"]["status"] == "ok" and rows["walk"]["error"] is None
     assert rows["walk"]["systems.hand_phone.horizontal_error_m.rmse"] > 0
+    tidy = pq.read_table(tmp_path / "out" / "results_by_system.parquet").to_pylist()
+    assert sorted((r["layout"], r["system"]) for r in tidy) == [
+        ("broken", None), ("walk", "hand_phone"), ("walk", "left_foot")]  # a failed run: one row, no system
 
 
 @pytest.mark.slow
@@ -204,6 +207,48 @@ def test_cli_study_writes_rows_summary_and_plots_quietly(local_run):
     assert summary[0].startswith("layout,outage_system,outage_start_s,outage_duration_s,metric,runs,failed,mean,sd")
     assert any(",outage.end_error_m,2,0," in line for line in summary)
     assert (out / "end_error_vs_outage.png").stat().st_size > 10_000
+
+
+def test_results_are_typed_and_the_per_system_view_has_one_row_per_run_and_system(local_run):
+    _, out, _ = local_run
+    runs = pq.read_table(out / "results.parquet")
+    types = {f.name: f.type for f in runs.schema}
+    assert types["system_names"] == pa.list_(pa.string())
+    assert types["evaluation.transform.translation_m"] == pa.list_(pa.float64())
+    assert types["systems.left_foot.diagnostics.initialisation.still_interval_s"] == pa.list_(pa.float64())
+    assert pa.types.is_list(types["input.notes"]) and pa.types.is_list(types["input.warnings"])
+    assert types["systems.left_foot.horizontal_error_m.rmse"] == pa.float64()
+    for name, col in zip(runs.column_names, runs.columns):  # no JSON text left
+        if pa.types.is_string(col.type):
+            assert not any(str(v).startswith(("[", "{")) for v in col.to_pylist() if v is not None), name
+
+    tidy = pq.read_table(out / "results_by_system.parquet")
+    assert tidy.num_rows == runs.num_rows * 2
+    pairs = list(zip(tidy.column("run_key").to_pylist(), tidy.column("system").to_pylist()))
+    assert pairs == [(k, s) for k, names in zip(runs.column("run_key").to_pylist(),
+                                                runs.column("system_names").to_pylist()) for s in names]
+    assert {s for _, s in pairs} == {"left_foot", "hand_phone"}
+    assert tidy.column_names[:tidy.column_names.index("system") + 1][-2:] == ["error", "system"]
+    assert tidy.schema.field("horizontal_error_m.rmse").type == pa.float64()
+    assert tidy.schema.field("samples").type == pa.int64()
+    by_run = {r["run_key"]: r for r in runs.to_pylist()}
+    for row in tidy.to_pylist():
+        assert row["horizontal_error_m.rmse"] == by_run[row["run_key"]][f"systems.{row['system']}.horizontal_error_m.rmse"]
+    groups = tidy.group_by(["system", "outage.duration_s"]).aggregate([("horizontal_error_m.rmse", "mean")])
+    assert groups.num_rows == 2 * 3
+
+
+def test_list_parameters_are_list_cells_and_summarised_by_their_value(tmp_path):
+    store = ResultStore(tmp_path)
+    row = {"layout": "a", "outage.duration_s": 0.0, "status": "ok", "system_names": ["foot"],
+           "systems.foot.horizontal_error_m.rmse": 1.0}
+    store.append([{**row, "run_key": "k1", "param.lever_m": [0, 0.5]},
+                  {**row, "run_key": "k2", "param.lever_m": [0, 0.5], "systems.foot.horizontal_error_m.rmse": 3.0}])
+    table = store.compact({"k1": 0, "k2": 1})
+    assert table.schema.field("param.lever_m").type == pa.list_(pa.float64())
+    assert pq.read_table(tmp_path / "results_by_system.parquet").column("param.lever_m").to_pylist() == [[0, 0.5]] * 2
+    (rec,) = summarise(table.to_pylist(), ["param.lever_m"])
+    assert rec["param.lever_m"] == "[0.0, 0.5]" and rec["mean"] == 2.0
 
 
 def test_rerun_skips_completed_runs(local_run, tmp_path):

@@ -20,6 +20,7 @@ import yaml
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import apply_overrides, read_yaml
+from bodyfusion.study.results import cell
 from bodyfusion.study.spec import LoadedStudy
 
 
@@ -48,13 +49,8 @@ class RunSpec:
         row: dict[str, Any] = {"run_key": self.key, "layout": self.layout, "source": self.source,
                                "config": self.label, "seed": self.seed, "outage.system": system,
                                "outage.start_s": start, "outage.duration_s": duration}
-        row.update({f"param.{k}": _param_cell(v) for k, v in self.params})
+        row.update({f"param.{k}": cell(v) for k, v in self.params})
         return row
-
-
-def _param_cell(value: Any) -> Any:
-    """A parameter value as a Parquet cell: scalars as they are, anything else as JSON text."""
-    return value if value is None or isinstance(value, (bool, int, float, str)) else json.dumps(value, sort_keys=True)
 
 
 def canonical_json(value: Any) -> str:

@@ -1,8 +1,14 @@
-"""A study's rows on disk: resumable part files, results.parquet, and the summary table.
+"""A study's rows on disk: resumable part files, results.parquet, the per-system view and the
+summary table.
 
 ``results.parquet`` holds one row per run: :data:`HEAD_COLUMNS`, ``param.<path>`` per
 parameter, the ``outage.*`` errors, metrics.json flattened with dots and the ``runtime.*``
-columns. Finished rows go to ``parts/`` in small Parquet files, each written whole and
+columns. Cells are typed (:func:`cell`): numbers, text, lists of numbers as ``list<double>``,
+lists of text as ``list<string>``, a parameter that is a mapping as a struct.
+``results_by_system.parquet`` (:func:`by_system`) holds one row per run and system, that
+system's metrics under their own names (``horizontal_error_m.rmse``...), so that
+``pandas.read_parquet(path).groupby(["system", "param.<path>"])`` needs no reshaping.
+Finished rows go to ``parts/`` in small Parquet files, each written whole and
 renamed into place, and are compacted into ``results.parquet`` (deduplicated by run key)
 at the end: a study killed at any moment loses no saved row, duplicates none, and
 resumes. A failed run is saved too (``status`` ``failed``, ``error``) and, being
@@ -13,6 +19,7 @@ statistics of the outage errors and RMSEs per layout, parameter values and outag
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import time
@@ -37,8 +44,10 @@ HEAD_COLUMNS: dict[str, pa.DataType] = {
     "outage.duration_s": pa.float64(),
     "status": pa.string(),
     "error": pa.string(),
+    "system_names": pa.list_(pa.string()),
 }
-"""The first columns of every row and their types (``param.<path>`` columns follow)."""
+"""The first columns of every row and their types (``param.<path>`` columns follow);
+``system_names``: the run's navigation systems (null for a failed run)."""
 
 TIMING_PREFIXES = ("runtime.", "constraints.solve_time_us.")
 """Columns that measure time: they differ between runs of the same key; every other column
@@ -48,6 +57,7 @@ SUMMARY_METRICS = ("outage.end_error_m", "outage.max_error_m")
 """Summarised for every study with outages; each system's horizontal RMSE is added."""
 
 RESULTS_FILE = "results.parquet"
+BY_SYSTEM_FILE = "results_by_system.parquet"
 SUMMARY_FILE = "summary.csv"
 PARTS_DIR = "parts"
 
@@ -58,6 +68,19 @@ def is_timing_column(name: str) -> bool:
 
 
 # --------------------------------------------------------------------------- storage
+
+
+def cell(value: Any) -> Any:
+    """A value as a typed Parquet cell: scalars and None as they are, a list of numbers as floats
+    (``list<double>``), other lists and mappings item by item (``list<string>``, struct...)."""
+    if isinstance(value, dict):
+        return {k: cell(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        items = [cell(v) for v in value]
+        if items and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in items):
+            return [float(v) for v in items]
+        return items
+    return value
 
 
 def _table(rows: list[dict[str, Any]]) -> pa.Table:
@@ -82,13 +105,42 @@ def _write_atomic(table: pa.Table, path: Path) -> None:
     os.replace(tmp, path)
 
 
+def by_system(table: pa.Table) -> pa.Table:
+    """One row per run and system of ``table`` (results.parquet's rows): the head columns but
+    ``system_names``, ``system``, the ``param.*`` columns, then the ``systems.<system>.*``
+    columns of that system without their prefix; in the order of ``table``, systems in their
+    run's order. A run with no systems (a failed one) gives one row, ``system`` null."""
+    names = table.column_names
+    head = [n for n in HEAD_COLUMNS if n in names and n != "system_names"]
+    params = [n for n in names if n.startswith("param.")]
+    runs = table.column("system_names").to_pylist() if "system_names" in names else [None] * table.num_rows
+    pairs = [(i, s) for i, run in enumerate(runs) for s in (run or [None])]
+    parts = []
+    for name in dict.fromkeys(s for _, s in pairs):
+        order = [k for k, (_, s) in enumerate(pairs) if s == name]
+        rows = pa.array([pairs[k][0] for k in order], pa.int64())
+        prefix = f"systems.{name}."
+        own = {n[len(prefix):]: n for n in names if name is not None and n.startswith(prefix)}
+        parts.append(pa.table({**{n: table.column(n).take(rows) for n in head},
+                               "system": pa.array([name] * len(order), pa.string()),
+                               **{n: table.column(n).take(rows) for n in params},
+                               **{short: table.column(n).take(rows) for short, n in own.items()},
+                               "_order": pa.array(order, pa.int64())}))
+    if not parts:
+        return pa.table({**{n: table.column(n) for n in head}, "system": pa.array([], pa.string()),
+                         **{n: table.column(n) for n in params}})
+    return pa.concat_tables(parts, promote_options="permissive").sort_by("_order").drop_columns(["_order"])
+
+
 class ResultStore:
-    """The rows of a study folder: ``parts/`` (one file per batch) and ``results.parquet``."""
+    """The rows of a study folder: ``parts/`` (one file per batch), ``results.parquet`` and
+    ``results_by_system.parquet``."""
 
     def __init__(self, out_dir: Path) -> None:
         self.out_dir = Path(out_dir)
         self.parts_dir = self.out_dir / PARTS_DIR
         self.results_path = self.out_dir / RESULTS_FILE
+        self.by_system_path = self.out_dir / BY_SYSTEM_FILE
         self._seq = 0
         try:
             self.parts_dir.mkdir(parents=True, exist_ok=True)
@@ -117,7 +169,7 @@ class ResultStore:
     def compact(self, order: dict[str, int]) -> pa.Table:
         """Merge every saved file into results.parquet: one row per run key (the first saved),
         sorted by ``order`` (run key → grid index; other keys last), timing columns last;
-        then remove the merged parts."""
+        write its :func:`by_system` view; then remove the merged parts."""
         files = self._files()
         if not files:
             return _table([])
@@ -133,6 +185,7 @@ class ResultStore:
         rest = [n for n in names if n not in head and not is_timing_column(n)]
         table = table.select(head + rest + [n for n in names if is_timing_column(n)])
         _write_atomic(table, self.results_path)
+        _write_atomic(by_system(table), self.by_system_path)
         for f in files:
             if f != self.results_path:
                 f.unlink(missing_ok=True)
@@ -142,8 +195,13 @@ class ResultStore:
 # --------------------------------------------------------------------------- summary
 
 
+def _text(value: Any) -> Any:
+    """A list or mapping cell as JSON text (hashable, and what a CSV cell can hold); others as they are."""
+    return json.dumps(value, sort_keys=True) if isinstance(value, (list, dict)) else value
+
+
 def _group_key(row: dict[str, Any], params: list[str]) -> tuple:
-    return (row["layout"], *(row.get(p) for p in params), row.get("outage.duration_s"))
+    return (row["layout"], *(_text(row.get(p)) for p in params), row.get("outage.duration_s"))
 
 
 def summarise(rows: list[dict[str, Any]], params: list[str]) -> list[dict[str, Any]]:
@@ -165,7 +223,7 @@ def summarise(rows: list[dict[str, Any]], params: list[str]) -> list[dict[str, A
                      "p50": float(np.percentile(v, 50)), "p90": float(np.percentile(v, 90))} if v.size else \
                 dict.fromkeys(("mean", "sd", "p50", "p90"), float("nan"))
             first = members[0]
-            out.append({"layout": key[0], **{p: first.get(p) for p in params},
+            out.append({"layout": key[0], **{p: _text(first.get(p)) for p in params},
                         "outage_system": first.get("outage.system"), "outage_start_s": first.get("outage.start_s"),
                         "outage_duration_s": key[-1], "metric": metric, "runs": int(v.size),
                         "failed": len(members) - len(ok), **stats})

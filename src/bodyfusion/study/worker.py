@@ -3,15 +3,15 @@
 A scenario is simulated into a temporary folder (deleted afterwards) and
 :func:`bodyfusion.core.run.run_layout` runs the written ``config.yaml``; a recorded layout is
 run as it is. Both in-process, writing no trajectories or plots. The row holds the run's
-head columns (:meth:`bodyfusion.study.grid.RunSpec.head`), the ``outage.*`` errors
-(:func:`bodyfusion.evaluation.metrics.outage_errors`), metrics.json flattened with dots and
-the ``runtime.*`` columns (timings, CPU seconds, the worker's process id). A failing run
+head columns (:meth:`bodyfusion.study.grid.RunSpec.head`), ``system_names``, the ``outage.*``
+errors (:func:`bodyfusion.evaluation.metrics.outage_errors`), metrics.json flattened with dots
+(lists as typed list cells, :func:`bodyfusion.study.results.cell`) and the ``runtime.*``
+columns (timings, CPU seconds, the worker's process id). A failing run
 becomes a row with ``status`` ``failed`` and its error's first line.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -26,17 +26,18 @@ from bodyfusion.core.run import run_layout
 from bodyfusion.evaluation.metrics import outage_errors
 from bodyfusion.sim import simulate
 from bodyfusion.study.grid import RunSpec
+from bodyfusion.study.results import cell
 
 
 def flatten(doc: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested dicts → one level with dotted keys; lists become JSON text."""
+    """Nested dicts → one level with dotted keys; lists become typed list cells (:func:`cell`)."""
     out: dict[str, Any] = {}
     for key, value in doc.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict):
             out.update(flatten(value, f"{name}."))
         elif isinstance(value, (list, tuple)):
-            out[name] = json.dumps(value)
+            out[name] = cell(value)
         else:
             out[name] = value
     return out
@@ -78,7 +79,9 @@ def execute_run(spec: RunSpec) -> dict[str, Any]:
             errs = (outage_errors(result.trajectories[system], truth, result.transform, start, duration)
                     if truth is not None and system in result.trajectories else {})
             body.update({f"outage.{k}": errs.get(k, float("nan")) for k in ("end_error_m", "max_error_m", "end_t_s")})
-        body.update(flatten(metrics_document(result, spec.label, run_s)))
+        doc = metrics_document(result, spec.label, run_s)
+        body["system_names"] = list(doc["systems"])
+        body.update(flatten(doc))
         body["runtime.simulate_s"] = sim_s
         row.update(status="ok", error=None)
         row.update({k: v for k, v in body.items() if k not in row})
