@@ -2,8 +2,9 @@
 
 Validate the study file, expand its grid, skip the runs already saved in the output
 folder, execute the others (:mod:`bodyfusion.study.executors`) with a progress bar on a
-terminal, save the finished rows in batches, then compact them into ``results.parquet``
-and write ``summary.csv``, the plots and ``study.json`` (counts and throughput).
+terminal, save the finished rows in batches, then compact them into ``results.parquet`` (and
+its per-system view ``results_by_system.parquet``) and write ``summary.csv``, the plots and
+``study.json`` (counts and throughput).
 """
 
 from __future__ import annotations
@@ -111,7 +112,8 @@ def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | 
     params = [f"param.{p}" for p in study.spec.parameters]
     out = Path(out_dir)
     write_summary(out / SUMMARY_FILE, summarise(in_grid, params))
-    report.files = [store.results_path, out / SUMMARY_FILE, *write_plots(out, in_grid, params)]
+    report.files = [store.results_path, store.by_system_path, out / SUMMARY_FILE,
+                    *write_plots(out, in_grid, params)]
     (out / "study.json").write_text(json.dumps({
         "study": str(study_path), "name": study.name, "runs": report.total, "done": report.done,
         "failed": report.failed, "skipped": report.skipped, "executor": report.executor, "workers": workers,
