@@ -1,4 +1,4 @@
-"""Consistency measures: covariance checks, NIS tallies, the horizontal NEES and its plot."""
+"""Consistency measures: covariance checks, NIS tallies, the horizontal NEES."""
 
 from __future__ import annotations
 
@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 from bodyfusion.base.types import Trajectory, TruthTrack
-from bodyfusion.evaluation.consistency import (CovarianceHealth, NeesTrack, NisTally, chi2_band, covariance_defects,
+from bodyfusion.evaluation.consistency import (CovarianceHealth, NisTally, chi2_band, covariance_defects,
                                                horizontal_nees, nees, nis, quaternion_norm_deviation)
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore, score_systems
-from bodyfusion.evaluation.plots import plot_nees
 
 
 def random_covariances(rng: np.random.Generator, n: int, k: int = 2) -> np.ndarray:
@@ -113,13 +112,3 @@ def test_nees_after_an_alignment_turns_the_covariance_with_the_frame():
 def test_nees_is_nan_where_the_covariance_is_singular():
     values = nees(np.array([[1.0, 0.0], [0.0, 0.0], [1.0, 1.0]]), np.stack([np.eye(2), np.zeros((2, 2)), 4 * np.eye(2)]))
     assert values[0] == 1.0 and np.isnan(values[1]) and values[2] == pytest.approx(0.5)
-
-
-def test_plot_nees_writes_a_png(tmp_path):
-    rng = np.random.default_rng(0)
-    t = np.linspace(0.0, 100.0, 500)
-    tracks = {"a": NeesTrack(t, rng.chisquare(2, t.size)), "b": NeesTrack(t, 10.0 * rng.chisquare(2, t.size))}
-    plot_nees(tmp_path / "nees.png", tracks)
-    assert (tmp_path / "nees.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    plot_nees(tmp_path / "empty.png", {})
-    assert (tmp_path / "empty.png").is_file()

@@ -1,4 +1,4 @@
-"""Scoring and plots: alignment, error statistics, interpolation, sparse truth, loop closure."""
+"""Scoring: alignment, error statistics, interpolation, sparse truth, loop closure."""
 
 from __future__ import annotations
 
@@ -19,11 +19,6 @@ from bodyfusion.evaluation.metrics import (
     loop_closure_m,
     path_length_m,
     score_systems,
-)
-from bodyfusion.evaluation.plots import (
-    plot_error_cdf,
-    plot_error_vs_time,
-    plot_trajectories,
 )
 
 STAT_KEYS = {"rmse", "mean", "max", "p50", "p75", "p90", "p95", "p99"}
@@ -290,25 +285,3 @@ def test_loop_closure_and_path_length_on_simple_shapes():
     circle = np.column_stack([2 * np.cos(a), 2 * np.sin(a), np.zeros_like(a)])
     assert path_length_m(circle) == pytest.approx(4 * np.pi, rel=1e-5)
     assert path_length_m(np.zeros((1, 3))) == 0.0
-
-
-# --------------------------------------------------------------------------- plots
-
-
-def test_plots_write_nonempty_png(tmp_path):
-    t = np.linspace(0.0, 10.0, 201)
-    truths = _two_feet(t)
-    truths["right"] = TruthTrack(t[::50], truths["right"].pos_n[::50], sparse=True)
-    est = {k: _traj(t, _curvy_walk(t, (0.1, 0.0, 0.0))) for k in truths}
-    est["head"] = _traj(t, _curvy_walk(t))
-    tf, scores = score_systems(est, truths)
-    paths = [tmp_path / "traj.png", tmp_path / "err.png", tmp_path / "sub" / "cdf.png"]
-    plot_trajectories(paths[0], est, scores, tf, truths)
-    plot_error_vs_time(paths[1], scores)
-    plot_error_cdf(paths[2], scores)
-    for p in paths:
-        data = p.read_bytes()
-        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
-    # Without truth (nothing scored) the plots still render.
-    plot_error_cdf(tmp_path / "c2.png", {})
-    assert (tmp_path / "c2.png").read_bytes()[:4] == b"\x89PNG"

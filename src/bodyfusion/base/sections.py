@@ -4,9 +4,16 @@ models, file paths relative to the layout, and errors that name their dotted key
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationInfo
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+)
 
 
 def _resolve_path(value: Path, info: ValidationInfo) -> Path:
@@ -36,3 +43,19 @@ class KeyedError(ValueError):
     def __init__(self, key: str, reason: str) -> None:
         super().__init__(reason)
         self.key = key
+
+
+class FiguresConfig(StrictModel):
+    """The plot files: each plot is written once per format of ``formats`` (``png``, ``pdf``,
+    ``svg``: ``trajectory.png``, ``trajectory.pdf``...); ``dpi``, dots per inch, sets the
+    resolution of PNG files and of the raster parts of PDF and SVG files."""
+
+    formats: list[Literal["png", "pdf", "svg"]] = Field(default_factory=lambda: ["png"], min_length=1)
+    dpi: int = Field(default=120, ge=50, le=1200)
+
+    @field_validator("formats")
+    @classmethod
+    def _once_each(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError("a format is named twice")
+        return v

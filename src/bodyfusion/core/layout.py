@@ -17,7 +17,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, StrictModel
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.layout_io import (  # the file handling was here: its names stay importable
     MAX_YAML_BYTES,  # noqa: F401
@@ -196,8 +196,12 @@ class TruthConfig(PositionFrame):
 
 
 class OutputConfig(StrictModel):
+    """What a run writes: ``dir`` (default ``./out/<layout name>``), the ``plots`` (on or off)
+    in the ``figures`` formats and resolution, every ``decimate``-th trajectory sample."""
+
     dir: DataPath | None = None
     plots: bool = True
+    figures: FiguresConfig = Field(default_factory=FiguresConfig)
     decimate: int = Field(default=1, ge=1)
 
 

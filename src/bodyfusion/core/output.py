@@ -133,9 +133,5 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     if output.plots:
         from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
-        plots.plot_trajectories(out_dir / "trajectory.png", result.trajectories, result.scores or None,
-                                result.transform, result.truths or None)
-        if result.scores:
-            plots.plot_error_vs_time(out_dir / "error_vs_time.png", result.scores)
-            plots.plot_error_cdf(out_dir / "error_cdf.png", result.scores)
-            plots.plot_nees(out_dir / "nees.png", result.nees)
+        plots.write_run_plots(out_dir, result.trajectories, result.scores, result.transform, result.truths,
+                              result.nees, output.figures)

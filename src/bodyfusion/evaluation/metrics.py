@@ -167,6 +167,13 @@ def error_cdf(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e, np.arange(1, e.size + 1, dtype=float) / max(e.size, 1)
 
 
+def horizontal_sigma_m(traj: Trajectory, t: np.ndarray) -> np.ndarray:
+    """The horizontal σ (DRMS, √(σ_E² + σ_N²), m; unchanged by the evaluation rotation) of
+    ``traj``'s position covariance, interpolated linearly to times ``t`` (s); NaN outside its span."""
+    sd = np.asarray(traj.pos_sd, dtype=float)
+    return np.interp(np.asarray(t, dtype=float), traj.t, np.hypot(sd[:, 0], sd[:, 1]), left=np.nan, right=np.nan)
+
+
 def outage_errors(est: Trajectory, truth: TruthTrack, transform: PlanarTransform,
                   start_s: float, duration_s: float) -> dict[str, float]:
     """Horizontal error (m) of one system across a GNSS outage ``[start_s, start_s + duration_s)`` (s).

@@ -1,9 +1,13 @@
-"""PNG plots of scored runs (plan view against truth, horizontal error vs time, error CDF,
-horizontal NEES vs time) and of studies (an error against the GNSS outage duration).
+"""Figures of scored runs (plan view against truth, several methods' tracks of one system,
+horizontal error against time with its σ band, error CDF, horizontal NEES against time) and of
+studies (an error against the GNSS outage duration).
 
-Positions are ENU metres (plan view: east vs north), time in seconds. Uses
-``matplotlib.figure.Figure`` with the Agg canvas directly: no pyplot, no global state,
-safe in worker processes and without a display.
+Positions are ENU metres (plan view: east vs north, after the evaluation transform), time in
+seconds. Every ``plot_*`` function returns a :class:`matplotlib.figure.Figure`: with ``ax=`` it
+draws into that Axes (a panel of the caller's figure) and returns ``ax.figure``; without, it
+draws into a new figure of its own. Saving is separate (:func:`save_figure`, any of PNG, PDF,
+SVG at a chosen dpi; :func:`write_run_plots` for a run's standard set). New figures use the Agg
+canvas directly: no pyplot, no global state, safe in worker processes and without a display.
 """
 
 from __future__ import annotations
@@ -12,128 +16,224 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-from bodyfusion.evaluation.consistency import NeesTrack
-from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore, error_cdf
+from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.evaluation.consistency import NeesTrack
+from bodyfusion.evaluation.metrics import (
+    PlanarTransform,
+    SystemScore,
+    error_cdf,
+    horizontal_sigma_m,
+    score_systems,
+)
+from bodyfusion.evaluation.thinning import thin_index
 
-DPI = 120
-MAX_POINTS = 20000
-"""Most points drawn per line (longer series are decimated evenly)."""
+DPI = FiguresConfig().dpi
+"""Resolution of saved figures unless the layout says otherwise, dots per inch."""
+FORMATS = ("png", "pdf", "svg")
+"""The formats :func:`save_figure` writes."""
+BAND_ALPHA = 0.15
+"""Opacity of σ and confidence bands: light, drawn behind the lines."""
 
 
-def _new_figure(width_in: float = 7.0, height_in: float = 5.0) -> Figure:
-    fig = Figure(figsize=(width_in, height_in), dpi=DPI)
+# --------------------------------------------------------------------------- figures and files
+
+
+def new_figure(width_in: float = 8.0, height_in: float = 4.5) -> Figure:
+    """A figure (inches) on the Agg canvas with constrained layout (legends outside the axes get
+    their room), not registered with pyplot."""
+    fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
-def _save(fig: Figure, path: Path) -> None:
+def _axes(ax: Axes | None, width_in: float = 8.0, height_in: float = 4.5) -> Axes:
+    """``ax`` itself, or the one Axes of a new figure."""
+    return ax if ax is not None else new_figure(width_in, height_in).add_subplot(1, 1, 1)
+
+
+def save_figure(fig: Figure, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = DPI) -> list[Path]:
+    """Write ``fig`` once per format (:data:`FORMATS`) as ``path`` with that format's suffix
+    (a ``.png``/``.pdf``/``.svg`` suffix of ``path`` is replaced); ``dpi`` in dots per inch.
+    Creates the folder; returns the files written."""
     path = Path(path)
+    if path.suffix.lower().lstrip(".") in FORMATS:
+        path = path.with_suffix("")
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown:
+        raise ValueError(f"unknown figure format(s) {unknown}: expected some of {list(FORMATS)}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI, format="png")
-    fig.clear()
+    written = []
+    for fmt in formats:
+        out = path.with_name(f"{path.name}.{fmt}")
+        fig.savefig(out, dpi=dpi, format=fmt)
+        written.append(out)
+    return written
 
 
-def _colours(names: list[str]) -> dict[str, str]:
-    cycle = [f"C{i % 10}" for i in range(len(names))]
-    return dict(zip(names, cycle))
+def _colours(names: Sequence[str]) -> dict[str, str]:
+    return {name: f"C{i % 10}" for i, name in enumerate(names)}
 
 
-def _no_data(ax, text: str) -> None:
+def _darker(colour: str, factor: float = 0.55) -> tuple[float, float, float]:
+    r, g, b = to_rgb(colour)
+    return (r * factor, g * factor, b * factor)
+
+
+def _no_data(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def plot_trajectories(
-    path: Path,
-    estimates: Mapping[str, Trajectory],
-    scores: Mapping[str, SystemScore] | None,
-    transform: PlanarTransform,
-    truths: Mapping[str, TruthTrack] | None,
-) -> None:
-    """Plan view (east vs north, m, equal aspect) of each estimate after ``transform``, with truth.
+def _legend_outside(ax: Axes, handles: list | None = None, **kwargs) -> None:
+    """The legend to the right of the axes, clear of the data."""
+    extra = {"handles": handles} if handles is not None else {}
+    ax.legend(**extra, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small", **kwargs)
 
-    Dense truth is drawn as a dashed line, sparse truth (surveyed points) as markers; a circle
-    marks each estimate's start. With ``scores`` the legend gives each system's horizontal RMSE.
-    """
-    truths = truths or {}
-    scores = scores or {}
-    names = list(dict.fromkeys([*estimates, *truths]))
-    colour = _colours(names)
-    fig = _new_figure(7.0, 6.0)
-    ax = fig.add_subplot(1, 1, 1)
-    for name, traj in estimates.items():
-        pos = transform.apply(np.asarray(traj.pos_n, dtype=float))
-        label = name
-        if name in scores:
-            rmse = scores[name].metrics["horizontal_error_m"]["rmse"]
-            label = f"{name} (RMSE {rmse:.2f} m)"
-        ax.plot(pos[:, 0], pos[:, 1], "-", color=colour[name], lw=1.2, label=label)
-        if len(pos):
-            ax.plot(pos[0, 0], pos[0, 1], "o", color=colour[name], ms=6, mfc="none")
-    for name, truth in truths.items():
-        p = np.asarray(truth.pos_n, dtype=float)
-        if truth.sparse:
-            ax.plot(p[:, 0], p[:, 1], "x", color=colour[name], ms=8, mew=2, ls="none",
-                    label=f"{name} truth (surveyed points)")
-        else:
-            ax.plot(p[:, 0], p[:, 1], "--", color=colour[name], lw=1.0, alpha=0.7, label=f"{name} truth")
-    if not names:
-        _no_data(ax, "no trajectories")
-    ident = PlanarTransform.identity()
-    aligned = not (
-        transform.rotation_rad == ident.rotation_rad
-        and np.all(np.asarray(transform.translation_m) == 0)
-        and transform.vertical_offset_m == 0
-    )
-    title = "Trajectories (plan view)"
-    if aligned:
-        title += f", estimates aligned: rotation {np.degrees(transform.rotation_rad):.1f}°"
+
+# --------------------------------------------------------------------------- plan view
+
+
+def _draw_track(ax: Axes, pos: np.ndarray, colour, label: str, ls: str = "-") -> None:
+    """A track (N, ≥2) east, north, m: a line, an open circle at its start, a filled square at its end."""
+    idx = thin_index(len(pos))
+    ax.plot(pos[idx, 0], pos[idx, 1], ls=ls, color=colour, lw=1.2, label=label, zorder=3)
+    if len(pos):
+        ax.plot(pos[0, 0], pos[0, 1], "o", color=colour, ms=7, mfc="white", mew=1.5, zorder=4)
+        ax.plot(pos[-1, 0], pos[-1, 1], "s", color=colour, ms=6, zorder=4)
+
+
+def _draw_truth(ax: Axes, truth: TruthTrack, colour, label: str) -> None:
+    """Dense truth as a thin dashed line, sparse truth (surveyed points) as crosses."""
+    p = np.asarray(truth.pos_n, dtype=float)
+    if truth.sparse:
+        ax.plot(p[:, 0], p[:, 1], "x", color=colour, ms=8, mew=2, ls="none", label=f"{label} (surveyed points)",
+                zorder=2)
+    else:
+        idx = thin_index(len(p))
+        ax.plot(p[idx, 0], p[idx, 1], "--", color=colour, lw=1.0, label=label, zorder=2)
+
+
+def _finish_plan_view(ax: Axes, title: str, drawn: bool) -> None:
     ax.set_title(title)
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
-    if names:
-        ax.legend(loc="best", fontsize="small")
-    _save(fig, path)
+    if not drawn:
+        _no_data(ax, "no trajectories")
+        return
+    handles, _ = ax.get_legend_handles_labels()
+    marks = [Line2D([], [], marker="o", color="0.3", mfc="white", ls="none", label="start"),
+             Line2D([], [], marker="s", color="0.3", ls="none", label="end")]
+    _legend_outside(ax, handles + marks)
 
 
-def plot_error_vs_time(path: Path, scores: Mapping[str, SystemScore]) -> None:
-    """Horizontal error (m) against time (s) at the truth epochs, one line per system."""
-    fig = _new_figure()
-    ax = fig.add_subplot(1, 1, 1)
+def _rmse_label(name: str, score: SystemScore | None) -> str:
+    if score is None:
+        return name
+    return f"{name} (RMSE {score.metrics['horizontal_error_m']['rmse']:.2f} m)"
+
+
+def plot_trajectories(estimates: Mapping[str, Trajectory], scores: Mapping[str, SystemScore] | None = None,
+                      transform: PlanarTransform | None = None, truths: Mapping[str, TruthTrack] | None = None,
+                      *, ax: Axes | None = None) -> Figure:
+    """Plan view (east vs north, m, equal aspect) of each system's estimate after ``transform``
+    (the evaluation alignment; default none) as a solid line, with its truth as a dashed line
+    in a darker shade (surveyed points as crosses); open circles mark the starts, squares the
+    ends. With ``scores`` the legend gives each system's horizontal RMSE."""
+    transform = transform or PlanarTransform.identity()
+    truths = truths or {}
+    scores = scores or {}
+    colour = _colours(list(dict.fromkeys([*estimates, *truths])))
+    ax = _axes(ax, 8.0, 6.0)
+    for name, traj in estimates.items():
+        _draw_track(ax, transform.apply(np.asarray(traj.pos_n, dtype=float)), colour[name],
+                    _rmse_label(name, scores.get(name)))
+    for name, truth in truths.items():
+        _draw_truth(ax, truth, _darker(colour[name]), f"{name} truth")
+    title = "Trajectories (plan view)"
+    if transform.rotation_rad != 0.0 or np.any(np.asarray(transform.translation_m) != 0):
+        title += f", estimates aligned: rotation {np.degrees(transform.rotation_rad):.1f}°"
+    _finish_plan_view(ax, title, bool(estimates or truths))
+    return ax.figure
+
+
+def plot_method_comparison(tracks: Mapping[str, Trajectory], truth: TruthTrack | None = None,
+                           transform: PlanarTransform | None = None, *, system: str = "",
+                           ax: Axes | None = None) -> Figure:
+    """Plan view (east vs north, m) of one system's track as estimated by several methods
+    (label → trajectory, e.g. ``filter``, ``rts``, ``fb-rts``), each after ``transform``, in
+    its own colour, against its truth (black, dashed); with truth the legend gives each
+    method's horizontal RMSE. Starts and ends marked as in :func:`plot_trajectories`."""
+    transform = transform or PlanarTransform.identity()
+    colour = _colours(list(tracks))
+    aligned = {label: Trajectory(t.t, transform.apply(np.asarray(t.pos_n, dtype=float)), t.pos_sd, t.pos_cov_en)
+               for label, t in tracks.items()}
+    scores: dict[str, SystemScore] = {}
+    if truth is not None and aligned:
+        _, scores = score_systems(aligned, dict.fromkeys(aligned, truth), alignment="none")
+    ax = _axes(ax, 8.0, 6.0)
+    if truth is not None:
+        _draw_truth(ax, truth, "k", "truth")
+    for label, traj in aligned.items():
+        _draw_track(ax, np.asarray(traj.pos_n), colour[label], _rmse_label(label, scores.get(label)))
+    _finish_plan_view(ax, f"{system + ': ' if system else ''}methods compared (plan view)",
+                      bool(tracks or truth is not None))
+    return ax.figure
+
+
+# --------------------------------------------------------------------------- errors
+
+
+def plot_error_vs_time(scores: Mapping[str, SystemScore], estimates: Mapping[str, Trajectory] | None = None,
+                       *, ax: Axes | None = None) -> Figure:
+    """Horizontal error (m) against time (s) at the truth epochs, one line per system; with
+    ``estimates`` each system's 2DRMS band (0 to 2 √(σ_E² + σ_N²), about 95–98 % of a consistent
+    filter's errors) shaded lightly behind it, its edge dotted. The vertical axis follows the errors: a band
+    wider than them is cut at the top rather than squeezing the errors flat."""
+    estimates = estimates or {}
+    ax = _axes(ax)
     colour = _colours(list(scores))
+    top = 0.0
     for name, sc in scores.items():
-        sparse_like = len(sc.t) < 50
-        ax.plot(sc.t, sc.horizontal_error_m, "-o" if sparse_like else "-", ms=4, lw=1.0,
-                color=colour[name], label=name)
-    if not scores:
-        _no_data(ax, "no truth: nothing scored")
+        if name in estimates:
+            band = 2.0 * horizontal_sigma_m(estimates[name], sc.t)
+            idx = thin_index(sc.t.size)
+            ax.fill_between(sc.t[idx], 0.0, band[idx], color=colour[name], alpha=BAND_ALPHA / 2, lw=0, zorder=1)
+            ax.plot(sc.t[idx], band[idx], ":", color=colour[name], lw=0.9, zorder=2, label=f"{name} 2DRMS")
+        idx = thin_index(sc.t.size)
+        sparse_like = sc.t.size < 50
+        ax.plot(sc.t[idx], sc.horizontal_error_m[idx], "-o" if sparse_like else "-", ms=4, lw=1.0,
+                color=colour[name], label=name, zorder=3)
+        finite = sc.horizontal_error_m[np.isfinite(sc.horizontal_error_m)]
+        top = max(top, float(finite.max()) if finite.size else 0.0)
     ax.set_title("Horizontal error against time")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("horizontal error [m]")
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0.0, 1.1 * top if top > 0 else None)
     ax.grid(True, alpha=0.3)
     if scores:
-        ax.legend(loc="best", fontsize="small")
-    _save(fig, path)
+        _legend_outside(ax)
+    else:
+        _no_data(ax, "no truth: nothing scored")
+    return ax.figure
 
 
-def plot_error_cdf(path: Path, scores: Mapping[str, SystemScore]) -> None:
-    """Empirical CDF of horizontal error (m) per system."""
-    fig = _new_figure()
-    ax = fig.add_subplot(1, 1, 1)
+def plot_error_cdf(scores: Mapping[str, SystemScore], *, ax: Axes | None = None) -> Figure:
+    """Empirical CDF of the horizontal error (m) per system."""
+    ax = _axes(ax)
     colour = _colours(list(scores))
     for name, sc in scores.items():
         e, p = error_cdf(sc.horizontal_error_m)
         if e.size:
             ax.step(np.concatenate(([0.0], e)), np.concatenate(([0.0], p)), where="post",
                     color=colour[name], lw=1.2, label=name)
-    if not scores:
-        _no_data(ax, "no truth: nothing scored")
     ax.set_title("CDF of horizontal error")
     ax.set_xlabel("horizontal error [m]")
     ax.set_ylabel("cumulative probability")
@@ -141,18 +241,19 @@ def plot_error_cdf(path: Path, scores: Mapping[str, SystemScore]) -> None:
     ax.set_xlim(left=0)
     ax.grid(True, alpha=0.3)
     if scores:
-        ax.legend(loc="lower right", fontsize="small")
-    _save(fig, path)
+        _legend_outside(ax)
+    else:
+        _no_data(ax, "no truth: nothing scored")
+    return ax.figure
 
 
-def plot_nees(path: Path, tracks: Mapping[str, NeesTrack], title: str = "Horizontal position NEES against time") -> None:
+def plot_nees(tracks: Mapping[str, NeesTrack], title: str = "Horizontal position NEES against time",
+              *, ax: Axes | None = None) -> Figure:
     """Horizontal NEES (2 dof) against time (s) per system, log scale, with the two-sided 95 %
     chi-square band of one epoch (of a Monte-Carlo mean: of ``runs`` runs) shaded and the
     expected value (the dof) as a line; the legend gives each system's mean NEES and the
     share of epochs inside the band."""
-    crowded = len(tracks) > 4  # the legend goes beside the axes
-    fig = _new_figure(10.0 if crowded else 7.0, 5.0)
-    ax = fig.add_subplot(1, 1, 1)
+    ax = _axes(ax)
     colour = _colours(list(tracks))
     low = []
     for name, track in tracks.items():
@@ -160,17 +261,18 @@ def plot_nees(path: Path, tracks: Mapping[str, NeesTrack], title: str = "Horizon
         t, v = track.t[ok], track.nees[ok]
         if not v.size:
             continue
-        step = max(1, v.size // MAX_POINTS)
+        idx = thin_index(v.size)
         s = track.summary()
-        ax.plot(t[::step], v[::step], "-", lw=0.8, color=colour[name],
+        ax.plot(t[idx], v[idx], "-", lw=0.8, color=colour[name], zorder=3,
                 label=f"{name} (mean {s['mean']:.3g}, {100 * s['in_band_fraction']:.0f} % in band)")
         low.append(np.percentile(v, 1))
     bands = {(track.dof, track.runs): track.band() for track in tracks.values()}
     for (dof, runs), (lo, hi) in sorted(bands.items()):
         of = f", mean of {runs} runs" if runs > 1 else ""
-        ax.axhspan(lo, hi, color="0.5", alpha=0.15, lw=0, label=f"95 % band, {dof} dof{of} [{lo:.3g}, {hi:.3g}]")
+        ax.axhspan(lo, hi, color="0.5", alpha=BAND_ALPHA, lw=0, zorder=1,
+                   label=f"95 % band, {dof} dof{of} [{lo:.3g}, {hi:.3g}]")
     for dof in sorted({dof for dof, _ in bands}):
-        ax.axhline(dof, color="k", lw=1.0, ls="--", label=f"expected ({dof})")
+        ax.axhline(dof, color="k", lw=1.0, ls="--", zorder=2, label=f"expected ({dof})")
     if low:  # the first epochs (a covariance and an error near 0) would stretch the axis for decades
         ax.set_ylim(bottom=min(min(low), *(lo / 3.0 for lo, _ in bands.values())))
     else:
@@ -181,44 +283,74 @@ def plot_nees(path: Path, tracks: Mapping[str, NeesTrack], title: str = "Horizon
     ax.set_ylabel("NEES [-]")
     ax.set_yscale("log")
     ax.grid(True, which="major", alpha=0.3)
-    if crowded:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
-        fig.subplots_adjust(right=0.62)
-    elif tracks:
-        ax.legend(loc="best", fontsize="small")
-    _save(fig, path)
+    if tracks:
+        _legend_outside(ax)
+    return ax.figure
 
 
-def plot_against_outage_duration(path: Path, curves: Mapping[str, Mapping[float, Sequence[float]]],
-                                 title: str, ylabel: str = "horizontal error [m]") -> None:
+# --------------------------------------------------------------------------- studies
+
+
+def plot_against_outage_duration(curves: Mapping[str, Mapping[float, Sequence[float]]], title: str,
+                                 ylabel: str = "horizontal error [m]", *, ax: Axes | None = None) -> Figure:
     """An error (m) against the GNSS outage duration (s): per curve (label → duration → one value
-    per run) the mean with its 95 % confidence band (Student t) and the 90th percentile, dashed."""
-    from scipy.stats import t as student_t  # scipy.stats is slow to import; only study plots need it
+    per run) each run as a small dot, the mean as a line with its 95 % confidence interval (Student
+    t) as a light error bar, and the 90th percentile dashed. Curves are set a little apart along
+    the duration axis so their bars do not overlap. The vertical axis follows the runs, means and
+    percentiles: the interval of a few runs, wider than them, is cut off rather than drawn to scale."""
+    # scipy.stats is slow to import; only study plots need it
+    from scipy.stats import t as student_t
 
-    fig = _new_figure()
-    ax = fig.add_subplot(1, 1, 1)
+    ax = _axes(ax)
     colour = _colours(list(curves))
-    for label, by_duration in curves.items():
-        d = np.array(sorted(by_duration), dtype=float)
-        runs = [np.asarray(by_duration[k], dtype=float) for k in sorted(by_duration)]
+    span = max((abs(float(d)) for by_duration in curves.values() for d in by_duration), default=0.0) or 1.0
+    top = 0.0
+    for k, (label, by_duration) in enumerate(curves.items()):
+        d = np.array(sorted(by_duration), dtype=float) + 0.012 * span * (k - (len(curves) - 1) / 2)
+        runs = [np.asarray(by_duration[key], dtype=float) for key in sorted(by_duration)]
         runs = [v[np.isfinite(v)] for v in runs]
         mean = np.array([v.mean() if v.size else np.nan for v in runs])
         half = np.array([student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size) if v.size > 1 else np.nan
                          for v in runs])
         p90 = np.array([np.percentile(v, 90) if v.size else np.nan for v in runs])
-        n = min((v.size for v in runs), default=0)
-        ax.plot(d, mean, "-o", ms=4, color=colour[label], label=f"{label} (mean, n ≥ {n})")
-        ax.fill_between(d, mean - half, mean + half, color=colour[label], alpha=0.2, lw=0)
-        ax.plot(d, p90, "--", color=colour[label], lw=1.0, alpha=0.8, label=f"{label} (90th percentile)")
-    if not curves:
-        _no_data(ax, "no successful runs")
+        sizes = sorted({v.size for v in runs})
+        n = f"n = {sizes[0]}" if len(sizes) == 1 else f"n = {sizes[0]}–{sizes[-1]}"
+        ax.errorbar(d, mean, yerr=half, fmt="none", ecolor=colour[label], elinewidth=1.0, capsize=3, alpha=0.5,
+                    zorder=1)
+        ax.plot(np.repeat(d, [v.size for v in runs]), np.concatenate(runs), ".", color=colour[label], ms=3,
+                alpha=0.5, zorder=2)
+        ax.plot(d, mean, "-o", ms=4, color=colour[label], zorder=3, label=f"{label} (mean, {n})")
+        ax.plot(d, p90, "--", color=colour[label], lw=1.0, alpha=0.8, zorder=3, label=f"{label} (90th percentile)")
+        values = np.concatenate([*runs, mean, p90])
+        values = values[np.isfinite(values)]
+        top = max(top, float(values.max()) if values.size else 0.0)
     ax.set_title(title)
     ax.set_xlabel("GNSS outage duration [s]")
     ax.set_ylabel(ylabel)
-    ax.set_ylim(bottom=0)
-    ax.set_xlim(left=0)
+    ax.set_ylim(0.0, 1.1 * top if top > 0 else None)
     ax.grid(True, alpha=0.3)
     if curves:
-        ax.legend(loc="lower right", fontsize="small", title="band: 95 % confidence of the mean",
-                  title_fontsize="small")
-    _save(fig, path)
+        _legend_outside(ax, title="dots: runs; bars: 95 % confidence\nof the mean", title_fontsize="small")
+    else:
+        _no_data(ax, "no successful runs")
+    return ax.figure
+
+
+# --------------------------------------------------------------------------- a run's set
+
+
+def write_run_plots(out_dir: str | Path, estimates: Mapping[str, Trajectory],
+                    scores: Mapping[str, SystemScore] | None, transform: PlanarTransform,
+                    truths: Mapping[str, TruthTrack] | None, nees: Mapping[str, NeesTrack],
+                    figures: FiguresConfig | None = None) -> list[Path]:
+    """A run's plots in ``out_dir`` in the ``figures`` formats and dpi (default PNG): trajectory;
+    where something was scored, error_vs_time (with the 2DRMS bands), error_cdf and nees.
+    Returns the files written."""
+    figures = figures or FiguresConfig()
+    out_dir = Path(out_dir)
+    drawn = {"trajectory": plot_trajectories(estimates, scores, transform, truths)}
+    if scores:
+        drawn |= {"error_vs_time": plot_error_vs_time(scores, estimates), "error_cdf": plot_error_cdf(scores),
+                  "nees": plot_nees(nees)}
+    return [path for name, fig in drawn.items() for path in save_figure(fig, out_dir / name, figures.formats,
+                                                                        figures.dpi)]

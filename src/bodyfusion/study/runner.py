@@ -113,7 +113,7 @@ def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | 
     out = Path(out_dir)
     write_summary(out / SUMMARY_FILE, summarise(in_grid, params))
     report.files = [store.results_path, store.by_system_path, out / SUMMARY_FILE,
-                    *write_plots(out, in_grid, params)]
+                    *write_plots(out, in_grid, params, study.spec.figures)]
     (out / "study.json").write_text(json.dumps({
         "study": str(study_path), "name": study.name, "runs": report.total, "done": report.done,
         "failed": report.failed, "skipped": report.skipped, "executor": report.executor, "workers": workers,

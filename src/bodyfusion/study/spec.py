@@ -13,6 +13,7 @@ A study file (YAML, strict; paths relative to the study file)::
       start_s: 30                             # s on the system's clock (a layout may set outage_start_s)
       durations_s: [0, 10, 20, 30, 40, 60, 120]
     seeds: 20                                 # seeds 0..19, or a list of seeds
+    figures: {formats: [png, pdf], dpi: 300}  # optional: the plot files (default PNG, 120 dpi)
 
 ``parameters`` and ``set`` paths apply to the file the layout names: a scenario's paths
 (``layout.fuser.method``, ``systems.hand_phone.gnss.white_sigma_m``) or a layout's
@@ -34,7 +35,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from bodyfusion.base.sections import DataPath, StrictModel
+from bodyfusion.base.sections import DataPath, FiguresConfig, StrictModel
 
 
 class StudyLayout(StrictModel):
@@ -88,6 +89,7 @@ class StudySpec(StrictModel):
     parameters: dict[str, list[Any]] = Field(default_factory=dict)
     outages: StudyOutages | None = None
     seeds: int | list[int]
+    figures: FiguresConfig = Field(default_factory=FiguresConfig)
 
     @field_validator("parameters")
     @classmethod

@@ -1,0 +1,185 @@
+"""Figures for papers: every plot returns a Figure and draws into a given Axes, saving is
+separate (PNG, PDF, SVG at a dpi), σ bands on the error, start and end markers, estimate and
+truth told apart, methods compared on one axes, study plots readable at a few runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.colors import to_rgb
+from matplotlib.figure import Figure
+
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.sections import FiguresConfig
+from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run
+from bodyfusion.evaluation.consistency import NeesTrack
+from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
+from bodyfusion.evaluation.plots import (
+    new_figure,
+    plot_against_outage_duration,
+    plot_error_cdf,
+    plot_error_vs_time,
+    plot_method_comparison,
+    plot_nees,
+    plot_trajectories,
+    save_figure,
+    write_run_plots,
+)
+
+MAGIC = {"png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF", "svg": b"<?xml"}
+
+
+def walk(t: np.ndarray, offset: float = 0.0, sd: float = 0.1) -> Trajectory:
+    """A curved walk, ENU m, with a constant one-sigma position ``sd`` (m)."""
+    pos = np.column_stack([1.2 * t, 0.5 * np.sin(0.4 * t) + offset, 0.0 * t])
+    return Trajectory(t, pos, np.full((t.size, 3), sd))
+
+
+@pytest.fixture()
+def scored():
+    """Two feet: estimates 0.1 m off their truths (one of them surveyed points), scored."""
+    t = np.linspace(0.0, 10.0, 201)
+    truths = {"left": TruthTrack(t, walk(t, 0.15).pos_n), "right": TruthTrack(t[::50], walk(t, -0.15).pos_n[::50],
+                                                                               sparse=True)}
+    estimates = {"left": walk(t, 0.25), "right": walk(t, -0.05)}
+    transform, scores = score_systems(estimates, truths, alignment="none")
+    return estimates, scores, transform, truths
+
+
+def nees_tracks() -> dict[str, NeesTrack]:
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 100.0, 500)
+    return {"a": NeesTrack(t, rng.chisquare(2, t.size)), "b": NeesTrack(t, 10.0 * rng.chisquare(2, t.size))}
+
+
+def every_plot(scored):
+    estimates, scores, transform, truths = scored
+    return {
+        "trajectories": lambda **kw: plot_trajectories(estimates, scores, transform, truths, **kw),
+        "methods": lambda **kw: plot_method_comparison({"filter": estimates["left"], "rts": walk(
+            estimates["left"].t, 0.2)}, truths["left"], **kw),
+        "error_vs_time": lambda **kw: plot_error_vs_time(scores, estimates, **kw),
+        "error_cdf": lambda **kw: plot_error_cdf(scores, **kw),
+        "nees": lambda **kw: plot_nees(nees_tracks(), **kw),
+        "outage": lambda **kw: plot_against_outage_duration({"a": {0.0: [1.0, 1.2], 30.0: [2.0, 2.5]}}, "t", **kw),
+    }
+
+
+@pytest.mark.parametrize("name", ["trajectories", "methods", "error_vs_time", "error_cdf", "nees", "outage"])
+def test_every_plot_returns_a_figure_and_draws_into_a_given_axes(scored, name):
+    draw = every_plot(scored)[name]
+    own = draw()
+    assert isinstance(own, Figure) and len(own.axes) == 1 and own.axes[0].lines
+    panel = new_figure(12.0, 4.0)
+    left, right = panel.subplots(1, 2)
+    assert draw(ax=right) is panel
+    assert right.lines and not left.lines and len(panel.axes) == 2
+
+
+def test_plots_of_nothing_still_render(tmp_path):
+    for fig in (plot_trajectories({}), plot_error_vs_time({}), plot_error_cdf({}), plot_nees({}),
+                plot_method_comparison({}), plot_against_outage_duration({}, "none")):
+        assert save_figure(fig, tmp_path / "empty")[0].stat().st_size > 1000
+
+
+def test_save_figure_writes_each_format_at_the_dpi_beside_the_name(tmp_path):
+    fig = plot_error_cdf({})
+    written = save_figure(fig, tmp_path / "sub" / "cdf.png", ["png", "pdf", "svg"], dpi=60)
+    assert [p.name for p in written] == ["cdf.png", "cdf.pdf", "cdf.svg"]
+    for path in written:
+        assert path.read_bytes().startswith(MAGIC[path.suffix[1:]])
+    small = written[0].stat().st_size
+    assert save_figure(fig, tmp_path / "cdf", dpi=240)[0].stat().st_size > 2 * small
+    with pytest.raises(ValueError, match="jpg"):
+        save_figure(fig, tmp_path / "cdf", ["jpg"])
+
+
+def test_a_runs_plots_keep_their_png_names_and_take_the_layouts_formats(scored, tmp_path):
+    estimates, scores, transform, truths = scored
+    names = [p.name for p in write_run_plots(tmp_path / "a", estimates, scores, transform, truths, nees_tracks())]
+    assert names == ["trajectory.png", "error_vs_time.png", "error_cdf.png", "nees.png"]
+    figures = FiguresConfig(formats=["pdf", "svg"], dpi=80)
+    written = write_run_plots(tmp_path / "b", estimates, None, transform, None, {}, figures)
+    assert [p.name for p in written] == ["trajectory.pdf", "trajectory.svg"]
+
+
+def test_error_vs_time_shades_the_2drms_band_behind_and_follows_the_errors(scored):
+    estimates, scores, _, _ = scored
+    wide = {name: Trajectory(e.t, e.pos_n, np.full_like(e.pos_sd, 5.0)) for name, e in estimates.items()}
+    ax = plot_error_vs_time(scores, wide).axes[0]
+    bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert len(bands) == 2
+    lines = [line for line in ax.lines if line.get_label() in scores]
+    assert all(b.get_zorder() < min(line.get_zorder() for line in lines) and b.get_alpha() < 0.5 for b in bands)
+    top = bands[0].get_paths()[0].vertices[:, 1].max()
+    assert top == pytest.approx(2.0 * np.hypot(5.0, 5.0))  # 2 √(σE² + σN²)
+    errors = max(float(np.max(s.horizontal_error_m)) for s in scores.values())
+    assert ax.get_ylim()[1] == pytest.approx(1.1 * errors)  # the 14 m band does not flatten 0.1 m errors
+
+
+def test_plan_view_marks_start_and_end_and_draws_truth_in_another_style_and_colour(scored):
+    estimates, scores, transform, truths = scored
+    ax = plot_trajectories(estimates, scores, transform, truths).axes[0]
+    estimate = next(line for line in ax.lines if line.get_label().startswith("left (RMSE"))
+    truth = next(line for line in ax.lines if line.get_label() == "left truth")
+    assert estimate.get_linestyle() == "-" and truth.get_linestyle() == "--"
+    assert np.linalg.norm(np.subtract(to_rgb(estimate.get_color()), to_rgb(truth.get_color()))) > 0.1
+    start = [line for line in ax.lines if line.get_marker() == "o"]
+    end = [line for line in ax.lines if line.get_marker() == "s"]
+    assert len(start) == len(end) == 2
+    np.testing.assert_allclose(np.ravel(start[0].get_xydata()), estimates["left"].pos_n[0, :2])
+    np.testing.assert_allclose(np.ravel(end[0].get_xydata()), estimates["left"].pos_n[-1, :2])
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "start" in labels and "end" in labels and "right truth (surveyed points)" in labels
+
+
+def test_methods_are_compared_on_one_axes_with_their_rmse_against_the_truth():
+    t = np.linspace(0.0, 10.0, 101)
+    truth = TruthTrack(t, walk(t).pos_n)
+    turn = PlanarTransform(0.0, np.array([0.0, 0.0]), 0.0)
+    fig = plot_method_comparison({"filter": walk(t, 0.3), "rts": walk(t, 0.1), "fb-rts": walk(t, 0.05)}, truth, turn,
+                                 system="left_foot")
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels[:4] == ["truth", "filter (RMSE 0.30 m)", "rts (RMSE 0.10 m)", "fb-rts (RMSE 0.05 m)"]
+    colours = {line.get_color() for line in ax.lines if line.get_label() in ("filter", "rts", "fb-rts")
+               or "RMSE" in line.get_label()}
+    assert len(colours) == 3 and ax.get_title().startswith("left_foot")
+
+
+def test_study_plot_at_two_runs_keeps_its_legend_outside_and_its_axis_on_the_runs():
+    curves = {"foot_hand": {0.0: [1.0, 1.3], 60.0: [3.0, 9.0]}, "dual": {0.0: [0.8, 0.9], 60.0: [2.0, 2.2]}}
+    fig = plot_against_outage_duration(curves, "end error")
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    assert ax.get_legend().get_window_extent().x0 >= ax.get_window_extent().x1
+    assert ax.get_ylim()[1] == pytest.approx(1.1 * 9.0)  # not the t(1) confidence interval's ±38 m
+    assert "n = 2" in ax.get_legend().get_texts()[0].get_text()
+    bars = [c for c in ax.collections if isinstance(c, LineCollection)]
+    assert bars and all(b.get_zorder() < 2 and b.get_alpha() <= 0.5 for b in bars)
+
+
+def test_a_layouts_output_figures_set_the_formats_and_dpi_of_the_runs_plots(write_yaml, tmp_path):
+    walker = {"plugin": "random_walk", "duration_s": 2.0, "rate_hz": 50}
+    layout = {"systems": {"walker": walker}, "output": {"figures": {"formats": ["pdf", "svg"], "dpi": 300}}}
+    loaded = load_layout(write_yaml(layout))
+    assert loaded.layout.output.figures == FiguresConfig(formats=["pdf", "svg"], dpi=300)
+    assert load_layout(write_yaml({"systems": {"walker": walker}})).layout.output.figures == FiguresConfig()
+    _, out = run(write_yaml(layout), out_dir=tmp_path / "out")
+    assert {p.name for p in out.glob("trajectory.*")} == {"trajectory.pdf", "trajectory.svg"}
+
+
+@pytest.mark.parametrize("figures, key, reason", [
+    ({"formats": ["jpg"]}, "output.figures.formats.0", "'png', 'pdf' or 'svg'"),
+    ({"formats": ["png", "png"]}, "output.figures.formats", "named twice"),
+    ({"formats": []}, "output.figures.formats", "at least 1"),
+    ({"dpi": 10}, "output.figures.dpi", "greater than or equal to 50"),
+])
+def test_a_bad_figures_section_is_refused_naming_its_key(write_yaml, figures, key, reason):
+    layout = {"systems": {"walker": {"plugin": "random_walk"}}, "output": {"figures": figures}}
+    with pytest.raises(ConfigError) as err:
+        load_layout(write_yaml(layout))
+    assert err.value.key == key and reason in err.value.reason
