@@ -1,4 +1,4 @@
-"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | plugins``.
+"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | report | plugins``.
 
 Each command imports what it needs when it runs (the compiled kernels, matplotlib, Dask are
 heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
@@ -131,6 +131,16 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
     for line in disjoint_time_bases(loaded):
         typer.echo(f"warning: {line}", err=True)
     typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
+
+
+@app.command()
+def report(folder: Annotated[Path, typer.Argument(metavar="RUN_OR_STUDY_DIR",
+                                                  help="A folder written by fusion run or fusion study.")]) -> None:
+    """Write report.html into a run or study folder: one self-contained page (interactive plots,
+    tables, data embedded; opens without a network) read from the folder's files only."""
+    from bodyfusion.evaluation.report import write_report
+
+    typer.echo(f"wrote {write_report(folder)}")
 
 
 @app.command()
