@@ -6,6 +6,35 @@ toolbox the plugins share), :mod:`bodyfusion.io` (readers of IMU, truth, GNSS an
 files), :mod:`bodyfusion.evaluation` (scoring and plots), :mod:`bodyfusion.plugins` (the built-in
 sensor systems), :mod:`bodyfusion.sim` (simulation with truth), :mod:`bodyfusion.study`
 (studies over many runs), :mod:`bodyfusion.testing` (the conformance kit for plugins).
+
+The library's entry points are at the root (:mod:`bodyfusion.api`): :func:`load_layout` (a YAML
+file, a dict or models; overrides as a dict or dotted strings), :func:`run` (with in-memory data),
+:func:`simulate`, :func:`run_study`; a run's :class:`RunResult` gives its tables as DataFrames.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
 __version__ = "0.2.0"
+
+_API = {"load_layout": "bodyfusion.api", "run": "bodyfusion.api", "run_study": "bodyfusion.api",
+        "Layout": "bodyfusion.core.layout", "LoadedLayout": "bodyfusion.core.layout",
+        "RunResult": "bodyfusion.core.result"}
+"""The library's names (:mod:`bodyfusion.api`), loaded when first used: ``import bodyfusion`` and
+the command line stay quick (the compiled kernels and pandas load with a run)."""
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _API:
+        raise AttributeError(f"module 'bodyfusion' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_API[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API})

@@ -44,6 +44,7 @@ import numpy as np
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
                                 SocpSolver)
+from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
 SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
@@ -68,6 +69,8 @@ class FuserReport:
     multipliers: list[float] = field(default_factory=list)
     solve_times_us: list[float] = field(default_factory=list)
     wall_s: float = 0.0
+    constraint_log: ConstraintLog | None = None
+    """Every constraint at every sync epoch (:class:`~bodyfusion.core.constraint_log.ConstraintLog`)."""
 
 
 def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
@@ -231,7 +234,9 @@ class Fuser:
             self._solver = SOLVERS[self.config.method](
                 n_constrained, distance_constraints(self.constraints, order[:n_constrained]),
                 tol_m=self.config.tolerance_m, max_iter=self.config.max_iterations)
-            events += [(float(t), 1, 0, 0) for t in epoch_times(members, self.config)]
+            epochs = epoch_times(members, self.config)
+            events += [(float(t), 1, 0, 0) for t in epochs]
+            self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -290,6 +295,7 @@ class Fuser:
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
+        rep.constraint_log.record(t, p_hat, sol)
         if not sol.active:
             return
         rep.activations += 1

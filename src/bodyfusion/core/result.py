@@ -4,20 +4,27 @@ scores and the consistency figures, the fuser's and the smoothers' reports (:cla
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bodyfusion.core.fuser import FuserReport
 from bodyfusion.core.layout import LoadedLayout
-from bodyfusion.core.system import AidingSource, SensorSystem
+from bodyfusion.core.system import AidingSource, CovarianceHistory, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
 from bodyfusion.evaluation.consistency import CovarianceHealth, NeesTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
+if TYPE_CHECKING:  # pandas loads when a table is asked for
+    import pandas as pd
+
 
 @dataclass
 class RunResult:
-    """Everything a run produced: systems (with their histories), trajectories, scores."""
+    """Everything a run produced: systems (with their histories), trajectories, scores; its
+    tables as pandas DataFrames (:meth:`to_frame`, :meth:`states`, :meth:`covariances`,
+    :meth:`events`, :meth:`innovations`, :meth:`constraint_events`, :meth:`errors`,
+    :meth:`truth_frame`)."""
 
     loaded: LoadedLayout
     systems: dict[str, SensorSystem]
@@ -53,6 +60,82 @@ class RunResult:
     def samples(self) -> int:
         """Input samples of every system and aiding source together."""
         return int(np.sum([s.samples for s in (*self.systems.values(), *self.aiding.values())]))
+
+    # --- tables ------------------------------------------------------------------------
+    # Each returns a pandas DataFrame (core/result_frames.py, imported when a table is asked
+    # for: a run from the command line needs none, and pandas takes a while to load).
+
+    def system(self, name: str) -> SensorSystem:
+        """The navigation system ``name`` (KeyError naming the systems there are)."""
+        if name not in self.systems:
+            raise KeyError(f"no system {name!r} in this run (have {sorted(self.systems)})")
+        return self.systems[name]
+
+    def to_frame(self) -> pd.DataFrame:
+        """Trajectories in long form: ``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m`` (ENU,
+        navigation frame, as trajectories.csv), ``sd_east_m``, ``sd_north_m``, ``sd_up_m``,
+        ``cov_east_north_m2``, and where the system estimates them ``v_east_mps``,
+        ``v_north_mps``, ``v_up_mps``, ``heading_deg``, ``pitch_deg``, ``roll_deg``
+        (:func:`bodyfusion.core.result_frames.trajectories`)."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.trajectories(self)
+
+    def truth_frame(self) -> pd.DataFrame:
+        """The truth tracks in long form: ``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m``."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.truth(self)
+
+    def errors(self) -> pd.DataFrame:
+        """Errors against truth at the truth epochs, after the evaluation alignment
+        (:func:`bodyfusion.core.result_frames.errors`)."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.errors(self)
+
+    def states(self, name: str) -> pd.DataFrame:
+        """System ``name``'s estimated states over time, in the column names every plugin shares
+        (:meth:`bodyfusion.core.system.SensorSystem.states`): the foot INS every sample's
+        position, velocity, attitude and biases; the hand PDR at each step and update its
+        position, walking heading, gyro bias, GNSS bias, step scale (and holding offset); the
+        random walk its position."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.states(self, name)
+
+    def covariances(self, name: str) -> CovarianceHistory:
+        """System ``name``'s covariance over time as it stores it
+        (:class:`~bodyfusion.core.system.CovarianceHistory`: ``t``, ``states``, ``matrix`` (N, k, k),
+        NaN where not stored; ``to_frame()`` for columns): the foot INS the position block
+        (variances and the east–north covariance) of every sample; the hand PDR its whole
+        error-state covariance at each step and update; the random walk its whole (position)
+        covariance at every sample."""
+        return self.system(name).covariance_history()
+
+    def events(self) -> pd.DataFrame:
+        """Gait events of every system: ``system``, ``event`` (``stance``: the foot INS's
+        detected stance phases; ``step``: the hand PDR's steps), ``t``, ``t_end``, ``duration_s``
+        and, for steps, ``length_m``."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.events(self)
+
+    def innovations(self) -> pd.DataFrame:
+        """Every recorded update: ``system``, ``t``, ``aiding`` (``zupt``, ``position_fix``,
+        ``gnss_position``, ``gnss_course``, ``magnetometer``, ``anchor_range``, ``peer_range``),
+        ``nis`` (before any gate), ``dof``, ``accepted`` and a range's ``end``."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.innovations(self)
+
+    def constraint_events(self) -> pd.DataFrame:
+        """Every constraint at every sync epoch: ``t``, ``pair``, ``system_a``, ``system_b``,
+        ``kind``, ``limit_m``, ``distance_before_m``, ``distance_after_m``, ``multiplier``,
+        ``active`` (empty without constraints or with ``fuser.method: none``)."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.constraint_events(self)
 
     @property
     def input_report(self) -> InputReport:

@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from pydantic import BaseModel
@@ -25,6 +25,9 @@ from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.evaluation.consistency import CovarianceHealth
+
+if TYPE_CHECKING:  # pandas loads when a table is asked for
+    import pandas as pd
 
 
 @dataclass
@@ -50,6 +53,44 @@ class JacobianCase:
     retract: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
     difference: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
+
+
+@dataclass
+class CovarianceHistory:
+    """A system's error-state covariance over time as it stores it: ``t`` (N,) s, ``states``
+    (the k error states each row and column of ``matrix`` belongs to, in the names of
+    :meth:`SensorSystem.states` where the state is one of those: ``east_m``, ``north_m``,
+    ``up_m``...), ``matrix`` (N, k, k) in the states' units squared; an entry the system does not
+    store is NaN. ``stored`` says in words what the system keeps."""
+
+    t: np.ndarray
+    states: tuple[str, ...]
+    matrix: np.ndarray
+    stored: str
+
+    def variances(self) -> dict[str, np.ndarray]:
+        """State name → (N,) variance."""
+        diag = np.diagonal(self.matrix, axis1=1, axis2=2)
+        return {name: diag[:, k] for k, name in enumerate(self.states)}
+
+    def to_frame(self) -> pd.DataFrame:
+        """Columns ``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle)."""
+        # pandas loads when a table is asked for
+        from bodyfusion.core.result_frames import covariance_frame
+
+        return covariance_frame(self.t, self.states, self.matrix)
+
+
+def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray | None, stored: str) -> CovarianceHistory:
+    """The (N, 3, 3) east, north, up covariance of variances ``var_enu`` (N, 3) m² and the
+    east–north covariance ``cov_en`` (N,) m² (None: not stored); the east–up and north–up
+    covariances are not stored (NaN)."""
+    n = len(t)
+    matrix = np.full((n, 3, 3), np.nan)
+    matrix[:, [0, 1, 2], [0, 1, 2]] = var_enu
+    if cov_en is not None:
+        matrix[:, 0, 1] = matrix[:, 1, 0] = cov_en
+    return CovarianceHistory(np.asarray(t), ("east_m", "north_m", "up_m"), matrix, stored)
 
 
 @dataclass(frozen=True)
@@ -111,6 +152,14 @@ class Plugin(ABC):
 
         The core adds ``trajectory_covariance`` and, where truth exists, ``nees`` (the
         horizontal NEES, :meth:`bodyfusion.core.result.RunResult.health`). Default here: nothing."""
+        return {}
+
+    def innovations(self) -> dict[str, np.ndarray]:
+        """Every update the plugin applied or refused, in time order, as equal-length columns:
+        ``t`` (s), ``aiding`` (the aiding type, as in :meth:`health`'s ``nis``: ``zupt``,
+        ``position_fix``, ``gnss_position``, ``gnss_course``, ``magnetometer``,
+        ``anchor_range``, ``peer_range``...), ``nis`` (before any gate), ``dof``, ``accepted``
+        (within the gate); a plugin may add columns (a range's ``end``). Default: none."""
         return {}
 
 
@@ -215,6 +264,33 @@ class SensorSystem(Plugin):
     @abstractmethod
     def trajectory(self) -> Trajectory:
         """History of positions and their one-sigma uncertainty."""
+
+    def states(self) -> dict[str, np.ndarray]:
+        """The estimated states at the epochs of :meth:`trajectory` (smoothed where the system was
+        smoothed), as equal-length columns in names every plugin shares: ``t`` (s); ``east_m``,
+        ``north_m``, ``up_m`` (ENU); where the system estimates them ``v_east_mps``,
+        ``v_north_mps``, ``v_up_mps``; ``qw``, ``qx``, ``qy``, ``qz`` (attitude, body to ENU);
+        ``heading_deg`` (azimuth clockwise from North: of the body x axis for an IMU, of the
+        walking direction for a PDR), ``pitch_deg``, ``roll_deg`` (ZYX in ENU, as
+        :func:`bodyfusion.nav.attitude.quat_from_azimuth_pitch_roll`); then the plugin's own
+        states under their own names with their units. Default: the trajectory's positions."""
+        traj = self.trajectory()
+        return {"t": traj.t, "east_m": traj.pos_n[:, 0], "north_m": traj.pos_n[:, 1], "up_m": traj.pos_n[:, 2]}
+
+    def covariance_history(self) -> CovarianceHistory:
+        """The error-state covariance over time as the system stores it (see the plugin's
+        docstring). Default: the trajectory's position covariance (variances and, where given,
+        the east–north covariance)."""
+        traj = self.trajectory()
+        return position_covariance(traj.t, traj.pos_sd**2, traj.pos_cov_en,
+                                   "position variances" + (", east-north covariance" if traj.pos_cov_en is not None
+                                                           else ""))
+
+    def events(self) -> dict[str, np.ndarray]:
+        """Gait events the system detected, as equal-length columns: ``event`` (``stance``,
+        ``step``...), ``t`` (start, s), ``t_end`` (s; equal to ``t`` for an instant) and, where the
+        system has it, ``length_m`` (a step's length). Default: none."""
+        return {}
 
     # --- consistency ----------------------------------------------------------------
     def health(self) -> dict:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
+from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import Trajectory
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
@@ -150,6 +151,45 @@ class NisTally:
         return {"dof": self.dof, "expected": float(self.dof), "count": self.count,
                 "mean": self.total / self.count if self.count and self.total is not None else None,
                 "beyond_gate": self.beyond_gate}
+
+
+class NisRecord:
+    """Every update of one aiding type of ``dof`` dimensions: its time (s), its NIS before any
+    gating and whether it lay within the gate, kept in growing arrays
+    (:class:`~bodyfusion.base.records.GrowingArray`); :meth:`tally` is the metrics.json summary."""
+
+    def __init__(self, dof: int) -> None:
+        self.dof = dof
+        self._rows = GrowingArray((3,))
+
+    def add(self, t: float, value: float, within_gate: bool = True) -> None:
+        """Record one update at time t (s)."""
+        self._rows.append((t, value, within_gate))
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def tally(self) -> NisTally:
+        """Count, NIS total and the updates beyond the gate."""
+        rows = self._rows.view()
+        return NisTally(self.dof, len(rows), float(rows[:, 1].sum()), int((rows[:, 2] == 0.0).sum()))
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """``t`` (s), ``nis``, ``dof``, ``accepted`` (within the gate) of every update, in time order."""
+        rows = self._rows.view()
+        return {"t": rows[:, 0].copy(), "nis": rows[:, 1].copy(), "dof": np.full(len(rows), self.dof),
+                "accepted": rows[:, 2] != 0.0}
+
+
+def innovation_columns(records: dict[str, NisRecord]) -> dict[str, np.ndarray]:
+    """The updates of several aiding types (name → record) as one set of columns in time order:
+    ``t``, ``aiding`` (the name), ``nis``, ``dof``, ``accepted``."""
+    parts = [{**rec.columns(), "aiding": np.full(len(rec), kind)} for kind, rec in records.items()]
+    if not parts:
+        return {}
+    columns = {key: np.concatenate([p[key] for p in parts]) for key in ("t", "aiding", "nis", "dof", "accepted")}
+    order = np.argsort(columns["t"], kind="stable")
+    return {key: value[order] for key, value in columns.items()}
 
 
 # --------------------------------------------------------------------------- NEES

@@ -9,9 +9,9 @@ import numpy as np
 from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
-from bodyfusion.core.system import LayoutContext, SensorSystem
+from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import ImuStream, InputReport, Trajectory
-from bodyfusion.evaluation.consistency import NisTally, nis, quaternion_norm_deviation
+from bodyfusion.evaluation.consistency import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
@@ -28,6 +28,7 @@ from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  run_foot_ins)
+from bodyfusion.plugins.foot_ins.results import foot_covariance, foot_states, stance_phases
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 
 MIN_STILL_SAMPLES = 10
@@ -298,7 +299,7 @@ class FootIns(SensorSystem):
         self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
-        self.fix_nis = NisTally(3)
+        self.fix_nis = NisRecord(3)
         self._next_fix = 0
         self._i = 0  # index of the sample the state refers to
         self.smoothed_x: np.ndarray | None = None
@@ -494,11 +495,31 @@ class FootIns(SensorSystem):
 
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
+        x, cov = self._history()
+        return Trajectory(self.stream.t[:len(x)], x[:, 0:3], np.sqrt(np.maximum(cov[:, :3], 0.0)), cov[:, 3].copy())
+
+    def _history(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 16) nominal states and (N, 4) position covariances so far, smoothed where smoothed."""
         n = self._i + 1
         smoothed = self.smoothed_x is not None and self.smoothed_pos_cov is not None
-        x = self.smoothed_x if smoothed else self.hist_x
-        cov = self.smoothed_pos_cov if smoothed else self.hist_pos_cov
-        return Trajectory(self.stream.t[:n], x[:n, 0:3], np.sqrt(np.maximum(cov[:n, :3], 0.0)), cov[:n, 3].copy())
+        return ((self.smoothed_x if smoothed else self.hist_x)[:n],
+                (self.smoothed_pos_cov if smoothed else self.hist_pos_cov)[:n])
+
+    def states(self) -> dict[str, np.ndarray]:
+        """Every sample's nominal state (:func:`~bodyfusion.plugins.foot_ins.results.foot_states`)."""
+        return foot_states(self.stream.t[:self._i + 1], self._history()[0])
+
+    def covariance_history(self) -> CovarianceHistory:
+        """The position covariance of every sample; the foot INS stores no other block."""
+        return foot_covariance(self.stream.t[:self._i + 1], self._history()[1])
+
+    def events(self) -> dict[str, np.ndarray]:
+        """The stance phases the detector found."""
+        return stance_phases(self.stream.t, self.stance[:self._i + 1])
+
+    def innovations(self) -> dict[str, np.ndarray]:
+        """Every position fix's NIS (``position_fix``, 3 dof)."""
+        return innovation_columns({"position_fix": self.fix_nis} if self.config.position_fixes else {})
 
     @property
     def samples(self) -> int:
@@ -529,7 +550,7 @@ class FootIns(SensorSystem):
     def _count_fix_nis(self, z_n: np.ndarray) -> None:
         """The NIS of position fix z_n (ENU, m) against the state before it, S = P_pp + σ² I."""
         value = nis(z_n - self.x[0:3], self.P[0:3, 0:3] + self._fix_sigma**2 * np.eye(3))
-        self.fix_nis.add(value, value <= self._fix_gate)
+        self.fix_nis.add(self.t_now, value, value <= self._fix_gate)
 
     def health(self) -> dict:
         """As :meth:`SensorSystem.health`, plus ``quaternion_norm_max_deviation`` of the filter's
@@ -542,7 +563,7 @@ class FootIns(SensorSystem):
         tallies = {"zupt": NisTally(3, int(c[C_ZUPTS]), float(c[C_NIS_SUM]), int(c[C_GATED])),
                    "zaru": NisTally(3, int(c[C_ZARUS]), None)}
         if self.config.position_fixes is not None:
-            tallies["position_fix"] = self.fix_nis
+            tallies["position_fix"] = self.fix_nis.tally()
         out = {**super().health(), "quaternion_norm_max_deviation": quaternion_norm_deviation(self.hist_x[:n, 6:10]),
                "nis": {kind: tally.to_dict() for kind, tally in tallies.items()}}
         if self.smoothed_x is not None:

@@ -70,8 +70,10 @@ import numpy as np
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
-from bodyfusion.core.system import LayoutContext, SensorSystem
-from bodyfusion.evaluation.consistency import NisTally, nis
+from bodyfusion.base.records import GrowingArray
+from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
+from bodyfusion.evaluation.consistency import NisRecord, innovation_columns, nis
+from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
 from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.phone_log import read_getsensordata
@@ -253,10 +255,11 @@ class HandPdr(SensorSystem):
                             "position_resets": 0, "heading_accepted": 0, "heading_rejected": 0,
                             "heading_skipped_standing": 0, "heading_skipped_handling": 0,
                             "heading_skipped_accuracy": 0}
-        self.nis_tallies = {"gnss_position": NisTally(3), "gnss_course": NisTally(1)}
+        self.nis_records = {"gnss_position": NisRecord(3), "gnss_course": NisRecord(1)}
         if self._mag is not None:
-            self.nis_tallies["magnetometer"] = NisTally(1)
-        self._hist: list[tuple[float, ...]] = []
+            self.nis_records["magnetometer"] = NisRecord(1)
+        self._hist_x = GrowingArray((1 + len(self._nominal),))  # t, nominal state
+        self._hist_P = GrowingArray((self.n_err, self.n_err))
         self._record()
 
     # --- the state ----------------------------------------------------------------
@@ -324,7 +327,7 @@ class HandPdr(SensorSystem):
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
                 weigh: bool, kind: str | None) -> bool:
         """:meth:`BankFilter.update`; the time an open bank collapses is the heading's resolution.
-        The NIS of a ``kind`` of :attr:`nis_tallies` is counted while the bank is one filter."""
+        The NIS of a ``kind`` of :attr:`nis_records` is recorded while the bank is one filter."""
         was_open = len(self._bank) > 1
         value = None
         if kind is not None and not was_open:
@@ -332,7 +335,7 @@ class HandPdr(SensorSystem):
             value = nis(residual(x), H @ P @ H.T + R)
         ok = self._bank.update(H, residual, R, gate, weigh)
         if value is not None:
-            self.nis_tallies[kind].add(value, ok)
+            self.nis_records[kind].add(self._tc, value, ok)
         if was_open and len(self._bank) == 1:
             self.heading_resolved_s = self._tc
             self.heading_resolutions.append(self._tc)
@@ -436,9 +439,13 @@ class HandPdr(SensorSystem):
         self.mag_counts["accepted" if ok else "rejected_gate"] += 1
 
     def _record(self) -> None:
-        """History row: time, position (m), position one-sigma (m), east–north covariance (m²)."""
+        """History row: time, nominal state and error-state covariance (the mixture's moments)."""
         x, P = self._bank.moments()
-        self._hist.append((self._tc, *x[:3], *np.sqrt(np.maximum(np.diag(P)[:3], 0.0)), P[E, N]))
+        self._hist_x.append((self._tc, *x))
+        self._hist_P.append(P)
+
+    def _last_record_t(self) -> float:
+        return float(self._hist_x.view()[-1, 0])
 
     # --- time -------------------------------------------------------------------
     @property
@@ -462,7 +469,7 @@ class HandPdr(SensorSystem):
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         if i >= 0:
             self._propagate_to(float(self.t[i]))  # the state refers to the last sample at or before t
-        if t >= self.t_end and self._hist[-1][0] < self._tc:
+        if t >= self.t_end and self._last_record_t() < self._tc:
             self._record()  # the trajectory covers the whole data span
 
     # --- heading ------------------------------------------------------------------
@@ -493,8 +500,9 @@ class HandPdr(SensorSystem):
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset of one filter or of every hypothesis (:meth:`BankFilter.correct`)."""
         changed = self._bank.correct(dx, P)
-        if self._hist[-1][0] == self._tc:  # corrected at an event: that record shows it
-            self._hist.pop()
+        if self._last_record_t() == self._tc:  # corrected at an event: that record shows it
+            self._hist_x.pop()
+            self._hist_P.pop()
             self._record()
         elif changed:
             self._record()
@@ -513,12 +521,37 @@ class HandPdr(SensorSystem):
         return self.t
 
     # --- results ----------------------------------------------------------------------
-    def trajectory(self) -> Trajectory:
-        h = np.array(self._hist)
-        # several records at one time (an update right after a step): keep the last
+    def _history(self) -> tuple[np.ndarray, np.ndarray]:
+        """The records (t, nominal state) (K, 1 + n) and covariances (K, n_err, n_err); of several
+        records at one time (an update right after a step), the last."""
+        h = self._hist_x.view()
         last = np.concatenate([h[1:, 0] > h[:-1, 0], [True]])
-        h = h[last]
-        return Trajectory(h[:, 0], h[:, 1:4], h[:, 4:7], h[:, 7])
+        return h[last], self._hist_P.view()[last]
+
+    def trajectory(self) -> Trajectory:
+        h, P = self._history()
+        var = np.diagonal(P, axis1=1, axis2=2)[:, :3]
+        return Trajectory(h[:, 0], h[:, 1:4], np.sqrt(np.maximum(var, 0.0)), P[:, E, N])
+
+    def states(self) -> dict[str, np.ndarray]:
+        """At every record (each step, GNSS or magnetometer update, the fuser's corrections; the
+        mixture's mean while the heading bank is open): :func:`~bodyfusion.plugins.hand_pdr.results.hand_states`."""
+        return hand_states(self._history()[0])
+
+    def covariance_history(self) -> CovarianceHistory:
+        """The whole error-state covariance (:data:`~bodyfusion.plugins.hand_pdr.results.ERROR_STATES`) at every record."""
+        h, P = self._history()
+        return CovarianceHistory(h[:, 0], ERROR_STATES[:self.n_err], P.copy(), STORED)
+
+    def events(self) -> dict[str, np.ndarray]:
+        """The detected steps: their time (s) and modelled length (m, before the step scale)."""
+        t = self.t[self.step_index]
+        return {"event": np.full(t.size, "step"), "t": t, "t_end": t, "length_m": self.step_length_m}
+
+    def innovations(self) -> dict[str, np.ndarray]:
+        """GNSS position (3 dof), GNSS course and magnetometer (1 dof) updates, recorded while the
+        heading bank is one filter (see :meth:`health`)."""
+        return innovation_columns(self.nis_records)
 
     @property
     def samples(self) -> int:
@@ -558,4 +591,4 @@ class HandPdr(SensorSystem):
         ``gnss_course`` (1 dof) and, with the magnetometer, ``magnetometer`` (1 dof), each counted
         before the gate while the heading bank is one filter (an open bank's moments are a
         mixture's, not a Gaussian's); the update that follows a position reset is not counted."""
-        return {**super().health(), "nis": {kind: tally.to_dict() for kind, tally in self.nis_tallies.items()}}
+        return {**super().health(), "nis": {kind: rec.tally().to_dict() for kind, rec in self.nis_records.items()}}

@@ -17,7 +17,7 @@ from pydantic import Field
 
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
-from bodyfusion.core.system import LayoutContext, SensorSystem
+from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.evaluation.consistency import CovarianceHealth
 
@@ -128,6 +128,12 @@ class RandomWalk(SensorSystem):
         n = self._i + 1
         var = np.diagonal(self.hist_cov[:n], axis1=1, axis2=2)
         return Trajectory(self.t[:n], self.hist_pos[:n], np.sqrt(np.maximum(var, 0.0)))
+
+    def covariance_history(self) -> CovarianceHistory:
+        """The whole error-state (position) covariance at every sample."""
+        n = self._i + 1
+        return CovarianceHistory(self.t[:n], ("east_m", "north_m", "up_m"), self.hist_cov[:n].copy(),
+                                 "the whole error-state (position) covariance at every sample (m^2)")
 
     def horizontal_nees(self) -> np.ndarray:
         """(N,) normalised estimation error squared of the horizontal position against the

@@ -164,6 +164,15 @@ class UwbTag(AidingSource):
                 "los_accepted": int((applied & ~nlos & ~rejected).sum())}
         return out
 
+    def innovations(self) -> dict[str, np.ndarray]:
+        """Every range the fuser applied (accepted or refused by the gate): ``aiding``
+        ``anchor_range`` or ``peer_range``, ``end`` (the anchor or peer system), 1 dof."""
+        applied = np.flatnonzero((self.fate == ACCEPTED) | (self.fate == REJECTED))
+        end = self.log.end[applied]
+        return {"t": self.log.t[applied], "aiding": np.where(end < self.n_anchors, "anchor_range", "peer_range"),
+                "nis": self.nis[applied], "dof": np.ones(applied.size, dtype=np.int64),
+                "accepted": self.fate[applied] == ACCEPTED, "end": np.asarray(self.ids, dtype=object)[end]}
+
     def health(self) -> dict:
         """``nis`` of the ranges the fuser applied (1 dof, before the gate; beyond the gate:
         rejected), ``anchor_ranges`` and ``peer_ranges`` apart where the tag has them."""

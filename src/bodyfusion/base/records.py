@@ -1,0 +1,39 @@
+"""Per-update records kept in numpy arrays: a row appended at a time into preallocated storage
+that doubles when full, so recording every update of a long run costs no Python object per row."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class GrowingArray:
+    """Rows of one ``shape`` (``()``: scalars) and ``dtype``, appended one at a time.
+
+    :meth:`view` is the (n, *shape) array of the rows so far (a view: copy it to keep it past
+    the next append)."""
+
+    def __init__(self, shape: tuple[int, ...] = (), dtype: type | np.dtype = np.float64, capacity: int = 64) -> None:
+        self._data = np.empty((max(int(capacity), 1), *shape), dtype=dtype)
+        self._n = 0
+
+    def append(self, row: object) -> None:
+        """Add one row (broadcast to the row shape)."""
+        if self._n == len(self._data):
+            grown = np.empty((2 * len(self._data), *self._data.shape[1:]), dtype=self._data.dtype)
+            grown[:self._n] = self._data
+            self._data = grown
+        self._data[self._n] = row
+        self._n += 1
+
+    def pop(self) -> None:
+        """Drop the last row."""
+        if self._n == 0:
+            raise IndexError("pop from an empty record")
+        self._n -= 1
+
+    def __len__(self) -> int:
+        return self._n
+
+    def view(self) -> np.ndarray:
+        """The rows so far, (n, *shape)."""
+        return self._data[:self._n]

@@ -1,0 +1,64 @@
+"""Every constraint at every epoch the fuser solved, in preallocated arrays: when, which pair, its
+separation before and after the solve, its multiplier and whether it was active."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bodyfusion.core.constraints import ConstraintSolution
+from bodyfusion.core.layout import ConstraintConfig
+
+
+class ConstraintLog:
+    """Rows for ``epochs`` sync epochs of the layout's ``constraints`` over the stacked systems
+    ``order`` (the fuser's). The separation of constraint k is ‖E (p_i + l_i − p_j − l_j)‖ (m; E
+    keeps east and north for a horizontal constraint, :mod:`bodyfusion.core.constraints.model`),
+    ``before`` at the estimates p̂, ``after`` at the constrained positions p*; the multiplier λ
+    follows the solvers' sign convention (0 when inactive)."""
+
+    def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
+        self.constraints = constraints
+        k = len(constraints)
+        self._i = np.array([order.index(c.between[0]) for c in constraints], dtype=np.int64)
+        self._j = np.array([order.index(c.between[1]) for c in constraints], dtype=np.int64)
+        self._lever = np.array([[c.lever_arms_m.get(c.between[0], (0.0, 0.0, 0.0)) for c in constraints],
+                                [c.lever_arms_m.get(c.between[1], (0.0, 0.0, 0.0)) for c in constraints]],
+                               dtype=float).reshape(2, k, 3)
+        self._axes = np.array([[1.0, 1.0, 0.0 if c.horizontal else 1.0] for c in constraints]).reshape(k, 3)
+        self.t = np.empty(epochs)
+        self.before_m = np.empty((epochs, k))
+        self.after_m = np.empty((epochs, k))
+        self.multiplier = np.empty((epochs, k))
+        self.active = np.zeros((epochs, k), dtype=bool)
+        self.n = 0
+
+    def separations(self, p: np.ndarray) -> np.ndarray:
+        """(K,) separation (m) of every constraint at the stacked positions p (3n,)."""
+        pos = p.reshape(-1, 3)
+        r = (pos[self._i] + self._lever[0] - pos[self._j] - self._lever[1]) * self._axes
+        return np.sqrt(np.einsum("ki,ki->k", r, r))
+
+    def record(self, t: float, p_hat: np.ndarray, solution: ConstraintSolution) -> None:
+        """One epoch at time t (s): the estimates p̂ (3n,) and the solver's solution."""
+        e = self.n
+        self.t[e] = t
+        self.before_m[e] = self.separations(p_hat)
+        self.after_m[e] = self.separations(solution.p)
+        self.multiplier[e] = solution.multipliers
+        self.active[e, solution.active] = True
+        self.n += 1
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Long form, one row per epoch and constraint: ``t`` (s), ``pair`` (``a-b``), ``system_a``,
+        ``system_b``, ``kind``, ``limit_m``, ``distance_before_m``, ``distance_after_m``,
+        ``multiplier``, ``active``."""
+        n, k = self.n, len(self.constraints)
+        pick = np.tile(np.arange(k), n)
+        labels = np.array([f"{c.between[0]}-{c.between[1]}" for c in self.constraints], dtype=object)
+        a = np.array([c.between[0] for c in self.constraints], dtype=object)
+        b = np.array([c.between[1] for c in self.constraints], dtype=object)
+        return {"t": np.repeat(self.t[:n], k), "pair": labels[pick], "system_a": a[pick], "system_b": b[pick],
+                "kind": np.array([c.kind for c in self.constraints], dtype=object)[pick],
+                "limit_m": np.array([c.distance_m for c in self.constraints])[pick],
+                "distance_before_m": self.before_m[:n].ravel(), "distance_after_m": self.after_m[:n].ravel(),
+                "multiplier": self.multiplier[:n].ravel(), "active": self.active[:n].ravel()}

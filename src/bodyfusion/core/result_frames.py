@@ -1,0 +1,109 @@
+"""A run's results as pandas DataFrames in long form, one set of column names for every plugin
+(the methods of :class:`bodyfusion.core.result.RunResult` call these). Units are in the column
+names (``_m``, ``_mps``, ``_deg``, ``_s``); positions are ENU in the navigation frame, before any
+evaluation alignment, except the ``errors`` table's aligned estimate."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+if TYPE_CHECKING:  # the result module calls these; importing it here would run in a circle
+    from bodyfusion.core.result import RunResult
+
+TRAJECTORY_EXTRAS = ("v_east_mps", "v_north_mps", "v_up_mps", "heading_deg", "pitch_deg", "roll_deg")
+"""Columns of a system's :meth:`~bodyfusion.core.system.SensorSystem.states` that
+:func:`trajectories` adds where the system has them (velocity, attitude)."""
+
+
+def _long(parts: Iterable[tuple[str, Mapping[str, object]]], columns: Iterable[str]) -> pd.DataFrame:
+    """One frame of ``system`` + columns from (name, equal-length columns) parts; a column a part
+    lacks is NaN in its rows; with no part, the empty frame with ``columns``."""
+    frames = [pd.DataFrame({"system": name, **dict(cols)}) for name, cols in parts if len(next(iter(cols.values()), ()))]
+    if not frames:
+        return pd.DataFrame(columns=["system", *columns])
+    return pd.concat(frames, ignore_index=True)
+
+
+def trajectories(result: RunResult) -> pd.DataFrame:
+    """``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m``, their one-sigma ``sd_east_m``,
+    ``sd_north_m``, ``sd_up_m`` and ``cov_east_north_m2``, then the velocity (``v_east_mps``...)
+    and attitude (``heading_deg``, ``pitch_deg``, ``roll_deg``) where the system estimates them:
+    every epoch of every system's trajectory (smoothed where smoothed), as trajectories.csv."""
+    parts = []
+    for name, traj in result.trajectories.items():
+        cols: dict[str, object] = {"t": traj.t, "east_m": traj.pos_n[:, 0], "north_m": traj.pos_n[:, 1],
+                                   "up_m": traj.pos_n[:, 2], "sd_east_m": traj.pos_sd[:, 0],
+                                   "sd_north_m": traj.pos_sd[:, 1], "sd_up_m": traj.pos_sd[:, 2],
+                                   "cov_east_north_m2": traj.horizontal_covariance()[:, 0, 1]}
+        states = result.systems[name].states()
+        if len(states.get("t", ())) == len(traj.t):
+            cols.update({k: states[k] for k in TRAJECTORY_EXTRAS if k in states})
+        parts.append((name, cols))
+    return _long(parts, ["t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m",
+                         "cov_east_north_m2"])
+
+
+def truth(result: RunResult) -> pd.DataFrame:
+    """``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m`` of every truth track (ENU, m)."""
+    return _long(((name, {"t": tr.t, "east_m": tr.pos_n[:, 0], "north_m": tr.pos_n[:, 1], "up_m": tr.pos_n[:, 2]})
+                  for name, tr in result.truths.items()), ["t", "east_m", "north_m", "up_m"])
+
+
+def errors(result: RunResult) -> pd.DataFrame:
+    """At every truth epoch of every scored system: ``t`` (s), the estimate after the evaluation
+    alignment (``east_m``, ``north_m``, ``up_m``), the truth (``truth_east_m``...), and the
+    ``horizontal_error_m`` and ``vertical_error_m``."""
+    parts = []
+    for name, score in result.scores.items():
+        est, ref = score.pos_est_aligned, score.pos_truth
+        parts.append((name, {"t": score.t, "east_m": est[:, 0], "north_m": est[:, 1], "up_m": est[:, 2],
+                             "truth_east_m": ref[:, 0], "truth_north_m": ref[:, 1], "truth_up_m": ref[:, 2],
+                             "horizontal_error_m": score.horizontal_error_m,
+                             "vertical_error_m": score.vertical_error_m}))
+    return _long(parts, ["t", "horizontal_error_m", "vertical_error_m"])
+
+
+def events(result: RunResult) -> pd.DataFrame:
+    """``system``, ``event`` (``stance``, ``step``), ``t`` and ``t_end`` (s), ``duration_s`` and,
+    where the system measures it, ``length_m``: every system's gait events."""
+    frame = _long(((name, s.events()) for name, s in result.systems.items()), ["event", "t", "t_end"])
+    frame.insert(4, "duration_s", frame["t_end"] - frame["t"])
+    return frame
+
+
+def innovations(result: RunResult) -> pd.DataFrame:
+    """``system`` (or aiding source), ``t`` (s), ``aiding`` (the aiding type), ``nis`` (before
+    any gate), ``dof``, ``accepted``, and a source's own columns (a range's ``end``): every update
+    of every system and aiding source that records them."""
+    sources = {**result.systems, **result.aiding}
+    return _long(((name, s.innovations()) for name, s in sources.items()), ["t", "aiding", "nis", "dof", "accepted"])
+
+
+def constraint_events(result: RunResult) -> pd.DataFrame:
+    """One row per constraint per sync epoch: ``t`` (s), ``pair``, ``system_a``, ``system_b``,
+    ``kind``, ``limit_m``, ``distance_before_m`` and ``distance_after_m`` (the constrained
+    separation at the estimates and after the solve), ``multiplier`` (λ) and ``active``."""
+    log = result.fuser.constraint_log
+    columns = ["t", "pair", "system_a", "system_b", "kind", "limit_m", "distance_before_m", "distance_after_m",
+               "multiplier", "active"]
+    return pd.DataFrame(log.columns() if log is not None else {c: [] for c in columns}, columns=columns)
+
+
+def states(result: RunResult, name: str) -> pd.DataFrame:
+    """The system's :meth:`~bodyfusion.core.system.SensorSystem.states` as a frame."""
+    return pd.DataFrame(result.system(name).states())
+
+
+def covariance_frame(t: np.ndarray, states_: tuple[str, ...], matrix: np.ndarray) -> pd.DataFrame:
+    """Variances and covariances as columns ``var_<state>`` and ``cov_<a>_<b>`` (upper triangle) at ``t``."""
+    cols: dict[str, np.ndarray] = {"t": t}
+    for a in range(len(states_)):
+        cols[f"var_{states_[a]}"] = matrix[:, a, a]
+    for a in range(len(states_)):
+        for b in range(a + 1, len(states_)):
+            cols[f"cov_{states_[a]}_{states_[b]}"] = matrix[:, a, b]
+    return pd.DataFrame(cols)

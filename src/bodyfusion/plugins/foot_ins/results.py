@@ -1,0 +1,48 @@
+"""The foot INS's results in the names every plugin shares (:meth:`bodyfusion.core.system.SensorSystem.states`):
+its nominal states, the covariance it stores, its stance phases and its updates' NIS."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from bodyfusion.core.system import CovarianceHistory, position_covariance
+from bodyfusion.nav import detectors
+
+STORED = "position variances east, north, up and the east-north covariance after each sample (m^2)"
+"""What :func:`covariance_history` holds: the filter's (or the smoother's) recorded position covariance."""
+
+
+def attitude_columns(q_nb: np.ndarray) -> dict[str, np.ndarray]:
+    """``qw``..``qz`` of quaternions q_nb (N, 4) (body to ENU, scalar first) and their
+    ``heading_deg`` (azimuth of the body x axis, clockwise from North, in [0, 360)), ``pitch_deg``
+    and ``roll_deg`` (ZYX in ENU, the inverse of :func:`bodyfusion.nav.attitude.quat_from_azimuth_pitch_roll`)."""
+    yaw, pitch, roll = Rotation.from_quat(q_nb, scalar_first=True).as_euler("ZYX").T
+    return {"qw": q_nb[:, 0], "qx": q_nb[:, 1], "qy": q_nb[:, 2], "qz": q_nb[:, 3],
+            "heading_deg": np.mod(90.0 - np.degrees(yaw), 360.0), "pitch_deg": np.degrees(pitch),
+            "roll_deg": np.degrees(roll)}
+
+
+def foot_states(t: np.ndarray, x: np.ndarray) -> dict[str, np.ndarray]:
+    """Columns of nominal states x (N, 16) at times t (N,) s: position (ENU, m), velocity (m/s),
+    attitude, accelerometer (m/s^2) and gyroscope (rad/s) biases on the body axes."""
+    out = {"t": t, "east_m": x[:, 0], "north_m": x[:, 1], "up_m": x[:, 2],
+           "v_east_mps": x[:, 3], "v_north_mps": x[:, 4], "v_up_mps": x[:, 5], **attitude_columns(x[:, 6:10])}
+    for k, axis in enumerate("xyz"):
+        out[f"acc_bias_{axis}_mps2"] = x[:, 10 + k]
+    for k, axis in enumerate("xyz"):
+        out[f"gyro_bias_{axis}_radps"] = x[:, 13 + k]
+    return out
+
+
+def foot_covariance(t: np.ndarray, pos_cov: np.ndarray) -> CovarianceHistory:
+    """The position block of the recorded covariances pos_cov (N, 4): variances east, north, up
+    and the east-north covariance (m²); the other entries are not stored."""
+    return position_covariance(t, pos_cov[:, :3], pos_cov[:, 3], STORED)
+
+
+def stance_phases(t: np.ndarray, stance: np.ndarray) -> dict[str, np.ndarray]:
+    """The detector's stance phases: ``event`` ``stance``, ``t`` its first and ``t_end`` its last
+    sample's time (s)."""
+    starts, ends = detectors.stance_events(stance)
+    return {"event": np.full(starts.size, "stance"), "t": t[starts], "t_end": t[ends - 1]}
