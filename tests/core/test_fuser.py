@@ -9,10 +9,11 @@ import pytest
 
 from bodyfusion.core.constraints import (
     DistanceConstraint,
+    ProjectionSolver,
     constrained_covariance,
     solve_projection,
 )
-from bodyfusion.core.fuser import spread_correction
+from bodyfusion.core.fuser import spread_correction, truncated_moments, truncation_correction
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run, run_layout
 from bodyfusion.sim import simulate
@@ -177,3 +178,52 @@ def test_positions_only_correction_leaves_the_other_states_and_their_variances()
     np.testing.assert_allclose(dx[pos], dx_all[pos], atol=1e-12)
     np.testing.assert_allclose(P_new[np.ix_(others, others)], P[np.ix_(others, others)], atol=1e-12)
     assert np.linalg.eigvalsh(P_new).min() > -1e-10
+
+
+@pytest.mark.parametrize("violation_sd", [-1.0, 0.3, 1.5, 2.5])
+def test_truncation_gives_the_moments_of_the_density_cut_at_the_bound(violation_sd):
+    """Two positions 100 m apart (the bound nearly linear over their spread) whose separation
+    σ is 0.6 m, a ``max`` limit the estimate violates by ``violation_sd`` σ (−1: inside, the
+    solver finds it inactive): the corrected mean and covariance of both positions match the
+    Monte-Carlo moments of the Gaussian with the infeasible samples cut away (the projection,
+    which puts the mean on the bound, misses them by 0.2–0.3 m)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6))
+    Sigma = 0.02 * A @ A.T + np.diag([0.1, 0.1, 0.01, 0.05, 0.05, 0.01])
+    p_hat = np.array([0.0, 0.0, 0.0, 100.0, 10.0, 0.0])
+    g = np.zeros(6)
+    g[0:2], g[3:5] = -p_hat[3:5] / np.linalg.norm(p_hat[3:5]), p_hat[3:5] / np.linalg.norm(p_hat[3:5])
+    s = np.sqrt(g @ Sigma @ g)
+    limit = np.linalg.norm(p_hat[3:5]) - violation_sd * s
+    sol = ProjectionSolver(2, [DistanceConstraint(0, 1, "max", limit)]).solve(p_hat, Sigma)
+    if violation_sd < 0:
+        assert not sol.active
+        return
+    dx, P = truncation_correction(Sigma, np.arange(6), p_hat, sol, np.array([False]))
+    draws = rng.multivariate_normal(p_hat, Sigma, size=1_000_000)
+    kept = draws[np.linalg.norm(draws[:, 3:5] - draws[:, 0:2], axis=1) <= limit]
+    assert kept.shape[0] > 5000
+    np.testing.assert_allclose(p_hat + dx, kept.mean(axis=0), atol=0.02)  # Monte-Carlo noise: 0.6 m / √5000
+    np.testing.assert_allclose(P, np.cov(kept.T), atol=0.02)
+    assert np.linalg.eigvalsh(P).min() > 0
+    dx_projected, _ = spread_correction(Sigma, np.arange(6), sol)
+    assert np.abs(p_hat + dx_projected - kept.mean(axis=0)).max() > 0.1
+
+
+def test_truncated_moments_are_stable_in_both_tails():
+    mean, var = truncated_moments(40.0)  # nothing cut
+    assert mean == pytest.approx(0.0, abs=1e-12) and var == pytest.approx(1.0)
+    mean, var = truncated_moments(-40.0)  # all but the edge cut: the bound itself
+    assert mean == pytest.approx(-40.0, rel=1e-3) and 0.0 <= var < 1e-3
+
+
+def test_an_equality_is_the_projection_under_truncation_too():
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(6, 6))
+    Sigma = 0.05 * A @ A.T + 0.01 * np.eye(6)
+    p_hat = np.array([0.0, 0.0, 0.0, 1.2, 0.3, 0.0])
+    sol = ProjectionSolver(2, [DistanceConstraint(0, 1, "fixed", 1.0)]).solve(p_hat, Sigma)
+    dx_t, P_t = truncation_correction(Sigma, np.arange(6), p_hat, sol, np.array([True]))
+    dx_p, P_p = spread_correction(Sigma, np.arange(6), sol)
+    np.testing.assert_allclose(dx_t, dx_p, atol=1e-9)
+    np.testing.assert_allclose(P_t, P_p, atol=1e-9)

@@ -35,11 +35,13 @@ systems' blocks alone and the correlation it creates is dropped, as for constrai
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import log_ndtr
 
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
@@ -122,6 +124,59 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
     IM = np.eye(P.shape[0]) - M
     P_new = IM @ P @ IM.T
     return dx, 0.5 * (P_new + P_new.T)
+
+
+def truncated_moments(beta: float) -> tuple[float, float]:
+    """Mean and variance of a standard normal truncated to X ≤ β: −φ(β)/Φ(β) and
+    1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))² (in log space: stable far in either tail)."""
+    ratio = math.exp(-0.5 * beta * beta - 0.5 * math.log(2.0 * math.pi) - float(log_ndtr(beta)))
+    return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
+
+
+def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, solution: ConstraintSolution,
+                          equality: np.ndarray, positions_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Joint error-state correction dx and covariance P* by density truncation ([Simon2010]).
+
+    Each active constraint k, linearised at the solution p* (its row J_k of the solution's
+    Jacobian; g_k ≤ 0 feasible), bounds X = J_k p above by b = J_k p*. The estimate's X is
+    N(m, s²), m = J_k p̂, s² = J_k Σ J_kᵀ; cut at b it has mean m + s μ_t and variance s² v_t
+    (:func:`truncated_moments` at β = (b − m)/s). The state takes the Gaussian conditional
+    on X averaged over the truncated X: with PH = P hᵀ (h: J_k in the joint state),
+    dx = PH (m_t − m)/s², P* = P − c PH PHᵀ, c = (s² − V)/s⁴ — written as the Joseph update
+    of a scalar measurement of noise R = V s²/(s² − V), so that ``positions_only`` (Schmidt
+    rows of the gain zero) keeps P* exact. An equality (``fixed``) or a bound far below the
+    estimate gives V → 0: the projection of [KFSC2015]. Constraints are taken one after
+    the other, each on the state the previous one left.
+    """
+    n = P.shape[0]
+    dx = np.zeros(n)
+    P = P.copy()
+    others = np.setdiff1d(np.arange(n), pos) if positions_only else np.empty(0, dtype=np.int64)
+    for row, k in zip(solution.jacobian, solution.active):
+        h = np.zeros(n)
+        h[pos] = row
+        PH = P @ h
+        s2 = float(h @ PH)
+        if not s2 > 0.0:
+            continue
+        s = math.sqrt(s2)
+        m = float(row @ (p_hat + dx[pos]))
+        b = float(row @ solution.p)
+        if equality[k]:
+            shift, var = b - m, 0.0
+        else:
+            mean_t, var_t = truncated_moments((b - m) / s)
+            shift, var = s * mean_t, s2 * var_t
+        if var >= s2:
+            continue
+        gain = PH / s2
+        gain[others] = 0.0
+        dx += gain * shift
+        K = PH * ((s2 - var) / (s2 * s2))
+        K[others] = 0.0
+        IKH = np.eye(n) - np.outer(K, h)
+        P = IKH @ P @ IKH.T + (var * s2 / (s2 - var)) * np.outer(K, K)
+    return dx, 0.5 * (P + P.T)
 
 
 def scalar_update(P: np.ndarray, H: np.ndarray, y: float, r_var: float,
@@ -237,6 +292,7 @@ class Fuser:
             epochs = epoch_times(members, self.config)
             events += [(float(t), 1, 0, 0) for t in epochs]
             self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
+            self._equality = np.array([c.kind == "fixed" for c in self.constraints])
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -300,5 +356,8 @@ class Fuser:
             return
         rep.activations += 1
         rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
-        dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
+        if self.config.inequality == "truncation":
+            dx, P_new = truncation_correction(P, pos, p_hat, sol, self._equality, self.config.correct == "positions")
+        else:
+            dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
         joint.correct(dx, P_new, list(range(len(joint.systems) if joint.track else n)))

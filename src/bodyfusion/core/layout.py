@@ -93,6 +93,12 @@ class FuserConfig(StrictModel):
     (the papers drop them). correct: spread the correction to ``all`` error states through
     their covariance with position (the papers), or correct ``positions`` only and keep the
     other states as Schmidt consider states (robust when those correlations are poorly known).
+    inequality: what an active ``max``/``min`` limit does to the estimate — ``truncation`` (the
+    default) takes the mean and covariance of the estimate's density cut at the bound
+    ([Simon2010]: a violation of a fraction of σ moves the estimate by less and keeps most of
+    its spread); ``projection`` puts it on the bound and shrinks its covariance as for an
+    equality ([KFSC2015] eqs. 58–60: no spread left across the bound). ``fixed`` limits are
+    equalities either way.
     """
 
     method: Literal["none", "projection", "qp", "socp"] = "projection"
@@ -103,6 +109,7 @@ class FuserConfig(StrictModel):
     max_iterations: int = Field(default=20, ge=1, le=1000)
     cross_covariance: bool = False
     correct: Literal["all", "positions"] = "all"
+    inequality: Literal["projection", "truncation"] = "truncation"
 
 
 class SmootherConfig(StrictModel):

@@ -286,7 +286,7 @@ def keep_yaw_unobservable(P: np.ndarray, dv: np.ndarray, phi: np.ndarray) -> Non
     left unobserved, N(x̂⁻), is not the one the next propagation carries, N(x̂⁺): left as is,
     every stance sample gains heading information no measurement holds, and the heading
     variance stops growing. The reset G = I + a e_ψᵀ, a = [0; e_z × dv; 0; 0; 0], maps
-    N(x̂⁻) to N(x̂⁺) (observability-constrained EKF, Hesch et al. 2014; the position part
+    N(x̂⁻) to N(x̂⁺) (observability-constrained EKF, [Hesch2014]; the position part
     e_z × dp is a translation, unobservable anyway): P ← G P Gᵀ and, unless empty,
     phi ← G phi."""
     a0, a1 = -dv[1], dv[0]

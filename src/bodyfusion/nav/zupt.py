@@ -5,7 +5,7 @@
 * Zero angular-rate update (ZARU): during stance the true rate is zero, so
   z = ω̃_b − b̂_g = δb_g + noise, H = [0 0 0 0 I].
 
-Heading stays unobservable (observability-constrained EKF, Hesch et al. 2014). Turning the
+Heading stays unobservable (observability-constrained EKF, [Hesch2014]). Turning the
 whole state about Up by δψ moves the error state along N(x̂) = [e_z × p̂; e_z × v̂; e_z; 0; 0],
 and a foot at rest stays at rest: no stance measurement holds heading. The EKF linearised at
 the estimate does not know it: with H = [0 I 0 0 0], H N = e_z × v̂⁻ ≠ 0 whenever the prior
