@@ -25,7 +25,7 @@ _API = {"load_layout": "bodyfusion.api", "run": "bodyfusion.api", "run_study": "
 """The library's names (:mod:`bodyfusion.api`), loaded when first used: ``import bodyfusion`` and
 the command line stay quick (the compiled kernels and pandas load with a run)."""
 
-__all__ = ["__version__", *_API]
+__all__ = ["Layout", "LoadedLayout", "RunResult", "__version__", "load_layout", "run", "run_study"]
 
 
 def __getattr__(name: str) -> Any:

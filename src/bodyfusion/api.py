@@ -24,7 +24,13 @@ from typing import Any
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import LoadedLayout, apply_overrides, plain, read_yaml, validate_layout
+from bodyfusion.core.layout import (
+    LoadedLayout,
+    apply_overrides,
+    plain,
+    read_yaml,
+    validate_layout,
+)
 from bodyfusion.core.output import write_outputs
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.run import run_layout
