@@ -76,10 +76,17 @@ def test_constraint_events_hold_every_constraint_at_every_epoch(vicon):
     assert rows.active.sum() == vicon.fuser.activations
     active, idle = rows[rows.active], rows[~rows.active]
     assert (active.distance_before_m > active.limit_m).all()
-    np.testing.assert_allclose(active.distance_after_m, active.limit_m, atol=1e-6)
+    assert (active.distance_after_m < active.distance_before_m).all()
     np.testing.assert_array_equal(idle.distance_after_m, idle.distance_before_m)
     assert (active.multiplier > 0).all() and (idle.multiplier == 0).all()
     np.testing.assert_allclose(sorted(active.multiplier), sorted(vicon.fuser.multipliers))
+
+
+def test_a_projected_constraint_ends_at_its_limit():
+    res = run_layout(load_layout(CONFIGS / "dual_foot_vicon.yaml", ["fuser.inequality=projection"]))
+    active = res.constraint_events().query("active")
+    assert len(active) > 0
+    np.testing.assert_allclose(active.distance_after_m, active.limit_m, atol=1e-6)
 
 
 def test_a_random_walk_stores_its_whole_covariance(tmp_path):

@@ -13,8 +13,10 @@ class ConstraintLog:
     """Rows for ``epochs`` sync epochs of the layout's ``constraints`` over the stacked systems
     ``order`` (the fuser's). The separation of constraint k is ‖E (p_i + l_i − p_j − l_j)‖ (m; E
     keeps east and north for a horizontal constraint, :mod:`bodyfusion.core.constraints.model`),
-    ``before`` at the estimates p̂, ``after`` at the constrained positions p*; the multiplier λ
-    follows the solvers' sign convention (0 when inactive)."""
+    ``before`` at the estimates p̂, ``after`` at the corrected estimates (the solution p* when
+    the correction projects, ``fuser.inequality: projection``; inside the limit by the truncated
+    density's mean with ``truncation``); the multiplier λ follows the solvers' sign convention
+    (0 when inactive)."""
 
     def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
         self.constraints = constraints
@@ -38,12 +40,12 @@ class ConstraintLog:
         r = (pos[self._i] + self._lever[0] - pos[self._j] - self._lever[1]) * self._axes
         return np.sqrt(np.einsum("ki,ki->k", r, r))
 
-    def record(self, t: float, p_hat: np.ndarray, solution: ConstraintSolution) -> None:
-        """One epoch at time t (s): the estimates p̂ (3n,) and the solver's solution."""
+    def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution) -> None:
+        """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution."""
         e = self.n
         self.t[e] = t
         self.before_m[e] = self.separations(p_hat)
-        self.after_m[e] = self.separations(solution.p)
+        self.after_m[e] = self.separations(p_after)
         self.multiplier[e] = solution.multipliers
         self.active[e, solution.active] = True
         self.n += 1

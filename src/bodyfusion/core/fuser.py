@@ -351,8 +351,8 @@ class Fuser:
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
-        rep.constraint_log.record(t, p_hat, sol)
         if not sol.active:
+            rep.constraint_log.record(t, p_hat, p_hat, sol)
             return
         rep.activations += 1
         rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
@@ -361,3 +361,4 @@ class Fuser:
         else:
             dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
         joint.correct(dx, P_new, list(range(len(joint.systems) if joint.track else n)))
+        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol)
