@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
@@ -135,12 +136,13 @@ def read_trajectories(path: str | Path) -> dict[str, Trajectory]:
     missing = [c for c in TRAJECTORY_COLUMNS if c not in table.column_names]
     if missing:
         raise InputError(path, f"missing column(s) {missing}")
-    system = np.asarray(table.column("system").cast(pa.string()).to_pylist(), dtype=object)
+    system = pc.dictionary_encode(table.column("system").cast(pa.string()).combine_chunks())  # first-seen order
+    codes = system.indices.to_numpy(zero_copy_only=False)
     cols = {c: table.column(c).to_numpy() for c in TRAJECTORY_COLUMNS[1:]}
     cov = table.column(COV_EN_COLUMN) if COV_EN_COLUMN in table.column_names else None
     out: dict[str, Trajectory] = {}
-    for name in dict.fromkeys(system):
-        rows = np.flatnonzero(system == name)
+    for code, name in enumerate(system.dictionary.to_pylist()):
+        rows = np.flatnonzero(codes == code)
         c = None if cov is None else cov.take(pa.array(rows))
         out[name] = Trajectory(cols["t"][rows], np.column_stack([cols[k][rows] for k in TRAJECTORY_COLUMNS[2:5]]),
                                np.column_stack([cols[k][rows] for k in TRAJECTORY_COLUMNS[5:8]]),
