@@ -24,6 +24,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.layout import (
     LoadedLayout,
     apply_overrides,
@@ -34,6 +35,7 @@ from bodyfusion.core.layout import (
 from bodyfusion.core.output import write_outputs
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.run import run_layout
+from bodyfusion.io.tables import tables_by_name
 from bodyfusion.study.runner import StudyReport
 from bodyfusion.study.runner import run_study as _run_study
 
@@ -44,13 +46,27 @@ Overrides = Mapping[str, Any] | Sequence[str] | None
 """Dotted keys set on the layout: ``{"fuser.method": "qp"}`` or ``["fuser.method=qp"]``."""
 
 
-def load_layout(source: LayoutSource, overrides: Overrides = None, *, base_dir: str | Path | None = None) -> LoadedLayout:
+Data = Mapping[str, Any] | None
+"""In-memory tables by system name: a table (a pandas DataFrame, a mapping of column name to
+array, a numpy structured array) for the system's data section (the plugin's ``data_section``:
+``data`` of a foot INS, ``imu`` of a hand PDR, ``ranges`` of a UWB tag), or a mapping of section
+key → table (``{"imu": imu_frame, "gnss": fixes_frame}``)."""
+
+
+def load_layout(source: LayoutSource, overrides: Overrides = None, *, data: Data = None, truth: Any = None,
+                base_dir: str | Path | None = None) -> LoadedLayout:
     """A validated layout from ``source`` with ``overrides`` set, both validation stages done.
 
     Relative data paths resolve against the YAML file's folder, else ``base_dir`` (default: the
     current folder; a loaded layout keeps its own). The result is edited in place with every field
     validated (``layout.fuser.method = "qp"``, ``layout.systems["left_foot"].filter.kind = "ckf"``);
-    a run checks the whole layout again."""
+    a run checks the whole layout again.
+
+    ``data``: in-memory tables by system (:data:`Data`), read with the layout's column names,
+    units and checks as a file would be (a section given a table needs no ``path``; errors name
+    the section and the row). ``truth``: one table read as the layout's truth section says (``long``
+    by default: ``system``, ``t``, ``east_m``, ``north_m``, ``up_m``), or a mapping of system name →
+    table (``t``, ``east_m``, ``north_m``, ``up_m``; ENU, m). A loaded layout keeps its tables."""
     if isinstance(source, (str, Path)):
         path = Path(source)
         raw, folder = read_yaml(path), path.resolve().parent
@@ -63,19 +79,43 @@ def load_layout(source: LayoutSource, overrides: Overrides = None, *, base_dir: 
     folder = Path(base_dir).resolve() if base_dir is not None else folder
     try:
         raw = apply_overrides(raw, overrides or [])
+        tables = {**(source.tables if isinstance(source, LoadedLayout) else {}), **_data_tables(raw, data)}
+        if truth is not None:
+            raw["truth"] = {**(raw.get("truth") or {"format": "long"}),
+                            **({"format": "long"} if tables_by_name(truth) else {})}
+            tables["truth"] = truth
     except ConfigError as err:
         raise ConfigError(err.key, err.reason, path) from None
-    tables = source.tables if isinstance(source, LoadedLayout) else {}
     return validate_layout(raw, path, folder, tables=tables)
 
 
-def run(layout: LayoutSource, overrides: Overrides = None, *, seed: int = 0,
+def _data_tables(raw: dict[str, Any], data: Data) -> dict[str, Any]:
+    """Dotted section key → table for the in-memory ``data`` by system (:data:`Data`)."""
+    systems = raw.get("systems") if isinstance(raw.get("systems"), dict) else {}
+    tables: dict[str, Any] = {}
+    for name, value in (data or {}).items():
+        section = systems.get(name)
+        if not isinstance(section, dict):
+            raise ConfigError(f"data.{name}", f"not a system of the layout (have {sorted(systems)})")
+        if tables_by_name(value):
+            tables.update({f"systems.{name}.{key}": table for key, table in value.items()})
+            continue
+        cls = plugin_registry.get_registry().system_class(section.get("plugin"), key=f"systems.{name}.plugin")
+        if cls.data_section is None:
+            raise ConfigError(f"data.{name}", f"a {cls.plugin_name} system reads no data")
+        tables[f"systems.{name}.{cls.data_section}"] = value
+    return tables
+
+
+def run(layout: LayoutSource, overrides: Overrides = None, *, data: Data = None, truth: Any = None, seed: int = 0,
         out_dir: str | Path | None = None) -> RunResult:
-    """Run a layout in this process and return its result; with ``out_dir``, also write the
-    outputs ``fusion run`` writes there (metrics.json, trajectories, plots). ``seed`` seeds every
-    random choice of the run (ensembles)."""
+    """Run a layout in this process and return its result; ``data`` and ``truth`` in memory as
+    :func:`load_layout` takes them (no file is written or read for them). With ``out_dir``, also
+    write the outputs ``fusion run`` writes there (metrics.json, trajectories, plots). ``seed``
+    seeds every random choice of the run (ensembles)."""
     t0 = time.perf_counter()
-    loaded = layout if isinstance(layout, LoadedLayout) and not overrides else load_layout(layout, overrides)
+    fresh = isinstance(layout, LoadedLayout) and not overrides and data is None and truth is None
+    loaded = layout if fresh else load_layout(layout, overrides, data=data, truth=truth)
     result = run_layout(loaded, seed)
     if out_dir is not None:
         write_outputs(result, Path(out_dir), str(loaded.path or loaded.name), total_wall_s=time.perf_counter() - t0)

@@ -4,13 +4,14 @@ models, file paths relative to the layout, and errors that name their dotted key
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
+    PrivateAttr,
     ValidationInfo,
     field_validator,
 )
@@ -34,6 +35,38 @@ class StrictModel(BaseModel):
     raises :class:`pydantic.ValidationError`)."""
 
     model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False, validate_assignment=True)
+
+
+class TableSection(StrictModel):
+    """A section whose data is one table: the file ``path`` (relative to the layout) or a table
+    given to the run in memory (:func:`bodyfusion.run`'s ``data``): a pandas DataFrame, a mapping
+    of column name to array, or a numpy structured array, read with the section's column names
+    and the same checks as the file (:func:`bodyfusion.io.tables.read_source`). :attr:`table` is
+    the in-memory table bound to the section, :attr:`label` its dotted key in the layout."""
+
+    path: DataPath | None = None
+    """The file; unset when the table is given in memory."""
+    _table: Any = PrivateAttr(default=None)
+    _label: str = PrivateAttr(default="")
+
+    def bind(self, table: Any, label: str) -> None:
+        """Take ``table`` as this section's data, ``label`` (its dotted key) naming it in errors."""
+        self._table, self._label = table, label
+
+    @property
+    def table(self) -> Any:
+        """The in-memory table bound to the section (None: its data is the file at :attr:`path`)."""
+        return self._table
+
+    @property
+    def label(self) -> str:
+        """The section's dotted key in the layout, once a table is bound."""
+        return self._label
+
+    def needs_data(self) -> bool:
+        """The section reads a table (a file or one in memory) to be used; False where it may
+        stand without one (a section that says how other data are read)."""
+        return True
 
 
 class KeyedError(ValueError):

@@ -17,8 +17,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, StrictModel, TableSection
 from bodyfusion.core import registry as plugin_registry
+from bodyfusion.core.data_tables import bind_tables, require_data
 from bodyfusion.core.layout_io import (  # the file handling was here: its names stay importable
     MAX_YAML_BYTES,  # noqa: F401
     MAX_YAML_NODES,  # noqa: F401
@@ -159,8 +160,9 @@ class HeadingAlignmentConfig(StrictModel):
     distance_m: float = Field(default=3.0, gt=0)
 
 
-class TruthConfig(PositionFrame):
+class TruthConfig(PositionFrame, TableSection):
     """Reference positions (ENU, m) for scoring; ``loop`` when the walk ends where it began.
+    From the file ``path`` or a table given in memory (:func:`bodyfusion.run`'s ``truth``).
 
     ``wide``: one row per epoch, ``systems`` maps each system to its three columns.
     ``long``: the ``system,t,east_m,north_m,up_m`` shape that ``fusion simulate`` writes.
@@ -172,6 +174,7 @@ class TruthConfig(PositionFrame):
     """
 
     path: DataPath | None = None
+    """The file; unset: no truth, or the truth given in memory."""
     format: Literal["wide", "long", "phone_log"] = "wide"
     systems: dict[str, tuple[str, str, str] | tuple[str, str]] = Field(default_factory=dict)
     """wide format: each system's position columns, x, y[, z] of the file's frame."""
@@ -186,6 +189,10 @@ class TruthConfig(PositionFrame):
     loop: bool = False
     alignment: Literal["first_3m", "none"] = "first_3m"
     alignment_distance_m: float = Field(default=3.0, gt=0)
+
+    def needs_data(self) -> bool:
+        """A truth section says how a truth table is read; without one the run has no truth."""
+        return False
 
     @model_validator(mode="after")
     def _time_source(self) -> "TruthConfig":
@@ -369,13 +376,16 @@ def load_layout(path: str | Path, overrides: Sequence[str] | Mapping[str, Any] |
         if err.path is not None:
             raise
         raise ConfigError(err.key, err.reason, path) from None
-    return validate_layout(raw, path, path.resolve().parent, registry)
+    loaded = validate_layout(raw, path, path.resolve().parent, registry)
+    require_data(loaded.layout, loaded.system_configs, path)
+    return loaded
 
 
 def validate_layout(raw: dict[str, Any], path: Path | None, base_dir: Path, registry: Any = None,
                     tables: dict[str, Any] | None = None) -> LoadedLayout:
     """Validate a raw layout dict (both stages); relative paths resolve against ``base_dir``;
-    ``path``: the file it came from, named in errors (None: built in code)."""
+    ``path``: the file it came from, named in errors (None: built in code); ``tables``: dotted key
+    of a table section → the in-memory table bound to it."""
     layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
     registry = registry or plugin_registry.get_registry()
     system_configs: dict[str, BaseModel] = {}
@@ -389,6 +399,7 @@ def validate_layout(raw: dict[str, Any], path: Path | None, base_dir: Path, regi
             except KeyedError as err:
                 raise ConfigError(err.key, str(err), path) from None
     _check_aiding_references(layout, system_configs, registry, path)
+    bind_tables(layout, system_configs, tables or {}, path)
     return LoadedLayout(path, layout, system_configs, raw, base_dir, tables)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.core import registry as plugin_registry
+from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings
 from bodyfusion.core.health import CovarianceMonitor
@@ -76,6 +77,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
+    require_data(loaded.layout, loaded.system_configs, loaded.path)
     context = layout_context(loaded, seed)
     built = build_systems(loaded, context)
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}

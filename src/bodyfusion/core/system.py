@@ -117,6 +117,11 @@ class Plugin(ABC):
     navigates: ClassVar[bool]
     """True for a navigation system (it has a position and a trajectory), False for an aiding
     source that only measures the navigation systems."""
+    data_section: ClassVar[str | None] = None
+    """The section of the plugin's config (a :class:`~bodyfusion.base.sections.TableSection`, by
+    its key within the system's section) that a table given in memory for the whole system feeds
+    (``bodyfusion.run(layout, data={"left_foot": imu_frame})``); None: the plugin reads no data.
+    Tables for other sections are given by their keys (``data={"hand": {"gnss": fixes}}``)."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         self.name = name

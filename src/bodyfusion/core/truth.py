@@ -24,7 +24,7 @@ from bodyfusion.nav.frames import apply_axis_map
 
 def _wide(truth: TruthConfig, origin: tuple[float, float, float] | None,
           systems: Collection[str]) -> dict[str, TruthTrack]:
-    tracks = read_truth_csv(truth.path, position_columns=truth.systems, time_column=truth.time_column,
+    tracks = read_truth_csv(truth, position_columns=truth.systems, time_column=truth.time_column,
                             time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
                             delimiter=truth.delimiter, sparse=truth.sparse)
     return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n), tr.sparse) for name, tr in tracks.items()}
@@ -32,13 +32,16 @@ def _wide(truth: TruthConfig, origin: tuple[float, float, float] | None,
 
 def _long(truth: TruthConfig, origin: tuple[float, float, float] | None,
           systems: Collection[str]) -> dict[str, TruthTrack]:
-    tracks = read_truth_long_csv(truth.path, sparse=truth.sparse)
+    tracks = read_truth_long_csv(truth, sparse=truth.sparse)
     return {name: tr for name, tr in tracks.items() if name in systems}
 
 
 def _phone_log(truth: TruthConfig, origin: tuple[float, float, float] | None,
                systems: Collection[str]) -> dict[str, TruthTrack]:
     """The log's surveyed points (POSI lines), sparse truth for ``truth.score_systems``."""
+    if truth.table is not None:
+        raise ConfigError("truth.format", "a phone_log truth is read from its file; an in-memory truth table is "
+                                          "read as format wide or long")
     ref = read_getsensordata(truth.path).reference
     if ref is None:
         raise ConfigError("truth.path", "the log has no POSI lines")
@@ -56,7 +59,8 @@ TRUTH_FORMATS: dict[str, TruthReader] = {"wide": _wide, "long": _long, "phone_lo
 
 def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,
                systems: Collection[str]) -> dict[str, TruthTrack]:
-    """The truth tracks a layout's truth section describes (empty without a path)."""
-    if truth.path is None:
+    """The truth tracks a layout's truth section describes: from its file, or its in-memory table
+    (empty without either)."""
+    if truth.path is None and truth.table is None:
         return {}
     return TRUTH_FORMATS[truth.format](truth, origin, systems)

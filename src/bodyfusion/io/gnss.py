@@ -18,8 +18,9 @@ import pymap3d
 import pynmea2
 
 from bodyfusion.base.errors import InputError
+from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
-from bodyfusion.io.tables import read_table
+from bodyfusion.io.tables import read_source
 
 KNOT = 1852.0 / 3600.0
 """One knot in m/s."""
@@ -90,14 +91,15 @@ def clean_fixes(rows: np.ndarray, path: str | Path, report: InputReport) -> Gnss
     return GnssFixes(*(np.ascontiguousarray(rows[:, k]) for k in range(7)), report=report)
 
 
-def read_gnss_csv(path: str | Path, *, time_column: str, lat_column: str, lon_column: str,
+def read_gnss_csv(source: str | Path | TableSection, *, time_column: str, lat_column: str, lon_column: str,
                   height_column: str | None = None, accuracy_column: str | None = None,
                   speed_column: str | None = None, course_column: str | None = None,
                   delimiter: str = ",") -> GnssFixes:
-    """GNSS fixes from a CSV with named columns (deg, m, m/s, deg)."""
+    """GNSS fixes from a CSV with named columns (deg, m, m/s, deg), or from a table section's
+    in-memory table with those columns (:func:`bodyfusion.io.tables.read_source`)."""
     optional = [c for c in (height_column, accuracy_column, speed_column, course_column) if c]
-    arrays, _ = read_table(path, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,
-                           allow_missing=optional)
+    arrays, _, path = read_source(source, [time_column, lat_column, lon_column, *optional], delimiter=delimiter,
+                                  allow_missing=optional)
     n = len(arrays[time_column])
     col = lambda name: arrays[name] if name else np.full(n, np.nan)
     height = arrays[height_column] if height_column else np.zeros(n)

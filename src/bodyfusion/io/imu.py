@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.base.sections import DataPath, StrictModel
+from bodyfusion.base.sections import DataPath, TableSection
 from bodyfusion.base.types import ImuStream
 from bodyfusion.io.imu_checks import check_imu
 from bodyfusion.io.tables import (
@@ -21,8 +21,10 @@ from bodyfusion.io.tables import (
     apply_timestamp_policy,
     check_columns,
     check_time_source,
-    read_table,
+    read_source,
+    row_error,
     sample_times,
+    source_name,
 )
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.frames import AxisMap, apply_axis_map
@@ -37,11 +39,12 @@ MAX_GAP_S = 600.0
 """Default longest gap in a recording's timestamps (s) a navigation system is asked to bridge."""
 
 
-class ImuCsvConfig(StrictModel):
-    """An IMU recorded as CSV: column names, units and time base (see :func:`read_imu_csv`)."""
+class ImuCsvConfig(TableSection):
+    """An IMU recorded as CSV, or its table given in memory: column names, units and time base
+    (see :func:`read_imu_csv`)."""
 
-    path: DataPath
-    """CSV file; relative to the layout file."""
+    path: DataPath | None = None
+    """CSV file; relative to the layout file (unset: the table is given in memory)."""
     acc_columns: tuple[str, str, str]
     """Header names of the accelerometer x, y, z columns (body frame)."""
     gyro_columns: tuple[str, str, str]
@@ -83,7 +86,7 @@ class ImuCsvConfig(StrictModel):
 
 
 def read_imu_csv(
-    path: str | Path,
+    source: str | Path | TableSection,
     *,
     acc_columns: Sequence[str],
     gyro_columns: Sequence[str],
@@ -102,7 +105,9 @@ def read_imu_csv(
     max_step_samples: float = 5.0,
     max_gap_s: float = MAX_GAP_S,
 ) -> ImuStream:
-    """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units.
+    """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units: the file ``source``, or a
+    table section's data (:func:`bodyfusion.io.tables.read_source`: its in-memory table, every
+    check the same, errors naming the section and the row instead of the file and the line).
 
     Time is ``time_column`` × ``time_scale`` seconds (e.g. a sample-number column
     with ``time_scale=1/60``) or ``i / rate_hz``; exactly one must be given.
@@ -117,18 +122,18 @@ def read_imu_csv(
     each in ``stream.report``. Refused with the line: a reading beyond :data:`ACC_LIMIT_MPS2`
     or :data:`GYRO_LIMIT_RADPS` (corrupt, not a sensor's), a gap longer than ``max_gap_s``.
     """
-    path = Path(path)
+    where = source_name(source)
     if acc_unit not in ACC_UNITS:
-        raise InputError(path, f"unknown acc_unit {acc_unit!r}; allowed: " + ", ".join(ACC_UNITS))
+        raise InputError(where, f"unknown acc_unit {acc_unit!r}; allowed: " + ", ".join(ACC_UNITS))
     if gyro_unit not in GYRO_UNITS:
-        raise InputError(path, f"unknown gyro_unit {gyro_unit!r}; allowed: " + ", ".join(GYRO_UNITS))
+        raise InputError(where, f"unknown gyro_unit {gyro_unit!r}; allowed: " + ", ".join(GYRO_UNITS))
     if timestamp_policy not in TIMESTAMP_POLICIES:
         raise InputError(
-            path, f"unknown timestamp policy {timestamp_policy!r}; allowed: " + ", ".join(TIMESTAMP_POLICIES)
+            where, f"unknown timestamp policy {timestamp_policy!r}; allowed: " + ", ".join(TIMESTAMP_POLICIES)
         )
-    check_time_source(path, time_column, time_scale, rate_hz)
-    acc_cols = check_columns(path, "acc_columns", acc_columns)
-    gyro_cols = check_columns(path, "gyro_columns", gyro_columns)
+    check_time_source(where, time_column, time_scale, rate_hz)
+    acc_cols = check_columns(where, "acc_columns", acc_columns)
+    gyro_cols = check_columns(where, "gyro_columns", gyro_columns)
     min_samples = max(int(min_samples), 1)
 
     cols: list[str] = []
@@ -137,10 +142,10 @@ def read_imu_csv(
     ):
         if c not in cols:
             cols.append(c)
-    arrays, line_no = read_table(path, cols, skip_rows=skip_rows, delimiter=delimiter)
-    n = line_no.size
+    arrays, line_no, where = read_source(source, cols, skip_rows=skip_rows, delimiter=delimiter)
+    n = len(arrays[cols[0]])
     if n < min_samples:
-        raise InputError(path, f"only {n} data rows; at least {min_samples} are needed")
+        raise InputError(where, f"only {n} data rows; at least {min_samples} are needed")
 
     stance = None
     if stance_column is not None:
@@ -148,16 +153,14 @@ def read_imu_csv(
         bad = np.flatnonzero((s != 0.0) & (s != 1.0))
         if bad.size:
             i = int(bad[0])
-            raise InputError(
-                path, f"stance column {stance_column!r} must be 0 or 1, got {s[i]:g}", int(line_no[i])
-            )
+            raise row_error(where, f"stance column {stance_column!r} must be 0 or 1, got {s[i]:g}", line_no, i)
         stance = s == 1.0
 
     t = sample_times(arrays, n, time_column, time_scale, rate_hz)
-    kept, report = apply_timestamp_policy(t, timestamp_policy, path, lines=line_no)
+    kept, report = apply_timestamp_policy(t, timestamp_policy, where, lines=line_no)
     if kept.size < min_samples:
         raise InputError(
-            path, f"only {kept.size} samples left after timestamp policy {timestamp_policy!r}; "
+            where, f"only {kept.size} samples left after timestamp policy {timestamp_policy!r}; "
             f"at least {min_samples} are needed"
         )
 
@@ -168,24 +171,24 @@ def read_imu_csv(
         bad = np.flatnonzero(np.any(np.abs(x[kept]) > limit, axis=1))
         if bad.size:
             k = int(kept[bad[0]])
-            raise InputError(path, f"{what} reading {np.max(np.abs(x[k])):.3g} {unit} is beyond any sensor's range "
-                             f"({limit:g} {unit}): a corrupt value ({bad.size} such samples)", int(line_no[k]))
+            raise row_error(where, f"{what} reading {np.max(np.abs(x[k])):.3g} {unit} is beyond any sensor's range "
+                            f"({limit:g} {unit}): a corrupt value ({bad.size} such samples)", line_no, k)
     gap = np.diff(t[kept])
     if gap.size and gap.max() > max_gap_s:
         j = int(np.argmax(gap))
-        raise InputError(path, f"a gap of {gap[j]:.6g} s in the timestamps (t = {t[kept[j]]:.6g} → "
-                         f"{t[kept[j + 1]]:.6g} s), longer than max_gap_s ({max_gap_s:g} s): split the recording "
-                         "there, or raise max_gap_s", int(line_no[kept[j + 1]]))
+        raise row_error(where, f"a gap of {gap[j]:.6g} s in the timestamps (t = {t[kept[j]]:.6g} → "
+                        f"{t[kept[j + 1]]:.6g} s), longer than max_gap_s ({max_gap_s:g} s): split the recording "
+                        "there, or raise max_gap_s", line_no, int(kept[j + 1]))
     stream = ImuStream(
         t=np.ascontiguousarray(t[kept]),
         acc_b=np.ascontiguousarray(acc[kept]),
         gyro_b=np.ascontiguousarray(gyro[kept]),
         stance=None if stance is None else np.ascontiguousarray(stance[kept]),
-        source=str(path),
+        source=where,
         report=report,
     )
-    stream.checks = check_imu(stream.t, stream.acc_b, stream.gyro_b, source=path.name, acc_unit=acc_unit,
-                              gyro_unit=gyro_unit, declared_rate_hz=declared_rate_hz,
+    stream.checks = check_imu(stream.t, stream.acc_b, stream.gyro_b, source=Path(where).name if line_no is not None
+                              else where, acc_unit=acc_unit, gyro_unit=gyro_unit, declared_rate_hz=declared_rate_hz,
                               max_step_samples=max_step_samples)
     for message in stream.checks.warnings:
         report.warn(message)
@@ -193,12 +196,13 @@ def read_imu_csv(
 
 
 def read_imu(section: ImuCsvConfig) -> ImuStream:
-    """The stream a layout's IMU section describes, in SI units and the body frame, checked
+    """The stream a layout's IMU section describes (its file, or its in-memory table), in SI units
+    and the body frame, checked
     (:func:`read_imu_csv`; with both a time column and ``rate_hz``, the rate is the nominal
     one the timestamps are checked against)."""
     timed = section.time_column is not None
     return read_imu_csv(
-        section.path, acc_columns=section.acc_columns, gyro_columns=section.gyro_columns,
+        section, acc_columns=section.acc_columns, gyro_columns=section.gyro_columns,
         stance_column=section.stance_column, acc_unit=section.acc_unit, gyro_unit=section.gyro_unit,
         time_column=section.time_column, time_scale=section.time_scale, rate_hz=None if timed else section.rate_hz,
         skip_rows=section.skip_rows, delimiter=section.delimiter, timestamp_policy=section.timestamp_policy,

@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from bodyfusion.base.errors import InputError
+from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
@@ -206,6 +208,126 @@ def read_table(
     return arrays, line_no
 
 
+# --------------------------------------------------------------------------- in-memory tables
+
+
+def _raw_columns(table: Any, where: str) -> dict[str, Any]:
+    """Name → column of an in-memory table: a pandas DataFrame (its columns, and its index when
+    the index is named), a mapping of name → array (an (N, 3) array under ``acc`` gives ``acc_x``,
+    ``acc_y``, ``acc_z``; (N, k) otherwise ``acc_0``...), or a numpy structured array."""
+    if hasattr(table, "columns") and hasattr(table, "index"):  # a pandas DataFrame
+        cols = {str(c): table[c] for c in table.columns}
+        if table.index.name is not None:
+            cols.setdefault(str(table.index.name), table.index)
+        return cols
+    if isinstance(table, np.ndarray) and table.dtype.names:
+        return {name: table[name] for name in table.dtype.names}
+    if isinstance(table, Mapping):
+        cols = {}
+        for name, value in table.items():
+            arr = np.asarray(value)
+            if arr.ndim == 2:
+                suffixes = "xyz" if arr.shape[1] == 3 else range(arr.shape[1])
+                cols.update({f"{name}_{s}": arr[:, k] for k, s in enumerate(suffixes)})
+            else:
+                cols[str(name)] = value
+        return cols
+    shape = getattr(table, "shape", None)
+    raise InputError(where, f"an in-memory table is a DataFrame, a mapping of column name to array or a structured "
+                            f"array, not {type(table).__name__}{'' if shape is None else f' {shape}'}: name its columns")
+
+
+def is_table(value: Any) -> bool:
+    """A pandas DataFrame, a numpy structured array or a mapping (of column name to array)."""
+    return ((hasattr(value, "columns") and hasattr(value, "index")) or isinstance(value, Mapping)
+            or (isinstance(value, np.ndarray) and value.dtype.names is not None))
+
+
+def tables_by_name(value: Any) -> bool:
+    """``value`` is a mapping of names to tables (one table per system, per section), not one
+    table given as a mapping of column names to arrays."""
+    return isinstance(value, Mapping) and bool(value) and all(is_table(v) for v in value.values())
+
+
+def _column(cols: dict[str, Any], name: str, where: str) -> Any:
+    if name not in cols:
+        raise InputError(where, f"missing column {name!r}; the table has: " + ", ".join(repr(c) for c in cols))
+    return cols[name]
+
+
+def table_columns(table: Any, columns: Sequence[str], *, where: str,
+                  allow_missing: Collection[str] = ()) -> dict[str, np.ndarray]:
+    """Named numeric columns (float64 copies) of an in-memory table (see :func:`_raw_columns`),
+    checked as :func:`read_table` checks a file's: every column present, numeric, one length,
+    at least one row; cells finite (NaN allowed in ``allow_missing`` columns, infinity never).
+    Errors name ``where``, the column and the row (0-based)."""
+    cols = _raw_columns(table, where)
+    out: dict[str, np.ndarray] = {}
+    for name in columns:
+        col = _column(cols, name, where)
+        try:
+            values = col.to_numpy(dtype=float, na_value=np.nan) if hasattr(col, "to_numpy") else np.asarray(col, float)
+        except (TypeError, ValueError):
+            raise InputError(where, f"column {name!r} is not numeric ({getattr(col, 'dtype', type(col).__name__)})"
+                             ) from None
+        values = np.array(values, dtype=np.float64)
+        if values.ndim != 1:
+            raise InputError(where, f"column {name!r} is not one-dimensional (shape {values.shape})")
+        out[name] = values
+    lengths = {name: len(v) for name, v in out.items()}
+    if len(set(lengths.values())) > 1:
+        raise InputError(where, "columns of different lengths: " + ", ".join(f"{k} {v}" for k, v in lengths.items()))
+    if not lengths or not next(iter(lengths.values())):
+        raise InputError(where, "no rows")
+    for name, values in out.items():
+        bad = np.isinf(values) | (np.isnan(values) & (name not in allow_missing))
+        if bad.any():
+            r = int(np.argmax(bad))
+            raise InputError(where, f"{'NaN' if np.isnan(values[r]) else 'infinite value'} in column {name!r} (row {r})")
+    return out
+
+
+def has_column(table: Any, name: str) -> bool:
+    """The in-memory table has a column ``name``."""
+    return name in _raw_columns(table, "table")
+
+
+def table_text_column(table: Any, name: str, *, where: str) -> np.ndarray:
+    """A column of names (ids, system names) of an in-memory table, as an array of str."""
+    col = _column(_raw_columns(table, where), name, where)
+    return np.char.strip(np.asarray(col, dtype=str).reshape(-1)).astype(object)
+
+
+def row_error(where: str, reason: str, lines: np.ndarray | None, i: int) -> InputError:
+    """An error at row i of a table: the file's line where the table is a file, else the
+    in-memory table's row (0-based)."""
+    if lines is not None:
+        return InputError(where, reason, int(lines[i]))
+    return InputError(where, f"{reason} (row {i})")
+
+
+def read_source(source: str | Path | TableSection, columns: Sequence[str], *, skip_rows: int = 0,
+                delimiter: str = ",", allow_missing: Collection[str] = ()) -> tuple[dict[str, np.ndarray],
+                                                                                     np.ndarray | None, str]:
+    """Named numeric columns of a file, or of a table section's data (its in-memory table when
+    one is bound, else its file): ``(arrays, lines, where)`` with the file's line numbers (None
+    for an in-memory table) and what errors name (the path, or the section's dotted key)."""
+    where = source_name(source)
+    if isinstance(source, TableSection):
+        if source.table is not None:
+            return table_columns(source.table, columns, where=where, allow_missing=allow_missing), None, where
+        source = source.path
+    arrays, lines = read_table(source, columns, skip_rows=skip_rows, delimiter=delimiter, allow_missing=allow_missing)
+    return arrays, lines, where
+
+
+def source_name(source: str | Path | TableSection) -> str:
+    """What errors about ``source`` name: a file's path, or an in-memory table's section key."""
+    if isinstance(source, TableSection):
+        return f"{source.label} (in-memory table)" if source.table is not None else str(source.path)
+    return str(source)
+
+
 def apply_timestamp_policy(
     t: np.ndarray,
     policy: str,
@@ -329,7 +451,7 @@ def timestamp_spikes(t: np.ndarray) -> np.ndarray:
     return np.flatnonzero(spike).astype(np.int64)
 
 
-def check_time_source(path: Path, time_column: str | None, time_scale: float, rate_hz: float | None) -> None:
+def check_time_source(path: str | Path, time_column: str | None, time_scale: float, rate_hz: float | None) -> None:
     if (time_column is None) == (rate_hz is None):
         raise InputError(path, "give exactly one of time_column and rate_hz")
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
@@ -338,7 +460,7 @@ def check_time_source(path: Path, time_column: str | None, time_scale: float, ra
         raise InputError(path, f"time_scale must be a positive finite number, got {time_scale!r}")
 
 
-def check_columns(path: Path, what: str, cols: Sequence[str], counts: tuple[int, ...] = (3,)) -> list[str]:
+def check_columns(path: str | Path, what: str, cols: Sequence[str], counts: tuple[int, ...] = (3,)) -> list[str]:
     if isinstance(cols, str) or len(cols) not in counts:
         need = " or ".join(map(str, counts))
         raise InputError(path, f"{what} must name {need} columns (x, y, z), got {cols!r}")

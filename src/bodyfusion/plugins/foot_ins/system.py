@@ -99,6 +99,7 @@ class FootIns(SensorSystem):
 
     plugin_name = "foot_ins"
     Config = FootInsConfig
+    data_section = "data"
     error_model = "strapdown15"
 
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:

@@ -7,18 +7,19 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel, TableSection
 from bodyfusion.io.imu import ImuCsvConfig
 
 
-class GnssSourceConfig(StrictModel):
-    """Where the GNSS fixes come from: a CSV with named columns, an NMEA 0183 log, or the
-    GNSS lines of the phone log (``phone_log``: the system's own ``phone_log`` file)."""
+class GnssSourceConfig(TableSection):
+    """Where the GNSS fixes come from: a CSV with named columns (or a table with those columns
+    given in memory), an NMEA 0183 log, or the GNSS lines of the phone log (``phone_log``: the
+    system's own ``phone_log`` file)."""
 
     format: Literal["csv", "nmea", "phone_log"] = "csv"
     """csv, nmea or phone_log."""
     path: DataPath | None = None
-    """File of fixes (csv, nmea); relative to the layout file."""
+    """File of fixes (csv, nmea); relative to the layout file (unset: the csv table given in memory)."""
     time_column: str = "t"
     """CSV column of fix times, s (on the IMU's clock)."""
     lat_column: str = "lat_deg"
@@ -34,11 +35,9 @@ class GnssSourceConfig(StrictModel):
     course_column: str | None = "course_deg"
     """CSV column of course over ground, degrees clockwise from North."""
 
-    @model_validator(mode="after")
-    def _path_for_files(self) -> "GnssSourceConfig":
-        if self.format != "phone_log" and self.path is None:
-            raise KeyedError("path", f"a {self.format} GNSS source needs a path")
-        return self
+    def needs_data(self) -> bool:
+        """A csv or nmea source reads its file or table; phone_log fixes come with the phone's log."""
+        return self.format != "phone_log"
 
 
 class StepConfig(StrictModel):

@@ -24,13 +24,12 @@ magnetometer's own noise counts too) is at most ``tolerance_deg``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from bodyfusion.io.imu import ImuCsvConfig
 from bodyfusion.base.errors import InputError
-from bodyfusion.io.tables import apply_timestamp_policy, read_table
+from bodyfusion.io.tables import apply_timestamp_policy, read_source
 from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig, QuasiStaticConfig
 
 MAG_UNITS: dict[str, float] = {"uT": 1.0, "nT": 1e-3, "G": 100.0}
@@ -123,16 +122,16 @@ class MagneticHeading:
 
 
 def read_magnetometer_csv(d: ImuCsvConfig, columns: tuple[str, str, str], unit: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times (s) and field (N, 3, µT) from the magnetometer ``columns`` of the IMU CSV ``d``;
-    rows with empty cells are skipped, the IMU's timestamp policy applies."""
-    path = Path(d.path)
+    """Times (s) and field (N, 3, µT) from the magnetometer ``columns`` of the IMU CSV ``d`` (or of
+    its in-memory table); rows with empty cells are skipped, the IMU's timestamp policy applies."""
     names = list(columns) + ([d.time_column] if d.time_column is not None and d.time_column not in columns else [])
-    arrays, lines = read_table(path, names, skip_rows=d.skip_rows, delimiter=d.delimiter, allow_missing=columns)
-    t = arrays[d.time_column] * d.time_scale if d.time_column is not None else np.arange(lines.size) / d.rate_hz
+    arrays, lines, where = read_source(d, names, skip_rows=d.skip_rows, delimiter=d.delimiter, allow_missing=columns)
+    n = len(arrays[names[0]])
+    t = arrays[d.time_column] * d.time_scale if d.time_column is not None else np.arange(n) / d.rate_hz
     m = np.column_stack([arrays[c] for c in columns]) * MAG_UNITS[unit]
     present = np.all(np.isfinite(m), axis=1)
-    t, m, lines = t[present], m[present], lines[present]
-    kept, _ = apply_timestamp_policy(t, d.timestamp_policy, path, lines=lines)
+    t, m = t[present], m[present]
+    kept, _ = apply_timestamp_policy(t, d.timestamp_policy, where, lines=None if lines is None else lines[present])
     if kept.size < 2:
-        raise InputError(path, f"fewer than 2 magnetometer samples in columns {', '.join(columns)}")
+        raise InputError(where, f"fewer than 2 magnetometer samples in columns {', '.join(columns)}")
     return t[kept], m[kept]

@@ -119,6 +119,7 @@ class HandPdr(SensorSystem):
 
     plugin_name = "hand_pdr"
     Config = HandPdrConfig
+    data_section = "imu"
 
     def __init__(self, name: str, config: HandPdrConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)
@@ -147,8 +148,10 @@ class HandPdr(SensorSystem):
             if mag.enabled:
                 magn = read_magnetometer_csv(d, mag.columns, mag.unit)
         g = config.gnss
+        if g is not None and g.format == "nmea" and g.table is not None:
+            raise ConfigError(f"{key}.gnss.format", "an in-memory GNSS table is read as format csv (its columns)")
         if g is not None and g.format == "csv":
-            fixes = read_gnss_csv(g.path, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
+            fixes = read_gnss_csv(g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
                                   height_column=g.height_column, accuracy_column=g.accuracy_column,
                                   speed_column=g.speed_column, course_column=g.course_column)
         elif g is not None and g.format == "nmea":

@@ -6,19 +6,20 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
+from bodyfusion.base.sections import DataPath, KeyedError, StrictModel, TableSection
 
 Vector3 = tuple[float, float, float]
 
 
-class RangeFileConfig(StrictModel):
-    """Ranges recorded as CSV with a header line, one ranging per row: the time (s, on the
-    host's clock), the id of the other end (an anchor name or a peer system name) and the
-    measured range (m). Other columns are ignored. Failed rangings (an empty or NaN range)
+class RangeFileConfig(TableSection):
+    """Ranges recorded as CSV with a header line (or a table with those columns given in memory),
+    one ranging per row: the time (s, on the host's clock), the id of the other end (an anchor
+    name or a peer system name) and the measured range (m). Other columns are ignored. Failed rangings (an empty or NaN range)
     and negative ranges are dropped and counted; rows whose time goes backwards are dropped
     and counted."""
 
-    path: DataPath = Field(description="CSV file of ranges; relative to the layout file.")
+    path: DataPath | None = Field(default=None, description="CSV file of ranges; relative to the layout file "
+                                                            "(unset: the table given in memory).")
     time_column: str = Field(default="t", description="Column of ranging times, s.")
     id_column: str = Field(default="id", description="Column naming the other end: an anchor or a peer system.")
     range_column: str = Field(default="range_m", description="Column of measured ranges, m.")

@@ -1,4 +1,5 @@
-"""Reader of UWB range logs: ``t, id, range_m`` rows (CSV with a header line).
+"""Reader of UWB range logs: ``t, id, range_m`` rows (CSV with a header line, or the same columns
+in an in-memory table).
 
 Policies (counted in the :class:`bodyfusion.base.types.InputReport` and the tag's diagnostics):
 failed rangings (empty or NaN range) and negative ranges are dropped; a row whose time is
@@ -17,8 +18,17 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.io.tables import clean_cell, read_lines, split_line
+from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
+from bodyfusion.io.tables import (
+    clean_cell,
+    read_lines,
+    row_error,
+    source_name,
+    split_line,
+    table_columns,
+    table_text_column,
+)
 
 
 @dataclass
@@ -44,10 +54,10 @@ def _number(path: Path, cell: str, column: str, line: int) -> float:
         raise InputError(path, f"non-numeric value {cell!r} in column {column!r}", line) from None
 
 
-def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_column: str = "id",
-                range_column: str = "range_m", nlos_column: str | None = None, delimiter: str = ",") -> RangeLog:
-    """Read a range log; ``ids`` are the ends the layout names (anchors, then peers)."""
-    path = Path(path)
+def _file_rows(path: Path, time_column: str, id_column: str, range_column: str, nlos_column: str | None,
+               delimiter: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+    """Times, ids, ranges (NaN: failed), NLOS flags and the line of every row of a range file;
+    a malformed row stops with its line."""
     lines = read_lines(path)
     if not lines or not lines[0].strip():
         raise InputError(path, "empty file: no header line", 1)
@@ -59,10 +69,7 @@ def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_
             why = "missing column" if name not in header else "repeated column"
             raise InputError(path, f"{why} {name!r}; the header has: " + ", ".join(repr(h) for h in header), 1)
         cols.append(header.index(name))
-    lookup = {name: k for k, name in enumerate(ids)}
-    t, end, rng, nlos = [], [], [], []
-    dropped = {"failed": 0, "negative": 0, "out_of_order": 0}
-    t_last = -math.inf
+    t, who, rng, nlos, line_nos = [], [], [], [], []
     for line_no, text in enumerate(lines[1:], start=2):
         if not text.strip():
             continue
@@ -72,32 +79,52 @@ def read_ranges(path: str | Path, ids: list[str], *, time_column: str = "t", id_
         ti = _number(path, clean_cell(cells[cols[0]]), time_column, line_no)
         if not math.isfinite(ti):
             raise InputError(path, f"non-finite time {ti!r}", line_no)
-        who = clean_cell(cells[cols[1]])
-        if who not in lookup:
-            raise InputError(path, f"id {who!r} is neither an anchor nor a peer of this tag "
-                                   f"(the layout names {', '.join(ids)})", line_no)
         cell = clean_cell(cells[cols[2]])
         ri = math.nan if cell == "" else _number(path, cell, range_column, line_no)
         if math.isinf(ri):
             raise InputError(path, f"infinite value in column {range_column!r}", line_no)
-        if ti < t_last:
-            dropped["out_of_order"] += 1
-            continue
-        t_last = ti
-        if math.isnan(ri):
-            dropped["failed"] += 1
-            continue
-        if ri < 0:
-            dropped["negative"] += 1
-            continue
         t.append(ti)
-        end.append(lookup[who])
+        who.append(clean_cell(cells[cols[1]]))
         rng.append(ri)
+        line_nos.append(line_no)
         if nlos_column:
-            nlos.append(_number(path, clean_cell(cells[cols[3]]), nlos_column, line_no) != 0)
+            nlos.append(_number(path, clean_cell(cells[cols[3]]), nlos_column, line_no))
+    return (np.asarray(t, dtype=float), np.asarray(who, dtype=object), np.asarray(rng, dtype=float),
+            np.asarray(nlos, dtype=float) if nlos_column else None, np.asarray(line_nos, dtype=np.int64))
+
+
+def read_ranges(source: str | Path | TableSection, ids: list[str], *, time_column: str = "t", id_column: str = "id",
+                range_column: str = "range_m", nlos_column: str | None = None, delimiter: str = ",") -> RangeLog:
+    """Read a range log; ``ids`` are the ends the layout names (anchors, then peers). From a file,
+    or a table section's in-memory table with the same columns (ids as names, a failed ranging
+    as NaN); the same policies either way."""
+    where = source_name(source)
+    if isinstance(source, TableSection) and source.table is not None:
+        cols = [time_column, range_column] + ([nlos_column] if nlos_column else [])
+        arrays = table_columns(source.table, cols, where=where, allow_missing=[range_column])
+        t, rng, lines = arrays[time_column], arrays[range_column], None
+        nlos = arrays[nlos_column] if nlos_column else None
+        who = table_text_column(source.table, id_column, where=where)
+    else:
+        path = Path(source.path if isinstance(source, TableSection) else source)
+        t, who, rng, nlos, lines = _file_rows(path, time_column, id_column, range_column, nlos_column, delimiter)
+    names, inverse = np.unique(who.astype(str), return_inverse=True)
+    lookup = {name: k for k, name in enumerate(ids)}
+    unknown = np.flatnonzero(~np.isin(names[inverse], ids))
+    if unknown.size:
+        i = int(unknown[0])
+        raise row_error(where, f"id {who[i]!r} is neither an anchor nor a peer of this tag (the layout names "
+                               f"{', '.join(ids)})", lines, i)
+    end = np.array([lookup.get(n, -1) for n in names], dtype=np.int64)[inverse]
+    before = np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))  # the latest time of the rows above
+    out_of_order = t < before
+    failed = ~out_of_order & np.isnan(rng)
+    negative = ~out_of_order & ~failed & (rng < 0)
+    keep = ~(out_of_order | failed | negative)
+    dropped = {"failed": int(failed.sum()), "negative": int(negative.sum()), "out_of_order": int(out_of_order.sum())}
     total = sum(dropped.values())
-    notes = [f"{path.name}: dropped {dropped['failed']} failed rangings (empty/NaN), {dropped['negative']} negative, "
-             f"{dropped['out_of_order']} out of time order"] if total else []
-    return RangeLog(np.asarray(t, dtype=float), np.asarray(end, dtype=np.int64), np.asarray(rng, dtype=float),
-                    np.asarray(nlos, dtype=bool) if nlos_column else None, dropped,
-                    InputReport(dropped_samples=total, notes=notes))
+    label = Path(where).name if lines is not None else where
+    notes = [(f"{label}: dropped {dropped['failed']} failed rangings (empty/NaN), {dropped['negative']} negative, "
+              f"{dropped['out_of_order']} out of time order")] if total else []
+    return RangeLog(np.ascontiguousarray(t[keep]), np.ascontiguousarray(end[keep]), np.ascontiguousarray(rng[keep]),
+                    None if nlos is None else nlos[keep] != 0, dropped, InputReport(dropped_samples=total, notes=notes))

@@ -16,8 +16,6 @@ states (:mod:`bodyfusion.core.fuser`).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from bodyfusion.base.types import InputReport
@@ -28,6 +26,7 @@ from bodyfusion.core.system import (
     ScalarMeasurement,
 )
 from bodyfusion.evaluation.consistency import NisTally
+from bodyfusion.io.tables import source_name
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
 from bodyfusion.plugins.uwb.ranges import read_ranges
@@ -55,16 +54,17 @@ class UwbTag(AidingSource):
 
     plugin_name = "uwb"
     Config = UwbConfig
+    data_section = "ranges"
 
     def __init__(self, name: str, config: UwbConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)
         self.ids = [*config.anchors, *config.peers]
         self.n_anchors = len(config.anchors)
         rc = config.ranges
-        self.log = read_ranges(rc.path, self.ids, time_column=rc.time_column, id_column=rc.id_column,
+        self.log = read_ranges(rc, self.ids, time_column=rc.time_column, id_column=rc.id_column,
                                range_column=rc.range_column, nlos_column=rc.nlos_column, delimiter=rc.delimiter)
         if len(self.log) == 0:
-            self.log.report.warn(f"{name}: no usable range in {Path(rc.path).name} "
+            self.log.report.warn(f"{name}: no usable range in {source_name(rc)} "
                                  f"(dropped: {', '.join(f'{v} {k}' for k, v in self.log.dropped.items() if v) or 'none'})")
         self._anchor_n = np.array(list(config.anchors.values()), dtype=float).reshape(-1, 3)
         self._peer_lever_n = np.array(list(config.peers.values()), dtype=float).reshape(-1, 3)
