@@ -118,6 +118,8 @@ def test_tum_files_are_eight_columns_increasing_times_unit_quaternions_and_the_p
                 **{f"{n}_truth": tr for n, tr in result.truths.items()}}
     assert {p.stem for p in (out / "tum").glob("*.txt")} == set(expected) == {
         "left_foot", "hand_phone", "left_foot_truth", "hand_phone_truth"}
+    foot = result.systems["left_foot"].states()
+    attitude = {"left_foot": np.column_stack([foot[k] for k in ("qx", "qy", "qz", "qw")])}  # the foot INS's, body to ENU
     for name, track in expected.items():
         rows = np.loadtxt(out / "tum" / f"{name}.txt", ndmin=2)
         assert rows.shape == (len(track.t), 8)
@@ -125,7 +127,8 @@ def test_tum_files_are_eight_columns_increasing_times_unit_quaternions_and_the_p
         np.testing.assert_array_equal(rows[:, 0], track.t)  # full precision
         np.testing.assert_array_equal(rows[:, 1:4], track.pos_n)
         np.testing.assert_allclose(np.linalg.norm(rows[:, 4:8], axis=1), 1.0)
-        np.testing.assert_array_equal(rows[:, 4:8], np.tile([0.0, 0.0, 0.0, 1.0], (len(rows), 1)))  # qx qy qz qw
+        identity = np.tile([0.0, 0.0, 0.0, 1.0], (len(rows), 1))  # qx qy qz qw: the phone and the truth have none
+        np.testing.assert_array_equal(rows[:, 4:8], attitude.get(name, identity))
 
 
 def test_tum_writes_a_truth_without_heights_at_zero_height(tmp_path):

@@ -12,10 +12,11 @@ so no calendar time is written):
   :data:`TRAJECTORY_FORMAT_VERSION` (:func:`write_trajectories_parquet`).
 - ``tum/<system>.txt`` and, where truth exists, ``tum/<system>_truth.txt``: the TUM RGB-D
   format ``timestamp tx ty tz qx qy qz qw`` read by evo (``evo_ape tum tum/x_truth.txt
-  tum/x.txt -a``). A :class:`~bodyfusion.base.types.Trajectory` holds no attitude, so the
-  orientation is the identity quaternion: compare positions only (evo's default APE
-  ``--pose_relation trans_part``). A truth without heights is written with ``tz`` 0; compare
-  it with ``--project_to_plane xy`` (:func:`write_tum`).
+  tum/x.txt -a``). The orientation is the system's attitude (body to ENU) where it estimates
+  one (:func:`system_attitudes`: the foot INS), else the identity quaternion, as for every
+  truth track (a :class:`~bodyfusion.base.types.Trajectory` or a truth holds no attitude): compare
+  positions (evo's default APE ``--pose_relation trans_part``). A truth without heights is
+  written with ``tz`` 0; compare it with ``--project_to_plane xy`` (:func:`write_tum`).
 - ``track.geojson`` (runs with a geodetic origin only; without one no file is written): a
   WGS84 FeatureCollection, one LineString per system with per-vertex ``times`` (s) and
   one-sigma ``sd_east_m``/``sd_north_m``/``sd_up_m``, and the truth of each system, a
@@ -39,6 +40,7 @@ import pyarrow.parquet as pq
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.core.system import SensorSystem
 from bodyfusion.io.gnss import enu_to_geodetic
 
 TRAJECTORY_COLUMNS = ("system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
@@ -150,30 +152,49 @@ def read_trajectories(path: str | Path) -> dict[str, Trajectory]:
     return out
 
 
-def _tum_table(t: np.ndarray, pos_n: np.ndarray) -> pa.Table:
-    """TUM columns; the identity orientation (no attitude in a trajectory), NaN heights as 0."""
-    n = len(t)
-    zero, one = np.zeros(n), np.ones(n)
+QUATERNION_STATES = ("qw", "qx", "qy", "qz")
+"""The attitude columns of :meth:`~bodyfusion.core.system.SensorSystem.states` (scalar first, body to ENU)."""
+
+
+def system_attitudes(systems: Mapping[str, SensorSystem]) -> dict[str, np.ndarray]:
+    """(N, 4) attitude quaternions ``[w, x, y, z]`` (body to ENU) at the trajectory's epochs of
+    every system whose :meth:`~bodyfusion.core.system.SensorSystem.states` give one."""
+    out = {}
+    for name, system in systems.items():
+        states = system.states()
+        if all(k in states for k in QUATERNION_STATES):
+            out[name] = np.column_stack([states[k] for k in QUATERNION_STATES])
+    return out
+
+
+def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None) -> pa.Table:
+    """TUM columns; the identity orientation without a quaternion, NaN heights as 0."""
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)) if q_wxyz is None else q_wxyz
     cols = {"timestamp": t, "tx": pos_n[:, 0], "ty": pos_n[:, 1], "tz": np.nan_to_num(pos_n[:, 2], nan=0.0),
-            "qx": zero, "qy": zero, "qz": zero, "qw": one}
+            "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "qw": q[:, 0]}
     return pa.table({k: pa.array(v, pa.float64()) for k, v in cols.items()})
 
 
 def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapping[str, TruthTrack],
-              decimate: int = 1) -> list[Path]:
+              decimate: int = 1, attitudes: Mapping[str, np.ndarray] | None = None) -> list[Path]:
     """``<folder>/<system>.txt`` per system and ``<system>_truth.txt`` per truth track (dense
     truth decimated like the estimate, surveyed points all): ``timestamp tx ty tz qx qy qz qw``,
-    s and ENU m at full precision, space-separated, no header. Returns the files written."""
-    tracks = {name: (tr.t[::decimate], tr.pos_n[::decimate]) for name, tr in trajectories.items()}
+    s and ENU m at full precision, space-separated, no header. ``attitudes``: a system's (N, 4)
+    quaternions ``[w, x, y, z]`` (body to ENU) at its trajectory's epochs
+    (:func:`system_attitudes`); the identity for the others and the truth. Returns the files written."""
+    attitudes = attitudes or {}
+    tracks = {name: (tr.t[::decimate], tr.pos_n[::decimate],
+                     attitudes[name][::decimate] if name in attitudes else None)
+              for name, tr in trajectories.items()}
     for name, tr in truths.items():
         step = 1 if tr.sparse else decimate
-        tracks[f"{name}_truth"] = (tr.t[::step], tr.pos_n[::step])
+        tracks[f"{name}_truth"] = (tr.t[::step], tr.pos_n[::step], None)
     folder.mkdir(parents=True, exist_ok=True)
     options = pacsv.WriteOptions(include_header=False, delimiter=" ", quoting_style="none")
     written = []
-    for name, (t, pos) in tracks.items():
+    for name, (t, pos, q) in tracks.items():
         written.append(folder / f"{name}.txt")
-        pacsv.write_csv(_tum_table(t, pos), written[-1], options)
+        pacsv.write_csv(_tum_table(t, pos, q), written[-1], options)
     return written
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from bodyfusion.base.errors import FusionError
 from bodyfusion.core.exports import (
+    system_attitudes,
     write_geojson,
     write_trajectories_csv,
     write_trajectories_parquet,
@@ -124,7 +125,8 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
-    write_tum(out_dir / "tum", result.trajectories, result.truths, output.decimate)
+    write_tum(out_dir / "tum", result.trajectories, result.truths, output.decimate,
+              attitudes=system_attitudes(result.systems))
     if result.geodetic_origin is not None:
         write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin,
                       output.decimate)
