@@ -153,3 +153,61 @@ def bf_input_error():
     from bodyfusion.base.errors import InputError
 
     return InputError
+
+
+# --------------------------------------------------------------------------- simulation in memory
+
+SCENARIO = {
+    "name": "api_walk", "rate_hz": 100,
+    "path": {"kind": "rectangle", "length_m": 12, "width_m": 6, "laps": 1, "clockwise": True},
+    "gait": {"start_still_s": 3, "end_still_s": 1},
+    "systems": {
+        "left_foot": {"kind": "foot_imu", "foot": "left", "imu": {"preset": "icm20948"}},
+        "hand_phone": {"kind": "hand_phone", "magnetometer": {}},
+        "tag": {"kind": "uwb_tag", "host": "left_foot", "rate_hz": 10, "dropout_probability": 0.05,
+                "anchors": {"A1": [-3.0, -3.0, 2.0], "A2": [-3.0, 15.0, 2.0], "A3": [10.0, 15.0, 2.0]}},
+    },
+    "layout": {"constraints": [{"between": ["left_foot", "hand_phone"], "distance_m": 1.5}]},
+}
+
+
+@pytest.fixture(scope="module")
+def simulated_walk(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    sim = bf.simulate(SCENARIO, seed=4, out_dir=out)
+    return sim, bf.run(sim.layout), bf.run(out / "config.yaml")
+
+
+def test_a_simulation_in_memory_runs_as_its_written_files_do(simulated_walk):
+    """The streams handed over in memory hold what the files hold: the run on them equals
+    ``fusion simulate`` + ``fusion run`` on the files, bit for bit (IMUs, GNSS, magnetometer,
+    UWB ranges and truth)."""
+    sim, in_memory, from_files = simulated_walk
+    assert set(sim.data) == {"left_foot", "hand_phone", "tag"} and set(sim.data["hand_phone"]) == {"imu", "gnss"}
+    assert all(section.path is None for section in (sim.layout.systems["left_foot"].data,
+                                                     sim.layout.systems["tag"].ranges, sim.layout.truth))
+    for name, traj in from_files.trajectories.items():
+        np.testing.assert_array_equal(in_memory.trajectories[name].pos_n, traj.pos_n)
+        np.testing.assert_array_equal(in_memory.trajectories[name].pos_sd, traj.pos_sd)
+    pd.testing.assert_frame_equal(in_memory.innovations(), from_files.innovations())
+    pd.testing.assert_frame_equal(in_memory.constraint_events(), from_files.constraint_events())
+    assert in_memory.scores["hand_phone"].metrics == from_files.scores["hand_phone"].metrics
+    assert sim.written is not None and sim.written.config_path.is_file()
+
+
+def test_every_plugin_gives_its_results_in_the_shared_names(simulated_walk):
+    _, result, _ = simulated_walk
+    hand = result.states("hand_phone")
+    assert {"t", "east_m", "north_m", "up_m", "heading_deg", "holding_offset_deg"} <= set(hand.columns)
+    np.testing.assert_array_equal(hand["t"], result.trajectories["hand_phone"].t)
+    cov = result.covariances("hand_phone")
+    assert cov.states[:3] == ("east_m", "north_m", "up_m") and cov.matrix.shape == (len(hand), 10, 10)
+    assert not np.isnan(cov.matrix).any()
+    events = result.events()
+    assert set(events.event) == {"stance", "step"}
+    assert events.loc[events.event == "step", "length_m"].between(0.2, 1.5).all()
+    aiding = set(result.innovations().groupby(["system", "aiding"]).size().index)
+    assert {("hand_phone", "gnss_position"), ("hand_phone", "magnetometer"), ("tag", "anchor_range")} <= aiding
+    frame = result.to_frame()
+    assert frame.loc[frame.system == "hand_phone", "heading_deg"].notna().all()
+    assert frame.loc[frame.system == "hand_phone", "v_east_mps"].isna().all()

@@ -19,13 +19,14 @@ from typing import Any
 
 __version__ = "0.2.0"
 
-_API = {"load_layout": "bodyfusion.api", "run": "bodyfusion.api", "run_study": "bodyfusion.api",
-        "Layout": "bodyfusion.core.layout", "LoadedLayout": "bodyfusion.core.layout",
-        "RunResult": "bodyfusion.core.result"}
+_API = {"load_layout": "bodyfusion.api", "run": "bodyfusion.api", "simulate": "bodyfusion.api",
+        "run_study": "bodyfusion.api", "Simulation": "bodyfusion.api", "Layout": "bodyfusion.core.layout",
+        "LoadedLayout": "bodyfusion.core.layout", "RunResult": "bodyfusion.core.result"}
 """The library's names (:mod:`bodyfusion.api`), loaded when first used: ``import bodyfusion`` and
 the command line stay quick (the compiled kernels and pandas load with a run)."""
 
-__all__ = ["Layout", "LoadedLayout", "RunResult", "__version__", "load_layout", "run", "run_study"]
+__all__ = ["Layout", "LoadedLayout", "RunResult", "Simulation", "__version__", "load_layout", "run", "run_study",
+           "simulate"]
 
 
 def __getattr__(name: str) -> Any:

@@ -1,6 +1,7 @@
 """The library's entry points, re-exported at the package root: a layout from a YAML file, a dict
-or pydantic models (:func:`load_layout`), a run in-process (:func:`run`), a simulation
-(:func:`simulate`) and a study (:func:`run_study`). A run's result has its tables as pandas
+or pydantic models (:func:`load_layout`), a run in-process with data from files or in memory
+(:func:`run`), a simulation handed over in memory (:func:`simulate`) and a study
+(:func:`run_study`). A run's result has its tables as pandas
 DataFrames (:class:`~bodyfusion.core.result.RunResult`)::
 
     import bodyfusion as bf
@@ -18,9 +19,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError
@@ -36,6 +39,7 @@ from bodyfusion.core.output import write_outputs
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.run import run_layout
 from bodyfusion.io.tables import tables_by_name
+from bodyfusion.sim.scenario import SimulationResult, simulated
 from bodyfusion.study.runner import StudyReport
 from bodyfusion.study.runner import run_study as _run_study
 
@@ -120,6 +124,44 @@ def run(layout: LayoutSource, overrides: Overrides = None, *, data: Data = None,
     if out_dir is not None:
         write_outputs(result, Path(out_dir), str(loaded.path or loaded.name), total_wall_s=time.perf_counter() - t0)
     return result
+
+
+@dataclass
+class Simulation:
+    """A simulated walk held in memory (:func:`simulate`).
+
+    ``layout``: a loaded layout whose sensor and truth sections read the tables below (run it
+    with ``bodyfusion.run(sim.layout)``: no file is read or written); ``data``: system → section
+    → DataFrame, the columns the sensor files would hold (10 significant digits, as printed, so
+    the run equals ``fusion simulate`` + ``fusion run`` bit for bit); ``truth``: the truth.csv
+    rows (``system``, ``t``, ``east_m``, ``north_m``, ``up_m``); ``distance_m`` walked in
+    ``duration_s``; ``written``: what was written, when asked (:func:`simulate`'s ``out_dir``)."""
+
+    layout: LoadedLayout
+    data: dict[str, dict[str, pd.DataFrame]]
+    truth: pd.DataFrame
+    distance_m: float
+    duration_s: float
+    written: SimulationResult | None = None
+
+
+def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = None, *, seed: int = 0,
+             out_dir: str | Path | None = None) -> Simulation:
+    """Simulate a scenario (a YAML file or a scenario dict; ``overrides`` as for layouts) and
+    hand its streams over in memory with a layout that reads them (:class:`Simulation`). With
+    ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte."""
+    sim = simulated(scenario, seed, overrides)
+    raw, tables = sim.in_memory()
+    frames = {key: pd.DataFrame(columns) for key, columns in tables.items()}
+    folder = Path(scenario).resolve().parent if isinstance(scenario, (str, Path)) else Path.cwd()
+    layout = validate_layout(raw, None, folder, tables=frames)
+    data: dict[str, dict[str, pd.DataFrame]] = {}
+    for key, frame in frames.items():
+        if key != "truth":
+            _, system, section = key.split(".", 2)
+            data.setdefault(system, {})[section] = frame
+    written = sim.write(out_dir) if out_dir is not None else None
+    return Simulation(layout, data, frames["truth"], sim.plan.distance_m, float(sim.plan.t[-1]), written)
 
 
 def run_study(study: str | Path, out_dir: str | Path, *, executor: str = "local", workers: int | None = None,

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydantic import BaseModel
 
+from bodyfusion.sim.files import SimFile
 from bodyfusion.sim.gait import GaitPlan
 from bodyfusion.sim.gait_config import GaitConfig
 
@@ -28,8 +28,8 @@ DEFAULT_GEODETIC_ORIGIN = (49.4613, 11.1109, 390.0)
 @dataclass
 class SimContext:
     """What every system kind sees: the scenario's rate (Hz), gravity (m/s^2) and gait, the
-    planned walk and its sample times (s), the seed, the output folder, the geodetic origin
-    of the ENU frame, and the systems simulated so far (aiding kinds read their hosts' truth)."""
+    planned walk and its sample times (s), the seed, the geodetic origin of the ENU frame, and
+    the systems simulated so far (aiding kinds read their hosts' truth)."""
 
     rate_hz: float
     gravity_mps2: float
@@ -37,20 +37,21 @@ class SimContext:
     plan: GaitPlan
     t: np.ndarray
     seed: int
-    out_dir: Path
     geodetic_origin: tuple[float, float, float] = DEFAULT_GEODETIC_ORIGIN
     outputs: dict[str, SystemOutput] = field(default_factory=dict)
 
 
 @dataclass
 class SystemOutput:
-    """One simulated system: its truth track, its layout section and the files it wrote."""
+    """One simulated system: its truth track, its layout section (naming its files) and its
+    files (:class:`~bodyfusion.sim.files.SimFile`: each written to the output folder, or held in
+    memory for the section that reads it)."""
 
     truth_t: np.ndarray
     truth_pos: np.ndarray
     layout: dict[str, Any]
     samples: int
-    files: list[Path] = field(default_factory=list)
+    files: list[SimFile] = field(default_factory=list)
     outages: list[dict[str, Any]] = field(default_factory=list)
     """Entries for the layout's ``outages`` list (system, start_s, duration_s)."""
     uses_geodetic_origin: bool = False

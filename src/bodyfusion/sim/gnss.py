@@ -32,11 +32,15 @@ from pydantic import Field
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.io.gnss import GnssFixes, enu_to_geodetic
 from bodyfusion.base.seeding import system_seed
+from bodyfusion.sim.files import SimFile, printed
 from bodyfusion.sim.imu import Motion, gauss_markov
 
-__all__ = ["GNSS_COLUMNS", "GnssOutage", "GnssReceiverConfig", "simulate_fixes", "write_gnss_csv"]
+__all__ = ["GNSS_COLUMNS", "GNSS_FORMATS", "GnssOutage", "GnssReceiverConfig", "gnss_file", "simulate_fixes",
+           "write_gnss_csv"]
 
 GNSS_COLUMNS = ("t", "lat_deg", "lon_deg", "height_m", "accuracy_m", "speed_mps", "course_deg")
+GNSS_FORMATS = ("%.10g", "%.11f", "%.11f", "%.4f", "%.4f", "%.4f", "%.3f")
+"""Printed precision of each of :data:`GNSS_COLUMNS`."""
 RADIUS_68_PER_SIGMA = math.sqrt(-2.0 * math.log(1.0 - 0.6827))
 """Radius of a circular 2-D Gaussian's 68.27 % region in units of the per-axis σ (≈ 1.515)."""
 
@@ -95,9 +99,20 @@ def simulate_fixes(motion: Motion, t_end: float, origin: tuple[float, float, flo
     return fixes, error
 
 
+def _gnss_table(fixes: GnssFixes) -> np.ndarray:
+    return np.column_stack([fixes.t, fixes.lat_deg, fixes.lon_deg, fixes.height_m, fixes.accuracy_m,
+                            fixes.speed_mps, fixes.course_deg])
+
+
 def write_gnss_csv(path: Path, fixes: GnssFixes) -> None:
     """``t,lat_deg,lon_deg,height_m,accuracy_m,speed_mps,course_deg`` (what the hand PDR's CSV reader reads)."""
-    table = np.column_stack([fixes.t, fixes.lat_deg, fixes.lon_deg, fixes.height_m, fixes.accuracy_m,
-                             fixes.speed_mps, fixes.course_deg])
-    np.savetxt(path, table, fmt=["%.10g", "%.11f", "%.11f", "%.4f", "%.4f", "%.4f", "%.3f"], delimiter=",",
-               header=",".join(GNSS_COLUMNS), comments="")
+    np.savetxt(path, _gnss_table(fixes), fmt=list(GNSS_FORMATS), delimiter=",", header=",".join(GNSS_COLUMNS),
+               comments="")
+
+
+def gnss_file(section: str, name: str, fixes: GnssFixes) -> SimFile:
+    """The fixes file :func:`write_gnss_csv` writes, as a :class:`~bodyfusion.sim.files.SimFile`
+    read by the layout section ``section``: its columns at the printed precision."""
+    table = _gnss_table(fixes)
+    columns = {col: printed(table[:, j], fmt) for j, (col, fmt) in enumerate(zip(GNSS_COLUMNS, GNSS_FORMATS))}
+    return SimFile(section, name, columns, lambda path: write_gnss_csv(path, fixes))

@@ -48,6 +48,7 @@ a layout that ``fusion run`` runs as is.
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,13 +61,22 @@ from bodyfusion.core import registry as plugin_registry
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.core.layout import Layout, apply_overrides, read_yaml, validate_section
-from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind
-from bodyfusion.sim.files import FLOAT_FORMAT
+from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind, SystemOutput
+from bodyfusion.sim.files import FLOAT_FORMAT, printed
 from bodyfusion.sim.gait import plan_gait
 from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.paths import PATH_KINDS, PathConfig
 
-__all__ = ["LoadedScenario", "Scenario", "SimulationResult", "TRUTH_COLUMNS", "load_scenario", "simulate"]
+__all__ = [
+    "TRUTH_COLUMNS",
+    "LoadedScenario",
+    "Scenario",
+    "Simulated",
+    "SimulationResult",
+    "load_scenario",
+    "simulate",
+    "simulated",
+]
 
 TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
 TRUTH_FILE = "truth.csv"
@@ -122,7 +132,7 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _kind_model(table: dict[str, type[StrictModel]], section: Any, key: str, path: Path) -> type[StrictModel]:
+def _kind_model(table: dict[str, type[StrictModel]], section: Any, key: str, path: Path | None) -> type[StrictModel]:
     kind = section.get("kind") if isinstance(section, dict) else None
     if kind not in table:
         reason = "missing key kind" if kind is None else f"unknown kind {kind!r}"
@@ -132,20 +142,23 @@ def _kind_model(table: dict[str, type[StrictModel]], section: Any, key: str, pat
 
 @dataclass
 class LoadedScenario:
-    """A validated scenario: the file's model, its path section, each system's section and
-    the kind (the plugin) that simulates it."""
+    """A validated scenario: the file's model, its path section, each system's section, the kind
+    (the plugin) that simulates it, and its ``file`` (None: a scenario dict)."""
 
     scenario: Scenario
     path: PathConfig
     systems: dict[str, Any]
     kinds: dict[str, SystemKind] = field(default_factory=dict)
+    file: Path | None = None
 
 
-def load_scenario(path: str | Path, overrides: list[str] | None = None) -> LoadedScenario:
-    """Read, override and validate a scenario file (path and systems by their ``kind``)."""
-    path = Path(path)
-    raw = apply_overrides(read_yaml(path), overrides or [])
-    base_dir = path.resolve().parent
+def load_scenario(source: str | Path | Mapping[str, Any],
+                  overrides: Sequence[str] | Mapping[str, Any] | None = None) -> LoadedScenario:
+    """Read (a YAML file, or a scenario dict), override and validate a scenario (path and
+    systems by their ``kind``)."""
+    path = Path(source) if isinstance(source, (str, Path)) else None
+    raw = apply_overrides(read_yaml(path) if path is not None else dict(source), overrides or [])
+    base_dir = path.resolve().parent if path is not None else Path.cwd()
     scenario = validate_section(Scenario, raw, key="", path=path, base_dir=base_dir)
     path_model = _kind_model(PATH_KINDS, scenario.path, "path", path)
     path_cfg = validate_section(path_model, scenario.path, key="path", path=path, base_dir=base_dir)
@@ -162,28 +175,93 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Loade
     for name in layout_systems:
         if name not in systems:
             raise ConfigError(f"layout.systems.{name}", f"not a simulated system (have {sorted(systems)})", path)
-    return LoadedScenario(scenario, path_cfg, systems, kinds)
+    return LoadedScenario(scenario, path_cfg, systems, kinds, path)
 
 
-def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
-             overrides: list[str] | None = None) -> SimulationResult:
-    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed).
+@dataclass
+class Simulated:
+    """A simulated walk held in memory (:func:`simulated`): the scenario it came from, the seed
+    and overrides, the walk's ``plan``, every system's output (truth, layout section, files) and
+    ``layout``, the layout ``config.yaml`` holds (its sections name the files)."""
 
-    Same scenario, overrides and seed → the same bytes in every file.
-    """
-    scenario_path = Path(scenario_path)
-    out_dir = Path(out_dir)
+    loaded: LoadedScenario
+    seed: int
+    overrides: list[str]
+    plan: Any
+    outputs: dict[str, SystemOutput]
+    layout: dict[str, Any]
+
+    @property
+    def name(self) -> str:
+        return str(self.layout["name"])
+
+    def truth_columns(self) -> dict[str, np.ndarray]:
+        """``truth.csv`` as its columns hold it: ``system``, ``t``, ``east_m``, ``north_m``, ``up_m``
+        (10 significant digits, as printed)."""
+        outs = [(name, out) for name, out in self.outputs.items() if len(out.truth_t)]
+        data = np.concatenate([np.column_stack([out.truth_t, out.truth_pos]) for _, out in outs])
+        return {"system": np.concatenate([np.full(len(out.truth_t), name, dtype=object) for name, out in outs]),
+                **{col: printed(data[:, j], FLOAT_FORMAT) for j, col in enumerate(TRUTH_COLUMNS[1:])}}
+
+    def in_memory(self) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]]]:
+        """The layout with its sensor and truth sections reading tables in memory (no paths), and
+        those tables by the dotted key of their section (``systems.<name>.<section>``, ``truth``):
+        the columns the files would hold, so a run on them equals a run on the files."""
+        layout = copy.deepcopy(self.layout)
+        tables: dict[str, dict[str, np.ndarray]] = {}
+        for name, out in self.outputs.items():
+            for file in out.files:
+                layout["systems"][name][file.section].pop("path")
+                tables[f"systems.{name}.{file.section}"] = file.columns
+        layout["truth"].pop("path")
+        tables["truth"] = self.truth_columns()
+        return layout, tables
+
+    def write(self, out_dir: str | Path) -> SimulationResult:
+        """Write the sensor files, ``truth.csv`` and ``config.yaml`` into ``out_dir`` (created if
+        needed): what ``fusion simulate`` writes."""
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        files: dict[str, list[Path]] = {}
+        for name, out in self.outputs.items():
+            files[name] = [out_dir / f.name for f in out.files]
+            for f, path in zip(out.files, files[name]):
+                f.write(path)
+        truth_path = out_dir / TRUTH_FILE
+        with truth_path.open("w", newline="") as fh:
+            fh.write(",".join(TRUTH_COLUMNS) + "\n")
+            for name, out in self.outputs.items():
+                fmt = name.replace("%", "%%") + "," + ",".join([FLOAT_FORMAT] * 4)
+                np.savetxt(fh, np.column_stack([out.truth_t, out.truth_pos]), fmt=fmt)
+        config_path = out_dir / CONFIG_FILE
+        source = self.loaded.file.name if self.loaded.file is not None else "a scenario"
+        header = (f"# Simulated by `fusion simulate` from {source} (seed {self.seed}"
+                  + (f", overrides: {' '.join(self.overrides)}" if self.overrides else "") + ").\n"
+                  f"# {self.plan.distance_m:.2f} m walked in {self.plan.t[-1]:.2f} s; truth in {TRUTH_FILE}, "
+                  "no alignment.\n")
+        config_path.write_text(header + yaml.safe_dump(self.layout, sort_keys=False, default_flow_style=None))
+        return SimulationResult(out_dir=out_dir, config_path=config_path, truth_path=truth_path,
+                                samples={n: out.samples for n, out in self.outputs.items()},
+                                distance_m=self.plan.distance_m, duration_s=float(self.plan.t[-1]), files=files)
+
+
+def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
+              overrides: Sequence[str] | Mapping[str, Any] | None = None) -> Simulated:
+    """Simulate a scenario (a YAML file, or a scenario dict) in memory: no file is written.
+
+    Same scenario, overrides and seed → the same numbers, and :meth:`Simulated.write` the same
+    bytes in every file."""
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ConfigError("seed", f"must be a non-negative integer, got {seed!r}")
-    loaded = load_scenario(scenario_path, overrides)
-    scenario, systems, kinds = loaded.scenario, loaded.systems, loaded.kinds
+    loaded = load_scenario(scenario, overrides)
+    scenario_path = loaded.file
+    scenario_cfg, systems, kinds = loaded.scenario, loaded.systems, loaded.kinds
     try:
-        plan = plan_gait(loaded.path.build(), scenario.gait, scenario.rate_hz)
+        plan = plan_gait(loaded.path.build(), scenario_cfg.gait, scenario_cfg.rate_hz)
     except ConfigError as err:
         raise ConfigError(err.key, err.reason, scenario_path) from None
-    out_dir.mkdir(parents=True, exist_ok=True)
-    origin = scenario.geodetic_origin if scenario.geodetic_origin is not None else DEFAULT_GEODETIC_ORIGIN
-    ctx = SimContext(scenario.rate_hz, scenario.gravity_mps2, scenario.gait, plan, plan.t, int(seed), out_dir,
+    origin = scenario_cfg.geodetic_origin if scenario_cfg.geodetic_origin is not None else DEFAULT_GEODETIC_ORIGIN
+    ctx = SimContext(scenario_cfg.rate_hz, scenario_cfg.gravity_mps2, scenario_cfg.gait, plan, plan.t, int(seed),
                      tuple(float(v) for v in origin))
 
     for name in sorted(systems, key=lambda n: kinds[n].aids):  # aiding kinds last
@@ -195,42 +273,35 @@ def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
             raise ConfigError(err.key, err.reason, scenario_path) from None
     outputs = {name: ctx.outputs[name] for name in systems}
 
-    truth_path = out_dir / TRUTH_FILE
-    with truth_path.open("w", newline="") as fh:
-        fh.write(",".join(TRUTH_COLUMNS) + "\n")
-        for name, out in outputs.items():
-            fmt = name.replace("%", "%%") + "," + ",".join([FLOAT_FORMAT] * 4)
-            np.savetxt(fh, np.column_stack([out.truth_t, out.truth_pos]), fmt=fmt)
-
-    name = scenario.name or scenario_path.stem
     layout: dict[str, Any] = {
-        "name": name,
-        "gravity_mps2": scenario.gravity_mps2,
+        "name": scenario_cfg.name or (scenario_path.stem if scenario_path is not None else "scenario"),
+        "gravity_mps2": scenario_cfg.gravity_mps2,
     }
-    if scenario.geodetic_origin is not None or any(out.uses_geodetic_origin for out in outputs.values()):
+    if scenario_cfg.geodetic_origin is not None or any(out.uses_geodetic_origin for out in outputs.values()):
         layout["geodetic_origin"] = list(ctx.geodetic_origin)
     layout["systems"] = {n: out.layout for n, out in outputs.items()}
     outages = [o for out in outputs.values() for o in out.outages]
     if outages:
         layout["outages"] = outages
     layout["truth"] = {"path": TRUTH_FILE, "format": "long", "alignment": "none", "loop": plan.path.closed}
-    over = dict(scenario.layout)
+    over = dict(scenario_cfg.layout)
     if outages and isinstance(over.get("outages"), list):
         over["outages"] = outages + list(over["outages"])
     layout = _deep_merge(layout, over)
-    validate_section(Layout, layout, key="layout", path=scenario_path, base_dir=out_dir)
-    config_path = out_dir / CONFIG_FILE
-    header = (f"# Simulated by `fusion simulate` from {scenario_path.name} (seed {int(seed)}"
-              + (f", overrides: {' '.join(overrides)}" if overrides else "") + ").\n"
-              f"# {plan.distance_m:.2f} m walked in {plan.t[-1]:.2f} s; truth in {TRUTH_FILE}, no alignment.\n")
-    config_path.write_text(header + yaml.safe_dump(layout, sort_keys=False, default_flow_style=None))
+    validate_section(Layout, layout, key="layout", path=scenario_path, base_dir=None)
+    return Simulated(loaded, int(seed), list(_override_texts(overrides)), plan, outputs, layout)
 
-    return SimulationResult(
-        out_dir=out_dir,
-        config_path=config_path,
-        truth_path=truth_path,
-        samples={n: out.samples for n, out in outputs.items()},
-        distance_m=plan.distance_m,
-        duration_s=float(plan.t[-1]),
-        files={n: out.files for n, out in outputs.items()},
-    )
+
+def _override_texts(overrides: Sequence[str] | Mapping[str, Any] | None) -> list[str]:
+    """Overrides as the ``KEY=VALUE`` texts config.yaml's header names."""
+    if isinstance(overrides, Mapping):
+        return [f"{k}={v}" for k, v in overrides.items()]
+    return list(overrides or [])
+
+
+def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
+             overrides: list[str] | None = None) -> SimulationResult:
+    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed).
+
+    Same scenario, overrides and seed → the same bytes in every file."""
+    return simulated(scenario_path, seed, overrides).write(out_dir)

@@ -13,6 +13,7 @@ drawn error of ``heading_error_sd_deg``).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -22,7 +23,7 @@ from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.foot_ins.config import FootFilterConfig, FootInsConfig, InitialStateConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
-from bodyfusion.sim.files import imu_csv_section, write_imu_csv
+from bodyfusion.sim.files import imu_csv_section, imu_file
 from bodyfusion.sim.foot_motion import stance_drift
 from bodyfusion.sim.gait_config import StanceNoiseConfig
 from bodyfusion.sim.imu import ImuErrorConfig, measured_imu
@@ -64,16 +65,15 @@ def stance_sigma_mps(stance_noise: StanceNoiseConfig | None) -> float:
 
 
 def simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemOutput:
-    """The foot's IMU file (``<name>_imu.csv``, true stance labels in ``stance``), its truth
-    and its ``foot_ins`` layout section."""
+    """The foot's IMU file (``<name>_imu.csv``, true stance labels in ``stance``, read by the
+    section ``data``), its truth and its ``foot_ins`` layout section."""
     motion = ctx.plan.feet[cfg.foot].mounted(cfg.mount_yaw_deg)
     t = ctx.t
     if cfg.stance_noise is not None:
         rng = np.random.Generator(np.random.PCG64(system_seed(ctx.seed, f"{name}#stance")))
         motion = stance_drift(motion, t.size, cfg.stance_noise, rng)
     acc, gyro = measured_imu(motion, t, ctx.rate_hz, ctx.gravity_mps2, cfg.imu, ctx.seed, name)
-    csv_path = ctx.out_dir / f"{name}_imu.csv"
-    write_imu_csv(csv_path, IMU_COLUMNS, t, acc, gyro, flags=motion.stance_flags(t.size))
+    imu = imu_file("data", f"{name}_imu.csv", IMU_COLUMNS, t, acc, gyro, flags=motion.stance_flags(t.size))
 
     pos = motion.evaluate(t).pos
     azimuth = math.degrees(float(motion.footprint_az[0])) + cfg.mount_yaw_deg
@@ -94,12 +94,12 @@ def simulate_foot_imu(name: str, cfg: FootImuSystem, ctx: SimContext) -> SystemO
         ("acc_bias_sd_mps2", errors.acc.initial_bias_sd())) if value > 0}
     section = FootInsConfig(
         plugin="foot_ins",
-        data=imu_csv_section(csv_path, IMU_COLUMNS, stance_column="stance"),
+        data=imu_csv_section(Path(imu.name), IMU_COLUMNS, stance_column="stance"),
         filter=FootFilterConfig(kind="ekf", earth_rate=False, zupt_sigma_mps=stance_sigma_mps(cfg.stance_noise),
                                 **noise),
         initial=InitialStateConfig(position_m=tuple(float(v) for v in pos[0]), heading_deg=float(azimuth % 360.0),
                                    heading_sd_deg=max(cfg.heading_error_sd_deg, HEADING_SD_FLOOR_DEG), **priors))
-    return SystemOutput(t, pos, layout_section(section), int(t.size), [csv_path])
+    return SystemOutput(t, pos, layout_section(section), int(t.size), [imu])
 
 
 SIMULATION_KINDS = [SystemKind("foot_imu", FootImuSystem, simulate_foot_imu, "foot_ins")]

@@ -6,6 +6,7 @@ section that runs it, built with the plugin's own models."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -15,8 +16,8 @@ from bodyfusion.base.sections import StrictModel
 from bodyfusion.plugins.hand_pdr.config import (FieldCheckConfig, GnssSourceConfig, HandPdrConfig, MagnetometerConfig,
                                                 PdrInitialConfig)
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
-from bodyfusion.sim.files import imu_csv_section, write_imu_csv
-from bodyfusion.sim.gnss import GnssReceiverConfig, simulate_fixes, write_gnss_csv
+from bodyfusion.sim.files import imu_csv_section, imu_file
+from bodyfusion.sim.gnss import GnssReceiverConfig, gnss_file, simulate_fixes
 from bodyfusion.sim.hand import HandSwayConfig, hand_motion, heel_strikes
 from bodyfusion.sim.imu import ImuErrorConfig, measured_imu
 from bodyfusion.sim.magnetometer import MagnetometerSimConfig, simulate_magnetometer
@@ -56,8 +57,9 @@ class HandPhoneSystem(StrictModel):
 
 
 def simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> SystemOutput:
-    """The phone's IMU file (``<name>_imu.csv``), its GNSS fixes (``<name>_gnss.csv``) with
-    their outages for the layout's ``outages`` list, its truth and its ``hand_pdr`` section."""
+    """The phone's IMU file (``<name>_imu.csv``, read by the section ``imu``), its GNSS fixes
+    (``<name>_gnss.csv``, section ``gnss``) with their outages for the layout's ``outages`` list,
+    its truth and its ``hand_pdr`` section."""
     cycle_s, _ = ctx.gait.cycle_s()
     motion = hand_motion(ctx.plan, int(round(cycle_s * ctx.rate_hz)), seed=ctx.seed, name=name,
                          offset_m=cfg.offset_m, bounce_m=cfg.bounce_m, lateral_sway_m=cfg.lateral_sway_m,
@@ -71,14 +73,12 @@ def simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sys
     mag = cfg.magnetometer
     m_b = np.empty((t.size, 0)) if mag is None else simulate_magnetometer(state, mag, seed=ctx.seed, name=name)
     columns = IMU_COLUMNS[:7] + (MAG_COLUMNS if mag is not None else ()) + IMU_COLUMNS[7:]
-    imu_path = ctx.out_dir / f"{name}_imu.csv"
-    write_imu_csv(imu_path, columns, t, acc, gyro, m_b, flags=steps)
-    files = [imu_path]
+    files = [imu_file("imu", f"{name}_imu.csv", columns, t, acc, gyro, m_b, flags=steps)]
 
     _, az0 = ctx.plan.path.start
     section: dict[str, Any] = {
         "plugin": "hand_pdr",
-        "imu": imu_csv_section(imu_path, IMU_COLUMNS),
+        "imu": imu_csv_section(Path(files[0].name), IMU_COLUMNS),
         "initial": PdrInitialConfig(position_m=tuple(float(v) for v in state.pos[0]),
                                     heading_deg=float(math.degrees(az0) % 360.0)),
     }
@@ -90,10 +90,8 @@ def simulate_hand_phone(name: str, cfg: HandPhoneSystem, ctx: SimContext) -> Sys
     outages: list[dict[str, Any]] = []
     if cfg.gnss is not None:
         fixes, _ = simulate_fixes(motion, float(t[-1]), ctx.geodetic_origin, cfg.gnss, seed=ctx.seed, name=name)
-        gnss_path = ctx.out_dir / f"{name}_gnss.csv"
-        write_gnss_csv(gnss_path, fixes)
-        files.append(gnss_path)
-        section["gnss"] = GnssSourceConfig(format="csv", path=gnss_path.name)
+        files.append(gnss_file("gnss", f"{name}_gnss.csv", fixes))
+        section["gnss"] = GnssSourceConfig(format="csv", path=files[-1].name)
         outages = [{"system": name, "start_s": float(o.start_s), "duration_s": float(o.duration_s)}
                    for o in cfg.gnss.outages]
     return SystemOutput(t, state.pos, layout_section(HandPdrConfig(**section)), int(t.size), files, outages=outages,

@@ -41,10 +41,11 @@ from bodyfusion.base.sections import KeyedError, StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.uwb.config import RangeFileConfig, UwbConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
+from bodyfusion.sim.files import SimFile, printed
 
 
 __all__ = ["NlosConfig", "RANGE_COLUMNS", "SIMULATION_KINDS", "UwbTagSystem", "link_ranges", "nlos_states",
-           "simulate_uwb_tag"]
+           "ranges_file", "simulate_uwb_tag"]
 
 RANGE_COLUMNS = ("t", "id", "range_m", "nlos")
 Vector3 = tuple[float, float, float]
@@ -138,6 +139,17 @@ def write_ranges_csv(path: Path, t: np.ndarray, ids: list[str], range_m: np.ndar
                 fh.write(f"{tk:.10g},{end},{'' if math.isnan(r) else f'{r:.4f}'},{int(nlos[k, j])}\n")
 
 
+def ranges_file(section: str, name: str, t: np.ndarray, ids: list[str], range_m: np.ndarray,
+                nlos: np.ndarray) -> SimFile:
+    """The ranges file :func:`write_ranges_csv` writes, as a :class:`~bodyfusion.sim.files.SimFile`
+    read by the layout section ``section``: its rows (epoch by epoch, links in ``ids`` order) at
+    the printed precision, a failed ranging NaN."""
+    columns = {"t": printed(np.repeat(t, len(ids)), "%.10g"),
+               "id": np.tile(np.asarray(ids, dtype=object), len(t)),
+               "range_m": printed(range_m.ravel(), "%.4f"), "nlos": nlos.ravel()}
+    return SimFile(section, name, columns, lambda path: write_ranges_csv(path, t, ids, range_m, nlos))
+
+
 def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOutput:
     """Ranges of tag ``name`` from the true tracks of its host and peers (already simulated)."""
 
@@ -167,12 +179,11 @@ def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOut
     nlos = np.empty((t.size, len(ids)), dtype=bool)
     for j, (other, rng) in enumerate(zip(others, rngs)):
         ranges[:, j], nlos[:, j] = link_ranges(np.linalg.norm(tag - other, axis=1), 1.0 / cfg.rate_hz, cfg, rng)
-    path = ctx.out_dir / f"{name}_ranges.csv"
-    write_ranges_csv(path, t, ids, ranges, nlos)
+    file = ranges_file("ranges", f"{name}_ranges.csv", t, ids, ranges, nlos)
     section = UwbConfig(plugin="uwb", host=cfg.host, lever_arm_m=cfg.lever_arm_m, anchors=cfg.anchors,
-                        peers=cfg.peers, ranges=RangeFileConfig(path=Path(path.name), nlos_column="nlos"),
+                        peers=cfg.peers, ranges=RangeFileConfig(path=Path(file.name), nlos_column="nlos"),
                         sigma_m=cfg.sigma_m)
-    return SystemOutput(np.empty(0), np.empty((0, 3)), layout_section(section), int(ranges.size), [path])
+    return SystemOutput(np.empty(0), np.empty((0, 3)), layout_section(section), int(ranges.size), [file])
 
 
 SIMULATION_KINDS = [SystemKind("uwb_tag", UwbTagSystem, simulate_uwb_tag, "uwb", aids=True)]
