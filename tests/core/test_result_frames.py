@@ -110,3 +110,13 @@ def test_every_applied_range_has_its_nis_and_end(tmp_path):
     assert len(rows) == src.diagnostics()["anchor_ranges"]["accepted"] + src.diagnostics()["anchor_ranges"][
         "rejected_by_gate"]
     assert set(rows.end) <= set(ANCHORS) and np.isfinite(rows.nis).all()
+
+
+def test_every_stance_update_has_its_nis_in_the_innovations(vicon):
+    rows = vicon.innovations()
+    zupt = rows[(rows.system == "right_foot") & (rows.aiding == "zupt")]
+    diag = vicon.systems["right_foot"].diagnostics()
+    assert len(zupt) == diag["zupt_updates"] and (zupt.dof == 3).all()
+    assert (~zupt.accepted).sum() == diag["zupt_gated"]
+    assert zupt.nis.mean() == pytest.approx(diag["zupt_mean_nis"], rel=1e-9)
+    assert zupt.t.is_monotonic_increasing

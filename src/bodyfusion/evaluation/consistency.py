@@ -181,10 +181,11 @@ class NisRecord:
                 "accepted": rows[:, 2] != 0.0}
 
 
-def innovation_columns(records: dict[str, NisRecord]) -> dict[str, np.ndarray]:
-    """The updates of several aiding types (name → record) as one set of columns in time order:
-    ``t``, ``aiding`` (the name), ``nis``, ``dof``, ``accepted``."""
-    parts = [{**rec.columns(), "aiding": np.full(len(rec), kind)} for kind, rec in records.items()]
+def innovation_columns(parts: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The updates of several aiding types (name → its ``t``, ``nis``, ``dof``, ``accepted``
+    columns, :meth:`NisRecord.columns`) as one set of columns in time order: ``t``, ``aiding``
+    (the name), ``nis``, ``dof``, ``accepted``."""
+    parts = [{**cols, "aiding": np.full(len(cols["t"]), kind)} for kind, cols in parts.items()]
     if not parts:
         return {}
     columns = {key: np.concatenate([p[key] for p in parts]) for key in ("t", "aiding", "nis", "dof", "accepted")}

@@ -147,14 +147,14 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
 
     def run(kernel, sigma_ekf: float | None = None):
         x, P = x0.copy(), P0.copy()
-        hist_x, hist_cov, counters = np.zeros((2, 16)), np.zeros((2, 4)), np.zeros(COUNTERS_SIZE)
+        hist_x, hist_cov, hist_nis, counters = np.zeros((2, 16)), np.zeros((2, 4)), np.zeros(2), np.zeros(COUNTERS_SIZE)
         if sigma_ekf is None:
             post_idx, post_P = np.zeros(1, dtype=np.int64), np.zeros((1, 15, 15))
             kernel(x, P, t, acc, gyro, stance, 1, 2, params, alpha, np.zeros(6), np.empty((0, 0)), hist_x, hist_cov,
-                   counters, post_idx, post_P)
+                   hist_nis, counters, post_idx, post_P)
             return x, P, counters, post_idx, post_P
         kernel(x, P, t, acc, gyro, stance, 1, 2, filter_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
-               hist_cov, counters)
+               hist_cov, hist_nis, counters)
         return x, P
 
     x, P, counters, post_idx, post_P = run(run_foot_ins_coloured)

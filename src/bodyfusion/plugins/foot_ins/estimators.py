@@ -36,7 +36,9 @@ class RunData:
     """What every estimator reads and writes: the samples (t s, specific force m/s^2, rate
     rad/s, stance flags), the filter parameters, the per-sample history rows it fills
     (nominal state; position covariance: variances east, north, up and the east–north
-    covariance, m²), the counters, and the covariances it leaves
+    covariance, m²; the stance update's NIS, :data:`~bodyfusion.plugins.foot_ins.kernels.NO_STANCE`
+    where there is none: at swing samples, and at every sample of the ensemble kinds, which keep
+    no NIS), the counters, and the covariances it leaves
     outside the plain EKF recursion (sample index, covariance) for the smoothers."""
 
     t: np.ndarray
@@ -46,6 +48,7 @@ class RunData:
     params: np.ndarray
     hist_x: np.ndarray
     hist_pos_cov: np.ndarray
+    hist_nis: np.ndarray
     counters: np.ndarray
     override_idx: list[np.ndarray] = field(default_factory=list)
     override_P: list[np.ndarray] = field(default_factory=list)
@@ -68,7 +71,7 @@ class Estimator:
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1; ``phi`` accumulates the transition ((0, 0): off)."""
         run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.counters)
+                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters)
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset: inject dx (n,) into the nominal state, take P (n, n)."""
@@ -94,7 +97,7 @@ class ColouredEkf(Estimator):
         post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
         run_foot_ins_coloured(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
                               self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_cov,
-                              data.counters, post_idx, post_P)
+                              data.hist_nis, data.counters, post_idx, post_P)
         k = int(data.counters[C_CALL_RECORDS])
         if k:  # the smoother rebuilds ZUPTs with σ_ξ: it takes the ckf's covariances here
             data.override_idx.append(post_idx[:k])

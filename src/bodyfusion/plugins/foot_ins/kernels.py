@@ -121,7 +121,9 @@ def _count(params: np.ndarray, nis: float, counters: np.ndarray) -> None:
 
 
 @numba.njit(inline="always")
-def _record_sample(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
+def _record_sample(x: np.ndarray, P: np.ndarray, nis: float, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
+                   hist_nis: np.ndarray) -> None:
+    hist_nis[i] = nis
     for k in range(16):
         hist_x[i, k] = x[k]
     for k in range(3):
@@ -132,15 +134,16 @@ def _record_sample(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, his
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                  stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
-                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
+                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, hist_nis: np.ndarray,
+                 counters: np.ndarray) -> None:
     """The ``ekf``: process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i],
     propagate P, and at stance samples apply the gated ZUPT (and the ZARU when its σ > 0).
 
     x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
     increments, see :func:`bodyfusion.nav.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
     ``hist_pos_cov`` (N, 4) receives the state and the position covariance after sample i
-    (variances east, north, up and the east–north covariance, m^2).
-    ``counters`` accumulates (layout ``C_*``). ``phi`` (15, 15) accumulates the error-state
+    (variances east, north, up and the east–north covariance, m^2), and ``hist_nis`` (N,) its
+    stance update's NIS before gating (:data:`NO_STANCE` at a swing sample). ``counters`` accumulates (layout ``C_*``). ``phi`` (15, 15) accumulates the error-state
     transition for the fuser's cross-covariances (empty (0, 0): off).
     """
     q_diag = process_noise_diag(params)
@@ -153,14 +156,14 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
                        off)
         if nis != NO_STANCE:
             _count(params, nis, counters)
-        _record_sample(x, P, i, hist_x, hist_pos_cov)
+        _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
 
 
 @numba.njit(cache=True)
 def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                           stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float,
                           mech_memory: np.ndarray, phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
-                          counters: np.ndarray, post_idx: np.ndarray, post_P: np.ndarray) -> None:
+                          hist_nis: np.ndarray, counters: np.ndarray, post_idx: np.ndarray, post_P: np.ndarray) -> None:
     """The ``ckf`` with colour factor α: as :func:`run_foot_ins`, with the coloured-noise
     update at every stance sample i ≥ 2 whose previous sample was stance too (a separate
     entry point, so that the ekf does not compile it). The other stance samples, and a
@@ -181,9 +184,9 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
         for k in range(3):
             v_prev[k] = x[3 + k]
         C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
+        nis = NO_STANCE
         if stance[i]:
             coloured = False
-            nis = 0.0
             if stance[i - 1] and i >= 2:
                 nis = coloured_zero_velocity_update(x, P, v_prev, C, f_n, t[i] - t[i - 1], q_diag, alpha,
                                                     params[P_ZUPT_SIGMA], gate, dx, phi)
@@ -201,4 +204,4 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
                 for c in range(15):
                     post_P[n_post, r, c] = P[r, c]
             counters[C_CALL_RECORDS] += 1
-        _record_sample(x, P, i, hist_x, hist_pos_cov)
+        _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)

@@ -41,6 +41,14 @@ def foot_covariance(t: np.ndarray, pos_cov: np.ndarray) -> CovarianceHistory:
     return position_covariance(t, pos_cov[:, :3], pos_cov[:, 3], STORED)
 
 
+def zupt_columns(t: np.ndarray, hist_nis: np.ndarray, gate: float) -> dict[str, np.ndarray]:
+    """The stance updates among the samples' recorded NIS (``hist_nis``, negative where none):
+    ``t`` (s), ``nis``, ``dof`` 3, ``accepted`` (within the chi-square ``gate``; 0: no gate)."""
+    i = np.flatnonzero(hist_nis >= 0.0)
+    nis = hist_nis[i]
+    return {"t": t[i], "nis": nis, "dof": np.full(i.size, 3), "accepted": (gate <= 0.0) | (nis <= gate)}
+
+
 def stance_phases(t: np.ndarray, stance: np.ndarray) -> dict[str, np.ndarray]:
     """The detector's stance phases: ``event`` ``stance``, ``t`` its first and ``t_end`` its last
     sample's time (s)."""

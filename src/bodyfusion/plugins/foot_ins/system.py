@@ -27,8 +27,8 @@ from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                                 run_foot_ins)
-from bodyfusion.plugins.foot_ins.results import foot_covariance, foot_states, stance_phases
+                                                 NO_STANCE, run_foot_ins)
+from bodyfusion.plugins.foot_ins.results import foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 
 MIN_STILL_SAMPLES = 10
@@ -277,7 +277,7 @@ class FootIns(SensorSystem):
         hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
         run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
-                     hist_x, hist_cov, self.backward_counters)
+                     hist_x, hist_cov, np.empty(s + 1), self.backward_counters)
         xb[3:6] *= -1.0
         xb[13:16] *= -1.0
         Pb = 2.0 * (Pb * flip)
@@ -295,7 +295,8 @@ class FootIns(SensorSystem):
         self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
                                                                      self.context.seed, self.name)
         self.run_data = RunData(self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
-                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.zeros(COUNTERS_SIZE))
+                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
+                                np.zeros(COUNTERS_SIZE))
         self.run_data.hist_x[0] = self.x
         self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
@@ -519,8 +520,12 @@ class FootIns(SensorSystem):
         return stance_phases(self.stream.t, self.stance[:self._i + 1])
 
     def innovations(self) -> dict[str, np.ndarray]:
-        """Every position fix's NIS (``position_fix``, 3 dof)."""
-        return innovation_columns({"position_fix": self.fix_nis} if self.config.position_fixes else {})
+        """Every stance update's NIS (``zupt``, 3 dof, before the gate; beyond it: de-weighted; the
+        ensemble kinds keep none) and every position fix's (``position_fix``, 3 dof)."""
+        parts = {"zupt": zupt_columns(self.stream.t, self.run_data.hist_nis[:self._i + 1], self._params[P_ZUPT_GATE])}
+        if self.config.position_fixes is not None:
+            parts["position_fix"] = self.fix_nis.columns()
+        return innovation_columns(parts)
 
     @property
     def samples(self) -> int:

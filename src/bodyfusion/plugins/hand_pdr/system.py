@@ -554,7 +554,7 @@ class HandPdr(SensorSystem):
     def innovations(self) -> dict[str, np.ndarray]:
         """GNSS position (3 dof), GNSS course and magnetometer (1 dof) updates, recorded while the
         heading bank is one filter (see :meth:`health`)."""
-        return innovation_columns(self.nis_records)
+        return innovation_columns({kind: rec.columns() for kind, rec in self.nis_records.items()})
 
     @property
     def samples(self) -> int:
