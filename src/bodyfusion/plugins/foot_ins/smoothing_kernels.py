@@ -88,18 +88,26 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, n: int, m: int, Lw: 
             if not ok:
                 break
         if ok:
-            for col in range(m):
-                for r in range(n):
-                    s = B[r, col] * d[r]
-                    for k in range(r):
-                        s -= Lw[r, k] * X[k, col]
-                    X[r, col] = s / Lw[r, r]
-                for r in range(n - 1, -1, -1):
-                    s = X[r, col]
-                    for k in range(r + 1, n):
-                        s -= Lw[k, r] * X[k, col]
-                    X[r, col] = s / Lw[r, r]
-                for r in range(n):
+            # L Y = D B, then Lᵀ Z = Y, X = D Z, a row of all m columns at a time: every element
+            # takes the same operations in the same order as one column at a time (vectorised)
+            for r in range(n):
+                for col in range(m):
+                    X[r, col] = B[r, col] * d[r]
+                for k in range(r):
+                    lrk = Lw[r, k]
+                    for col in range(m):
+                        X[r, col] -= lrk * X[k, col]
+                for col in range(m):
+                    X[r, col] /= Lw[r, r]
+            for r in range(n - 1, -1, -1):
+                for k in range(r + 1, n):
+                    lkr = Lw[k, r]
+                    for col in range(m):
+                        X[r, col] -= lkr * X[k, col]
+                for col in range(m):
+                    X[r, col] /= Lw[r, r]
+            for r in range(n):
+                for col in range(m):
                     X[r, col] *= d[r]
             return True
     return False
@@ -139,7 +147,6 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     no_phi = np.empty((0, 0))
     x_prior = np.empty(16)
     P_prior = np.empty((15, 15))
-    Phi_j = np.empty((15, 15))
     ptr = np.searchsorted(ov_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
     if store:
@@ -162,15 +169,18 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 for c in range(15):
                     P[r, c] += gap_dP[gptr, r, c]
             gptr += 1
-        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior,
-                       P_prior, Phi_j)
         j = i - i0
+        # storing, the step writes its prior and transition straight into the block buffers;
+        # not storing, it skips them (an empty transition)
+        x_prior_j, P_prior_j, Phi_j = (xp[j], Pprior[j], Phi[j]) if store else (x_prior, P_prior, no_phi)
+        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior_j,
+                       P_prior_j, Phi_j)
         if store:
             for k in range(3):
                 jump[j, k] = 0.0
             stanced = nis != NO_STANCE
-            yaw_reset[j, 0] = -(x[4] - x_prior[4]) if stanced else 0.0
-            yaw_reset[j, 1] = (x[3] - x_prior[3]) if stanced else 0.0
+            yaw_reset[j, 0] = -(x[4] - x_prior_j[4]) if stanced else 0.0
+            yaw_reset[j, 1] = (x[3] - x_prior_j[3]) if stanced else 0.0
         if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
             while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
                 ptr += 1
@@ -185,13 +195,10 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         if store:
             for k in range(16):
                 xs[j, k] = x[k]
-                xp[j, k] = x_prior[k]
             for r in range(15):
                 for c in range(15):
                     Ppost[j, r, c] = P[r, c]
-                    Pprior[j, r, c] = P_prior[r, c]
-                    Phi[j, r, c] = Phi_j[r, c]
-            boxminus(x, x_prior, scratch)
+            boxminus(x, x_prior_j, scratch)
             for k in range(15):
                 dx[j, k] = scratch[k]
     return P
@@ -227,14 +234,19 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
         dxs[L, k] = dx_end[k]
         for c in range(15):
             Ps[L, k, c] = P_end[k, c]
+    # Every product below runs a row at a time over contiguous columns (vectorised); each element
+    # still sums its terms in the index order of the textbook loop, so the result is that loop's.
     for j in range(L - 1, -1, -1):
-        # M = Φ_{j+1} P⁺_j ;  P⁻ Kᵀ = M
+        # M = Φ_{j+1} P⁺_j over the non-zero entries of Φ (block-sparse: a zero term adds nothing);
+        # P⁻ Kᵀ = M
         for r in range(15):
             for c in range(15):
-                s = 0.0
-                for k in range(15):
-                    s += Phi[j + 1, r, k] * Ppost[j, k, c]
-                M[r, c] = s
+                M[r, c] = 0.0
+            for k in range(15):
+                f = Phi[j + 1, r, k]
+                if f != 0.0:
+                    for c in range(15):
+                        M[r, c] += f * Ppost[j, k, c]
         if not chol_solve(Pprior[j + 1], M, Kt, 15, 15, Lw):
             failed += 1
             for r in range(15):
@@ -258,26 +270,32 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
         e[3] -= a0 * dxs[j + 1, 8]
         e[4] -= a1 * dxs[j + 1, 8]
         for r in range(15):
-            s = 0.0
-            for k in range(15):
-                s += Kt[k, r] * e[k]
-            dxs[j, r] = s
+            dxs[j, r] = 0.0
+        for k in range(15):
+            ek = e[k]
+            for r in range(15):
+                dxs[j, r] += Kt[k, r] * ek
         for r in range(15):
             for c in range(15):
                 D[r, c] -= Pprior[j + 1, r, c]
         # KD = K D
         for r in range(15):
             for c in range(15):
-                s = 0.0
-                for k in range(15):
-                    s += Kt[k, r] * D[k, c]
-                KD[r, c] = s
+                KD[r, c] = 0.0
+            for k in range(15):
+                kr = Kt[k, r]
+                for c in range(15):
+                    KD[r, c] += kr * D[k, c]
+        # Ps = P⁺ + (K D) Kᵀ, upper triangle mirrored
         for r in range(15):
             for c in range(r, 15):
-                s = 0.0
-                for k in range(15):
-                    s += KD[r, k] * Kt[k, c]
-                v = Ppost[j, r, c] + s
+                M[r, c] = 0.0
+            for k in range(15):
+                kdr = KD[r, k]
+                for c in range(r, 15):
+                    M[r, c] += kdr * Kt[k, c]
+            for c in range(r, 15):
+                v = Ppost[j, r, c] + M[r, c]
                 Ps[j, r, c] = v
                 Ps[j, c, r] = v
     return failed
