@@ -1,8 +1,9 @@
 """One run of a study, in a worker process: one grid point in, one results row out.
 
-A scenario is simulated into a temporary folder (deleted afterwards) and
-:func:`bodyfusion.core.run.run_layout` runs the written ``config.yaml``; a recorded layout is
-run as it is. Both in-process, writing no trajectories or plots. The row holds the run's
+A scenario is simulated in memory (:func:`bodyfusion.sim.simulated`) and
+:func:`bodyfusion.core.run.run_layout` runs its layout on the tables the files would hold (the
+same bits as the written files, none written); a recorded layout is run as it is. Both
+in-process, writing no trajectories or plots. The row holds the run's
 head columns (:meth:`bodyfusion.study.grid.RunSpec.head`), ``system_names``, the ``outage.*``
 errors (:func:`bodyfusion.evaluation.metrics.outage_errors`), metrics.json flattened with dots
 (lists as typed list cells, :func:`bodyfusion.study.results.cell`) and the ``runtime.*``
@@ -13,18 +14,16 @@ becomes a row with ``status`` ``failed`` and its error's first line.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 from bodyfusion.base.errors import FusionError
-from bodyfusion.core.layout import load_layout
+from bodyfusion.core.layout import load_layout, validate_layout
 from bodyfusion.core.output import metrics_document
 from bodyfusion.core.run import run_layout
 from bodyfusion.evaluation.metrics import outage_errors
-from bodyfusion.sim import simulate
+from bodyfusion.sim import simulated
 from bodyfusion.study.grid import RunSpec
 from bodyfusion.study.results import cell
 
@@ -50,14 +49,15 @@ def error_text(err: BaseException) -> str:
     return first if isinstance(err, FusionError) else f"{type(err).__name__}: {first}"
 
 
-def _run_result(spec: RunSpec, tmp: Path) -> tuple[Any, float]:
-    """(RunResult, simulation seconds) of one run; a scenario is simulated into ``tmp``."""
+def _run_result(spec: RunSpec) -> tuple[Any, float]:
+    """(RunResult, simulation seconds) of one run; a scenario is simulated in memory."""
     if spec.source == "layout":
         return run_layout(load_layout(spec.file, list(spec.overrides)), spec.seed), 0.0
     t0 = time.perf_counter()
-    sim = simulate(Path(spec.file), tmp, seed=spec.seed, overrides=list(spec.overrides))
+    sim = simulated(Path(spec.file), seed=spec.seed, overrides=list(spec.overrides))
     sim_s = time.perf_counter() - t0
-    return run_layout(load_layout(sim.config_path), spec.seed), sim_s
+    layout, tables = sim.in_memory()
+    return run_layout(validate_layout(layout, None, Path(spec.file).parent, tables=tables), spec.seed), sim_s
 
 
 def execute_run(spec: RunSpec) -> dict[str, Any]:
@@ -65,12 +65,8 @@ def execute_run(spec: RunSpec) -> dict[str, Any]:
     ``status`` ``failed`` and the error's first line."""
     t0, cpu0 = time.perf_counter(), time.process_time()
     row = spec.head()
-    tmp = tempfile.mkdtemp(prefix="fusion-study-")
     try:
-        try:
-            result, sim_s = _run_result(spec, Path(tmp))
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+        result, sim_s = _run_result(spec)
         run_s = time.perf_counter() - t0 - sim_s
         body: dict[str, Any] = {}
         if spec.outage is not None:
@@ -86,7 +82,7 @@ def execute_run(spec: RunSpec) -> dict[str, Any]:
         row.update(status="ok", error=None)
         row.update({k: v for k, v in body.items() if k not in row})
     except Exception as err:  # noqa: BLE001 - a failing run is recorded and the study goes on
-        row.update(status="failed", error=error_text(err).replace(tmp, "<simulated>"))  # same text everywhere
+        row.update(status="failed", error=error_text(err))
     row["runtime.run_s"] = time.perf_counter() - t0
     row["runtime.cpu_s"] = time.process_time() - cpu0
     row["runtime.pid"] = os.getpid()
