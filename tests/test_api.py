@@ -211,3 +211,29 @@ def test_every_plugin_gives_its_results_in_the_shared_names(simulated_walk):
     frame = result.to_frame()
     assert frame.loc[frame.system == "hand_phone", "heading_deg"].notna().all()
     assert frame.loc[frame.system == "hand_phone", "v_east_mps"].isna().all()
+
+
+# --------------------------------------------------------------------------- the documented examples
+
+README = CONFIGS.parent / "README.md"
+
+
+def test_the_readmes_python_snippet_runs_a_dict_layout_on_in_memory_data(monkeypatch):
+    text = README.read_text()
+    section = text[text.index("## From Python"):]
+    snippet = section[section.index("```python\n") + 10:section.index("\n```", section.index("```python"))]
+    assert len(snippet.splitlines()) <= 10
+    monkeypatch.chdir(CONFIGS.parent)
+    scope: dict = {}
+    exec(compile(snippet, "README.md", "exec"), scope)  # noqa: S102 - the README's own code
+    frame = scope["frame"]
+    assert isinstance(frame, pd.DataFrame) and len(frame) > 7000 and {"east_m", "heading_deg"} <= set(frame.columns)
+
+
+def test_the_notebook_example_runs(capsys):
+    import runpy
+
+    runpy.run_path(str(CONFIGS.parent / "examples" / "notebook_api.py"), run_name="__main__")
+    out = capsys.readouterr().out
+    for shown in ("refused:", "gnss_position", "zupt", "left_foot-right_foot", "stance"):
+        assert shown in out
