@@ -21,11 +21,13 @@ stance at either end.
 
 Kinds:
 
-* ``rts`` (§3.2): Rauch–Tung–Striebel over the closed-loop error states
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`); ``span: whole`` (the
+* ``rts`` (§3.2): Rauch–Tung–Striebel over the closed-loop error states; ``span: whole`` (the
   default) carries the backward sweep across the blocks — the fixed-interval smoother of the
-  whole run; ``span: segment`` smooths every segment on its own — the paper's segmented RTS,
-  which at a segment's end is the filter.
+  whole run, swept in the modified Bryson–Frazier form, which needs no covariance inverse
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.mbf_block`; the same smoother, equal
+  to the textbook sweep to rounding); ``span: segment`` smooths every segment on its own
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`) — the paper's segmented
+  RTS, which at a segment's end is the filter.
 * ``fb`` (§3.1, §3.3): per segment a–b, the forward pass (the filter) and a backward
   navigation (the filter's step on the time-reversed samples: angular rates, Earth rate,
   velocity and gyro bias negated, the same specific force) with its own error filter and
@@ -82,9 +84,10 @@ import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
-from bodyfusion.nav.error_state import P_EARTH_RATE
+from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, filter_pass, fuse_block,
-                                                           integrate_position, position_covariance, rts_block)
+                                                           integrate_position, mbf_block, position_covariance,
+                                                           rts_block)
 
 log = logging.getLogger(__name__)
 
@@ -194,6 +197,14 @@ class _Record:
         self.state_error = 0.0
         """Largest |replayed − recorded| nominal state element over the stored forward passes."""
 
+    def general_updates(self) -> np.ndarray:
+        """(n,) bool: the samples whose update is more than the ekf's ZUPT (a correction outside
+        the filter's loop, or the ZARU after the ZUPT), which the whole-run smoother steps back
+        through in general form (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.mbf_block`)."""
+        out = self.stance.copy() if self.params[P_ZARU_SIGMA] > 0 else np.zeros(self.n, dtype=np.bool_)
+        out[self.ov_idx] = True
+        return out
+
     def memory(self, a: int) -> np.ndarray:
         """The filter's mechanisation memory before the step to a + 1: the bias-corrected
         increments of sample a with the biases the filter held then (after sample a − 1)."""
@@ -270,16 +281,13 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     ckpt[0] = r.P0
     for k in range(bounds.size - 1):
         ckpt[k + 1] = r.forward(int(bounds[k]), int(bounds[k + 1]), ckpt[k], False, fw)
-    carry_dx, carry_P = np.zeros(15), None
+    general = r.general_updates()
+    lam, Lam = np.zeros(15), np.zeros((15, 15))
     for k in range(bounds.size - 2, -1, -1):
         a, b = int(bounds[k]), int(bounds[k + 1])
-        L = b - a
         r.forward(a, b, ckpt[k], True, fw)
-        end_P = fw.Ppost[L].copy() if carry_P is None else carry_P
-        failed += rts_block(fw.Ppost, fw.Pprior, fw.Phi, fw.dx, fw.yaw_reset, L, carry_dx, end_P, fw.dxs, fw.Ps)
-        carry_dx, carry_P = fw.dxs[0].copy(), fw.Ps[0].copy()
-        apply_smoothed(fw.xs, 0, L, fw.dxs, out_x, a)
-        position_covariance(fw.Ps, L, out_var, a)
+        failed += mbf_block(fw.xs, fw.xp, fw.Ppost, fw.Pprior, fw.Phi, fw.dx, fw.yaw_reset, r.stance[a:b + 1],
+                            general[a:b + 1], r.params, b - a, lam, Lam, out_x, out_var, a)
     diag["rts_gain_failures"] = failed
     return ckpt[-1], latencies
 
