@@ -154,7 +154,7 @@ def test_the_foot_ins_inflates_its_covariance_across_a_gap(tmp_path, write_yaml)
 
 def test_a_foot_at_rest_through_a_long_gap_stays_where_it_was(tmp_path, write_yaml):
     """A minute with no samples is not integrated as one 60 s step (0.02 m/s^2 of noise held
-    for 60 s would move the foot 36 m): the gap step takes the nominal period, and the
+    for 60 s would move the foot 36 m): the gap step holds its sample for 0.1 s at most, and the
     uncertainty the gap adds is bounded by a walker's speed."""
     from bodyfusion.core.layout import load_layout
     from bodyfusion.core.run import run_layout

@@ -33,6 +33,9 @@ from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
+GAP_HOLD_S = 0.1
+"""Longest stretch of a gap (s) integrated with the sample after it held: a tenth of a stride,
+over which the foot's specific force and rate stay near one sample's."""
 GAP_SPEED_SD_MPS = 3.0
 """One-sigma speed (m/s) of a foot over a gap in its IMU stream: a brisk run; bounds the
 position and velocity uncertainty a gap adds."""
@@ -188,8 +191,8 @@ class FootIns(SensorSystem):
         return still
 
     def _gap_inflation(self) -> tuple[np.ndarray, np.ndarray]:
-        """Gap policy: the step across a gap is mechanised over one nominal period
-        (:meth:`_navigation_clock`: nothing is integrated over time with no samples), and before
+        """Gap policy: the step across a gap is mechanised over at most a nominal period plus
+        :data:`GAP_HOLD_S` (:meth:`_navigation_clock`: no sample is held for longer), and before
         it the covariance grows by what the foot may have done in the Δ missing seconds: an
         unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
         σ_ω = rms(‖ω‖), bounded by a walker's reach: σ_p = min(σ_f Δ²/2, v_max Δ),
@@ -212,15 +215,16 @@ class FootIns(SensorSystem):
 
     def _navigation_clock(self) -> np.ndarray:
         """The sample times the filter integrates over (s): the recording's, with every gap
-        step shortened to the nominal period (the time after a gap moves back by the missing
-        Δ), so a gap is one ordinary step plus the covariance of :meth:`_gap_inflation`.
-        Output times stay the recording's."""
+        step cut to the nominal period plus :data:`GAP_HOLD_S` (the time after a gap moves back
+        by what is missing beyond that): a short gap is integrated with its sample held, as any
+        step; of a long one only what a held sample can describe, the rest is the covariance of
+        :meth:`_gap_inflation`. Output times stay the recording's."""
         checks = self.stream.checks
         if checks is None or checks.gap_index.size == 0:
             return self.stream.t
-        missing = np.zeros(len(self.stream))
-        missing[checks.gap_index] = checks.gap_missing_s
-        return self.stream.t - np.cumsum(missing)
+        beyond = np.zeros(len(self.stream))
+        beyond[checks.gap_index] = np.maximum(checks.gap_missing_s - GAP_HOLD_S, 0.0)
+        return self.stream.t - np.cumsum(beyond)
 
     def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """The state at the first sample: levelled (TRIAD on the mean specific force) and the
