@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import sys
 from pathlib import Path
 
 from rich.console import Console
@@ -95,7 +96,8 @@ def main() -> None:
     args = parser.parse_args()
     name = "gnss_outage_study_smoke" if args.smoke else "gnss_outage_study"
     out = args.out or Path("out") / name
-    report = run_study(CONFIGS / f"{name}.yaml", out, args.executor, workers=args.workers)
+    bar = sys.stderr.isatty()
+    report = run_study(CONFIGS / f"{name}.yaml", out, args.executor, workers=args.workers, progress=bar)
     console = Console()
     console.print(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
                   f"in {report.wall_s:.0f} s → {out}")
@@ -107,7 +109,7 @@ def main() -> None:
         free = out / "unconstrained"
         free.mkdir(parents=True, exist_ok=True)
         (free / "study.yaml").write_text(UNCONSTRAINED)
-        run_study(free / "study.yaml", free, args.executor, workers=args.workers)
+        run_study(free / "study.yaml", free, args.executor, workers=args.workers, progress=bar)
         free_rows = end_error_rows(free / "summary.csv")
         console.print(end_error_table(free_rows, "The same without the distance constraints, m"))
     console.print(f"plot: {out / 'end_error_vs_outage.png'}")

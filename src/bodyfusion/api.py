@@ -27,6 +27,7 @@ import pandas as pd
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.progress import ProgressCallback, reporting
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.layout import (
     LoadedLayout,
@@ -112,15 +113,17 @@ def _data_tables(raw: dict[str, Any], data: Data) -> dict[str, Any]:
 
 
 def run(layout: LayoutSource, overrides: Overrides = None, *, data: Data = None, truth: Any = None, seed: int = 0,
-        out_dir: str | Path | None = None) -> RunResult:
+        out_dir: str | Path | None = None, progress: bool | ProgressCallback = False) -> RunResult:
     """Run a layout in this process and return its result; ``data`` and ``truth`` in memory as
     :func:`load_layout` takes them (no file is written or read for them). With ``out_dir``, also
     write the outputs ``fusion run`` writes there (metrics.json, trajectories, plots). ``seed``
-    seeds every random choice of the run (ensembles)."""
+    seeds every random choice of the run (ensembles). ``progress``: ``True`` for a bar on stderr,
+    or a callable told (seconds of data fused, seconds in all) as the fuser advances."""
     t0 = time.perf_counter()
     fresh = isinstance(layout, LoadedLayout) and not overrides and data is None and truth is None
     loaded = layout if fresh else load_layout(layout, overrides, data=data, truth=truth)
-    result = run_layout(loaded, seed)
+    with reporting(progress, "fusing", "s of data") as told:
+        result = run_layout(loaded, seed, told)
     if out_dir is not None:
         write_outputs(result, Path(out_dir), str(loaded.path or loaded.name), total_wall_s=time.perf_counter() - t0)
     return result
@@ -146,11 +149,13 @@ class Simulation:
 
 
 def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = None, *, seed: int = 0,
-             out_dir: str | Path | None = None) -> Simulation:
+             out_dir: str | Path | None = None, progress: bool | ProgressCallback = False) -> Simulation:
     """Simulate a scenario (a YAML file or a scenario dict; ``overrides`` as for layouts) and
     hand its streams over in memory with a layout that reads them (:class:`Simulation`). With
-    ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte."""
-    sim = simulated(scenario, seed, overrides)
+    ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte.
+    ``progress``: ``True`` for a bar on stderr, or a callable told (systems simulated, systems)."""
+    with reporting(progress, "simulating", "systems") as told:
+        sim = simulated(scenario, seed, overrides, told)
     raw, tables = sim.in_memory()
     frames = {key: pd.DataFrame(columns) for key, columns in tables.items()}
     folder = Path(scenario).resolve().parent if isinstance(scenario, (str, Path)) else Path.cwd()
@@ -165,9 +170,11 @@ def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = No
 
 
 def run_study(study: str | Path, out_dir: str | Path, *, executor: str = "local", workers: int | None = None,
-              scheduler: str | None = None) -> StudyReport:
+              scheduler: str | None = None, progress: bool | ProgressCallback = False) -> StudyReport:
     """Run a study file (layouts × overrides × GNSS outages × seeds) into ``out_dir`` as ``fusion
     study`` does: ``results.parquet`` (read it with :func:`pandas.read_parquet`), ``summary.csv``,
     plots; a study already there is resumed. ``executor``: ``local`` (a process pool of
-    ``workers``) or ``dask`` (a LocalCluster, or the cluster at ``scheduler``)."""
-    return _run_study(study, out_dir, executor, workers, scheduler)
+    ``workers``) or ``dask`` (a LocalCluster, or the cluster at ``scheduler``; ``pip install
+    "bodyfusion[study]"``). ``progress``: ``True`` for a bar on stderr, or a callable told
+    (runs finished, runs in all)."""
+    return _run_study(study, out_dir, executor, workers, scheduler, progress=progress)

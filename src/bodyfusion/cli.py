@@ -7,17 +7,76 @@ from __future__ import annotations
 
 import logging
 import sys
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Fuse body-worn pedestrian navigation systems under body distance constraints.")
 
 SetOption = Annotated[list[str] | None, typer.Option("--set", help="Override a config field: KEY=VALUE (dotted path).")]
+log = logging.getLogger("bodyfusion.cli")  # also when run as __main__ (python -m bodyfusion.cli)
+
+
+@dataclass
+class ConsoleOptions:
+    """What the command line shows, set by its global options: ``verbosity`` -1 (``-q``: errors
+    only), 0 (warnings and each command's summary), 1 (``-v``: each stage), 2 (``-vv``: debug)."""
+
+    verbosity: int = 0
+
+    @property
+    def quiet(self) -> bool:
+        return self.verbosity < 0
+
+    @property
+    def bars(self) -> bool:
+        """Progress bars: on a terminal, or with ``-v`` (then also into a file or pipe)."""
+        return not self.quiet and (sys.stderr.isatty() or self.verbosity > 0)
+
+
+CONSOLE = ConsoleOptions()
+
+
+def say(text: str) -> None:
+    """A line of a command's summary on stdout (none with ``-q``)."""
+    if not CONSOLE.quiet:
+        typer.echo(text)
+
+
+def _bar(description: str, unit: str = "") -> AbstractContextManager[ProgressCallback | None]:
+    """A progress bar on stderr when the console shows them (:attr:`ConsoleOptions.bars`)."""
+    return reporting(CONSOLE.bars, description, unit)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from bodyfusion import __version__
+
+        typer.echo(f"bodyfusion {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def options(version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True,
+                                                  help="Print the version and exit.")] = False,
+            verbose: Annotated[int, typer.Option("-v", "--verbose", count=True,
+                                                 help="Say more on stderr: -v each stage and progress bars, "
+                                                      "-vv debug.")] = 0,
+            quiet: Annotated[bool, typer.Option("-q", "--quiet",
+                                                help="Errors only: no warnings, summaries or progress bars.")] = False,
+            ) -> None:
+    """Global options, given before the command: ``fusion -v run ...``."""
+    if verbose and quiet:
+        raise typer.BadParameter("-q and -v exclude each other", param_hint="-q/-v")
+    CONSOLE.verbosity = -1 if quiet else min(verbose, 2)
+    configure_logging(CONSOLE.verbosity)
 
 
 @app.command()
@@ -31,7 +90,10 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
 
     from bodyfusion.core.run import run as run_layout
 
-    result, out_dir = run_layout(config, set_ or [], out, seed)
+    with _bar("fusing", "s of data") as progress:
+        result, out_dir = run_layout(config, set_ or [], out, seed, progress)
+    if CONSOLE.quiet:
+        return
     console = Console(stderr=False)
     table = Table(title=f"{result.loaded.name} → {out_dir}")
     for col in ("system", "samples", "distance m", "h-RMSE m", "h-max m", "% dist", "loop m"):
@@ -93,8 +155,9 @@ def simulate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file."
     """Simulate a walk: sensor files, truth.csv and a ready config.yaml."""
     from bodyfusion.sim import simulate as simulate_scenario
 
-    result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [])
-    typer.echo(f"wrote {result.config_path}")
+    with _bar("simulating", "systems") as progress:
+        result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [], progress=progress)
+    say(f"wrote {result.config_path}")
 
 
 @app.command()
@@ -108,8 +171,8 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
     """Run a study: layouts × overrides × GNSS outages × seeds; results.parquet, summary.csv, plots."""
     from bodyfusion.study import run_study
 
-    report = run_study(study_file, out, executor, workers, scheduler)
-    typer.echo(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
+    report = run_study(study_file, out, executor, workers, scheduler, progress=CONSOLE.bars)
+    say(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
                f"in {report.wall_s:.1f} s ({report.runs_per_s:.2f} runs/s, {report.executor}, "
                f"{report.workers} workers) -> {report.out_dir}")
 
@@ -126,11 +189,10 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
         if not path.is_file():
             raise ConfigError(key, f"no such file: {path}", config)
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
-        typer.echo(f"warning: fuser.method is none: the {len(loaded.layout.constraints)} constraint(s) are not "
-                   "enforced", err=True)
+        log.warning("fuser.method is none: the %d constraint(s) are not enforced", len(loaded.layout.constraints))
     for line in disjoint_time_bases(loaded):
-        typer.echo(f"warning: {line}", err=True)
-    typer.echo(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
+        log.warning(line)
+    say(f"{config}: ok ({len(loaded.system_configs)} systems: {', '.join(loaded.system_configs)})")
 
 
 @app.command()
@@ -140,7 +202,7 @@ def report(folder: Annotated[Path, typer.Argument(metavar="RUN_OR_STUDY_DIR",
     tables, data embedded; opens without a network) read from the folder's files only."""
     from bodyfusion.evaluation.report import write_report
 
-    typer.echo(f"wrote {write_report(folder)}")
+    say(f"wrote {write_report(folder)}")
 
 
 @app.command()
@@ -154,7 +216,8 @@ def plugins() -> None:
 
 class _StderrHandler(logging.StreamHandler):
     """A handler that writes to whatever ``sys.stderr`` is when it emits (so the CLI can be run
-    in-process, with stderr redirected, many times)."""
+    in-process, with stderr redirected, many times, and a progress bar's console can print the
+    lines above the bar)."""
 
     @property
     def stream(self):  # type: ignore[override]
@@ -165,21 +228,33 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
-def _console_warnings() -> None:
-    """Warnings of the ``fusion`` logger (input checks, initialisation) as one line each on
-    stderr; installed once however often ``main`` runs."""
-    log = logging.getLogger("fusion")
+LEVELS = {-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO, 2: logging.DEBUG}
+"""Verbosity (-q: -1, default 0, -v: 1, -vv: 2) → the level of the ``bodyfusion`` logger."""
+
+
+def configure_logging(verbosity: int = 0) -> None:
+    """The package's log records (``bodyfusion`` and its module loggers) as one line each on
+    stderr, ``warning: ...`` (``info:``, ``debug:``, ``error:``), at the level ``verbosity``
+    selects (:data:`LEVELS`); the handler is installed once however often ``main`` runs."""
+    log = logging.getLogger("bodyfusion")
     if not any(isinstance(h, _StderrHandler) for h in log.handlers):
         handler = _StderrHandler()
-        handler.setFormatter(logging.Formatter("warning: %(message)s"))
+        handler.setFormatter(_LevelFormatter("%(message)s"))
         log.addHandler(handler)
-    log.setLevel(logging.WARNING)
+    log.setLevel(LEVELS[max(-1, min(2, verbosity))])
     log.propagate = False
+
+
+class _LevelFormatter(logging.Formatter):
+    """``level: message``, the level in lower case, as the CLI prints its ``error:`` line."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"{record.levelname.lower()}: {super().format(record)}"
 
 
 def main() -> None:
     """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
-    _console_warnings()
+    configure_logging()
     try:
         app(standalone_mode=False)
     except FusionError as err:

@@ -63,7 +63,7 @@ def fusion(*args: str) -> tuple[int, str]:
     err = io.StringIO()
     argv = sys.argv
     sys.argv = ["fusion", *args]
-    log = logging.getLogger("fusion")
+    log = logging.getLogger("bodyfusion")
     handlers, propagate, level = list(log.handlers), log.propagate, log.level
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err), \

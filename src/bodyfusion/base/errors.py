@@ -29,3 +29,8 @@ class ConfigError(FusionError):
         self.reason = reason
         parts = [p for p in (self.path, key) if p]
         super().__init__(": ".join([*parts, reason]))
+
+
+class MissingExtraError(FusionError):
+    """An optional dependency is not installed: ``what needs the optional dependency X: pip
+    install "bodyfusion[extra]"``."""

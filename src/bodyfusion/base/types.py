@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-LOG = logging.getLogger("fusion")
-"""The project's logger: warnings about the input and the run go here (and to the console)."""
+LOG = logging.getLogger("bodyfusion")
+"""The package's logger, parent of every module's (``logging.getLogger(__name__)``): warnings about
+the input and the run go here; the command line shows them on stderr (:mod:`bodyfusion.cli`)."""
 
 
 @dataclass

@@ -5,6 +5,7 @@ and .parquet, tum/, track.geojson), plots (nees.png where truth exists)."""
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,8 @@ from bodyfusion.core.exports import (
 )
 from bodyfusion.core.result import RunResult
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
+
+log = logging.getLogger(__name__)
 
 
 def _json_safe(value):
@@ -122,6 +125,7 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     output = result.loaded.layout.output
+    log.info("writing the outputs to %s", out_dir)
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
@@ -135,5 +139,6 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     if output.plots:
         from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
+        log.info("plotting")
         plots.write_run_plots(out_dir, result.trajectories, result.scores, result.transform, result.truths,
                               result.nees, output.figures)

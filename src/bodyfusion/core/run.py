@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.data_tables import require_data
@@ -14,6 +16,7 @@ from bodyfusion.core.heading import align_headings
 from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.output import write_outputs
+from bodyfusion.core.progress import FusionProgress
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.smoothing import constrain_trajectories, smooth_systems
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
@@ -23,6 +26,8 @@ from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
 from bodyfusion.nav.earth import normal_gravity
 
 __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "load_truth", "run", "run_layout"]
+
+log = logging.getLogger(__name__)
 
 
 def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
@@ -70,15 +75,17 @@ def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None =
         raise ConfigError(err.key, err.reason, loaded.path) from None
 
 
-def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
+def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None) -> RunResult:
     """Run a validated layout in-process (no files written). The layout is validated again as a
     whole first (:meth:`~bodyfusion.core.layout.LoadedLayout.checked`: fields set on its models
-    since it was loaded pass every cross-field and plugin check)."""
+    since it was loaded pass every cross-field and plugin check). ``progress(done, total)`` is told
+    the seconds of data fused (:class:`~bodyfusion.core.progress.FusionProgress`)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
     require_data(loaded.layout, loaded.system_configs, loaded.path)
     context = layout_context(loaded, seed)
+    log.info("reading the data of %s", ", ".join(f"{n} ({c.plugin})" for n, c in loaded.system_configs.items()))
     built = build_systems(loaded, context)
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}
     systems = {name: s for name, s in built.items() if name not in aiding}
@@ -91,15 +98,23 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
         LOG.warning("%s: fuser.method is none: the %d constraint(s) of the layout are not enforced",
                     loaded.path.name if loaded.path else loaded.name, len(loaded.layout.constraints))
     rotations = align_headings(systems, loaded.layout.heading_alignment)
-    monitors = {name: CovarianceMonitor(s) for name, s in systems.items()}
+    tracker = FusionProgress(systems, progress) if progress is not None else None
+    monitors = {name: CovarianceMonitor(tracker.track(s) if tracker else s) for name, s in systems.items()}
+    log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
+             len(aiding), loaded.layout.fuser.method, len(loaded.layout.constraints))
     report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
     for monitor in monitors.values():
         monitor.flush()
+    if tracker is not None:
+        tracker.finish()
     timings["navigation_s"] = time.perf_counter() - t0
+    log.debug("fused in %.2f s: %d constraint epoch(s), %d active", timings["navigation_s"], report.epochs,
+              report.activations)
 
     smoothed: dict[str, dict] = {}
     if loaded.layout.smoother.kind != "none":
         t0 = time.perf_counter()
+        log.info("smoothing (smoother.kind %s)", loaded.layout.smoother.kind)
         smoothed = smooth_systems(systems, loaded.layout.smoother)
         timings["smoothing_s"] = time.perf_counter() - t0
 
@@ -111,6 +126,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
                                                                     loaded.layout.constraints, loaded.layout.fuser)
     truth_cfg = loaded.layout.truth
     if truths:
+        log.info("scoring %s against the truth (alignment %s)", ", ".join(truths), truth_cfg.alignment)
         transform, scores = score_systems(trajectories, truths, alignment=truth_cfg.alignment,
                                           loop=truth_cfg.loop, alignment_distance_m=truth_cfg.alignment_distance_m)
     else:
@@ -123,11 +139,13 @@ def run_layout(loaded: LoadedLayout, seed: int = 0) -> RunResult:
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
-        seed: int = 0) -> tuple[RunResult, Path]:
-    """Load, run, and write outputs; returns the result and the output folder."""
+        seed: int = 0, progress: ProgressCallback | None = None) -> tuple[RunResult, Path]:
+    """Load, run (``progress`` as :func:`run_layout` takes it), and write outputs; returns the
+    result and the output folder."""
     t0 = time.perf_counter()
+    log.info("loading %s", config_path)
     loaded = load_layout(config_path, overrides)
-    result = run_layout(loaded, seed)
+    result = run_layout(loaded, seed, progress)
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
     write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0)
     return result, out

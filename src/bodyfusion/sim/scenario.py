@@ -48,6 +48,7 @@ a layout that ``fusion run`` runs as is.
 from __future__ import annotations
 
 import copy
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,6 +60,7 @@ from pydantic import Field, field_validator
 
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.core.layout import Layout, apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind, SystemOutput
@@ -66,6 +68,8 @@ from bodyfusion.sim.files import FLOAT_FORMAT, printed
 from bodyfusion.sim.gait import plan_gait
 from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.paths import PATH_KINDS, PathConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "TRUTH_COLUMNS",
@@ -221,6 +225,7 @@ class Simulated:
         """Write the sensor files, ``truth.csv`` and ``config.yaml`` into ``out_dir`` (created if
         needed): what ``fusion simulate`` writes."""
         out_dir = Path(out_dir)
+        log.info("writing the sensor files, %s and %s to %s", TRUTH_FILE, CONFIG_FILE, out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         files: dict[str, list[Path]] = {}
         for name, out in self.outputs.items():
@@ -246,11 +251,12 @@ class Simulated:
 
 
 def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
-              overrides: Sequence[str] | Mapping[str, Any] | None = None) -> Simulated:
+              overrides: Sequence[str] | Mapping[str, Any] | None = None,
+              progress: ProgressCallback | None = None) -> Simulated:
     """Simulate a scenario (a YAML file, or a scenario dict) in memory: no file is written.
 
     Same scenario, overrides and seed → the same numbers, and :meth:`Simulated.write` the same
-    bytes in every file."""
+    bytes in every file. ``progress(done, total)`` is told the systems simulated."""
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ConfigError("seed", f"must be a non-negative integer, got {seed!r}")
     loaded = load_scenario(scenario, overrides)
@@ -264,13 +270,19 @@ def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
     ctx = SimContext(scenario_cfg.rate_hz, scenario_cfg.gravity_mps2, scenario_cfg.gait, plan, plan.t, int(seed),
                      tuple(float(v) for v in origin))
 
-    for name in sorted(systems, key=lambda n: kinds[n].aids):  # aiding kinds last
+    log.info("planned the walk: %.1f m in %.1f s at %g Hz", plan.distance_m, plan.t[-1], scenario_cfg.rate_hz)
+    for done, name in enumerate(sorted(systems, key=lambda n: kinds[n].aids)):  # aiding kinds last
+        if progress is not None:
+            progress(done, len(systems))
+        log.info("simulating %s (%s)", name, systems[name].kind)
         try:
             ctx.outputs[name] = kinds[name].simulate(name, systems[name], ctx)
         except ConfigError as err:
             if err.path is not None:
                 raise
             raise ConfigError(err.key, err.reason, scenario_path) from None
+    if progress is not None:
+        progress(len(systems), len(systems))
     outputs = {name: ctx.outputs[name] for name in systems}
 
     layout: dict[str, Any] = {
@@ -299,9 +311,10 @@ def _override_texts(overrides: Sequence[str] | Mapping[str, Any] | None) -> list
     return list(overrides or [])
 
 
-def simulate(scenario_path: Path, out_dir: Path, seed: int = 0,
-             overrides: list[str] | None = None) -> SimulationResult:
-    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed).
+def simulate(scenario_path: Path, out_dir: Path, seed: int = 0, overrides: list[str] | None = None,
+             progress: ProgressCallback | None = None) -> SimulationResult:
+    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed); ``progress``
+    as :func:`simulated` takes it.
 
     Same scenario, overrides and seed → the same bytes in every file."""
-    return simulated(scenario_path, seed, overrides).write(out_dir)
+    return simulated(scenario_path, seed, overrides, progress).write(out_dir)

@@ -31,6 +31,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.extras import import_optional
 from bodyfusion.study.grid import RunSpec
 from bodyfusion.study.worker import error_text, execute_run
 
@@ -106,9 +107,10 @@ def run_dask(specs: list[RunSpec], workers: int, scheduler: str | None,
              on_row: Callable[[dict[str, Any]], None]) -> None:
     """Execute ``specs`` on a LocalCluster of ``workers`` processes, or on the cluster at
     ``scheduler``; a run whose worker died becomes a failed row."""
-    # late: Dask/distributed are heavy (~0.4 s to import) and only this executor needs them
-    import dask
-    from distributed import Client, LocalCluster, as_completed as dask_as_completed
+    # late: Dask/distributed are heavy (~0.4 s to import), only this executor needs them, an optional extra
+    dask = import_optional("dask", "study", "the dask executor", "dask[distributed]")
+    distributed = import_optional("distributed", "study", "the dask executor", "dask[distributed]")
+    Client, LocalCluster, dask_as_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     with contextlib.ExitStack() as stack:
         if scheduler is None:

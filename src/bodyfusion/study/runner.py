@@ -1,8 +1,8 @@
 """Running a study end to end: :func:`run_study`.
 
 Validate the study file, expand its grid, skip the runs already saved in the output
-folder, execute the others (:mod:`bodyfusion.study.executors`) with a progress bar on a
-terminal, save the finished rows in batches, then compact them into ``results.parquet`` (and
+folder, execute the others (:mod:`bodyfusion.study.executors`) with a progress bar when asked,
+save the finished rows in batches, then compact them into ``results.parquet`` (and
 its per-system view ``results_by_system.parquet``) and write ``summary.csv``, the plots and
 ``study.json`` (counts and throughput).
 """
@@ -10,8 +10,8 @@ its per-system view ``results_by_system.parquet``) and write ``summary.csv``, th
 from __future__ import annotations
 
 import json
+import logging
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,11 +21,14 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.study.executors import Executor, run_dask, run_local
 from bodyfusion.study.grid import expand_grid
 from bodyfusion.study.plots import write_plots
 from bodyfusion.study.results import SUMMARY_FILE, ResultStore, summarise, write_summary
 from bodyfusion.study.validation import load_study
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -48,22 +51,26 @@ class StudyReport:
         return executed / self.wall_s if self.wall_s > 0 else 0.0
 
 
-def _progress(total: int) -> Progress:
+def _progress(shown: bool) -> Progress:
+    """The study's bar on stderr (runs finished of all, done, failed, skipped, ETA); a no-op unless
+    ``shown``."""
     console = Console(stderr=True)
     return Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TextColumn("{task.fields[done]} done · {task.fields[failed]} failed · {task.fields[skipped]} "
                                "skipped"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                    console=console, disable=not sys.stderr.isatty(), transient=False)
+                    console=console, disable=not shown, transient=False)
 
 
 def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | str = Executor.local,
               workers: int | None = None, scheduler: str | None = None, batch_rows: int = 16,
-              flush_s: float = 5.0) -> StudyReport:
+              flush_s: float = 5.0, progress: bool | ProgressCallback = False) -> StudyReport:
     """Validate the study, run every run not yet saved in ``out_dir``, compact, summarise, plot.
 
     ``workers``: processes (local pool or LocalCluster; default all cores); ``scheduler``: a
     Dask scheduler address (``tcp://host:port``; only with ``executor='dask'``). Finished rows
     are saved every ``batch_rows`` rows or ``flush_s`` seconds, whichever comes first.
+    ``progress``: ``True`` shows a bar on stderr, a callable is told (runs finished, runs in all)
+    as each run finishes (local pool or Dask alike).
     """
     executor = Executor(executor)
     workers = workers if workers is not None else os.cpu_count() or 1
@@ -81,9 +88,12 @@ def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | 
                          workers=workers)
     pending: list[dict[str, Any]] = []
     last_flush = time.monotonic()
+    log.info("%s: %d runs, %d saved already, %d to run (%s, %d workers)", study.name, len(grid), report.skipped,
+             len(todo), executor.value, workers)
+    told = progress if callable(progress) else None
     t0 = time.perf_counter()
-    with _progress(len(grid)) as progress:
-        task = progress.add_task(study.name, total=len(grid), completed=report.skipped, done=0, failed=0,
+    with _progress(progress is True) as bar:
+        task = bar.add_task(study.name, total=len(grid), completed=report.skipped, done=0, failed=0,
                                  skipped=report.skipped)
 
         def on_row(row: dict[str, Any]) -> None:
@@ -93,7 +103,9 @@ def run_study(study_path: str | Path, out_dir: str | Path, executor: Executor | 
                 report.done += 1
             else:
                 report.failed += 1
-            progress.update(task, advance=1, done=report.done, failed=report.failed)
+            bar.update(task, advance=1, done=report.done, failed=report.failed)
+            if told is not None:
+                told(report.skipped + report.done + report.failed, report.total)
             if len(pending) >= batch_rows or time.monotonic() - last_flush >= flush_s:
                 store.append(pending)
                 pending.clear()

@@ -24,6 +24,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from bodyfusion.base.extras import import_optional
 from bodyfusion.core.constraints.kernels import _DEGENERATE_M
 from bodyfusion.core.constraints.linearisation import _certify
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, _check_inputs, _direction,
@@ -128,7 +129,8 @@ class SocpSolver:
         solver: str | None = None,
         solver_options: dict[str, Any] | None = None,
     ) -> None:
-        import cvxpy as cp  # late: heavy to import (≈ 0.5 s) and only this reference method uses it
+        # late: heavy to import (≈ 0.5 s), only this reference method uses it, an optional extra
+        cp = import_optional("cvxpy", "socp", "fuser.method=socp")
 
         self._cp = cp
         self.n_systems = int(n_systems)

@@ -4,6 +4,8 @@ coloured-noise zero-velocity update (``ckf``), or the ensemble filters (``enekf`
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError, FusionError
@@ -44,6 +46,7 @@ GAP_ATTITUDE_SD_RAD = 0.5
 the stance updates that follow re-level roll and pitch."""
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
+log = logging.getLogger(__name__)
 
 
 def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
@@ -110,6 +113,8 @@ class FootIns(SensorSystem):
         self.stream = read_imu(config.data)
         self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
         self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
+        log.info("%s: %d samples at %.0f Hz; stance (detector %s) in %.0f %% of them", name, len(self.stance),
+                 self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
         self._gap_index, self._gap_P = self._gap_inflation()
