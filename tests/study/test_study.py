@@ -179,8 +179,10 @@ def test_failing_run_is_recorded_with_its_error_and_the_study_goes_on(tmp_path):
           walk: {scenario: walk.yaml}
         seeds: 1
         """)
-    report = run_study(study, tmp_path / "out", workers=1)
+    told: list[tuple[float, float]] = []
+    report = run_study(study, tmp_path / "out", workers=1, progress=lambda done, total: told.append((done, total)))
     assert (report.done, report.failed) == (1, 1)
+    assert told == [(1, 2), (2, 2)]  # failed runs count as finished
     rows = {r["layout"]: r for r in pq.read_table(tmp_path / "out" / "results.parquet").to_pylist()}
     assert rows["broken"]["status"] == "failed" and "no_such.csv" in rows["broken"]["error"]
     assert rows["walk"]["status"] == "ok" and rows["walk"]["error"] is None
@@ -304,8 +306,9 @@ def test_compaction_keeps_the_first_row_of_a_key_saved_twice(tmp_path):
 @pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_rows_as_the_local_pool(local_run, tmp_path):
     study, out, _ = local_run
-    dask = run_study(study, tmp_path / "dask", "dask", workers=2)
-    assert dask.done == 6
+    told: list[tuple[float, float]] = []
+    dask = run_study(study, tmp_path / "dask", "dask", workers=2, progress=lambda done, total: told.append((done, total)))
+    assert dask.done == 6 and told == [(k, 6) for k in range(1, 7)]
     a = pq.read_table(out / "results.parquet")
     b = pq.read_table(tmp_path / "dask" / "results.parquet")
     assert rows_bits(a) == rows_bits(b)
