@@ -86,24 +86,26 @@ NO_STANCE = -1.0
 @numba.njit(inline="always")
 def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
              stance: np.ndarray, i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray,
-             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, x_prior: np.ndarray,
-             P_prior: np.ndarray, Phi: np.ndarray) -> float:
+             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, x_prior: np.ndarray | None,
+             P_prior: np.ndarray | None, Phi: np.ndarray | None) -> float:
     """One sample i of the ekf: mechanise from t[i-1] to t[i], propagate P, and at a stance
     sample the gated ZUPT (and ZARU) of :func:`bodyfusion.nav.zupt.stance_update`.
 
     x (16,), P (15, 15), ``mech_memory`` (6,) and ``phi`` (the transition accumulated for the
     fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch. For the smoothers, when
-    ``Phi`` is not empty ((0, 0): off), the step also writes its prior nominal state
-    ``x_prior`` (16,), prior covariance ``P_prior`` (15, 15) and transition ``Phi`` (15, 15,
-    :func:`transition`). Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
+    ``Phi`` is not empty, the step also writes its prior nominal state ``x_prior`` (16,), prior
+    covariance ``P_prior`` (15, 15) and transition ``Phi`` (15, 15, :func:`transition`); an
+    empty (0, 0) ``Phi`` skips them, and None (the filter) leaves them out of the compiled
+    step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
     C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
-    if Phi.shape[0] > 0:
-        transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
-        for r in range(15):
-            for c in range(15):
-                P_prior[r, c] = P[r, c]
-        for k in range(16):
-            x_prior[k] = x[k]
+    if Phi is not None:  # pruned at compile time when None
+        if Phi.shape[0] > 0:
+            transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
+            for r in range(15):
+                for c in range(15):
+                    P_prior[r, c] = P[r, c]
+            for k in range(16):
+                x_prior[k] = x[k]
     if stance[i]:
         return stance_update(x, P, gyro_b[i], params, dx, phi)
     return NO_STANCE
@@ -150,10 +152,9 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
-    off = np.empty((0, 0))
     for i in range(i0, i1):
-        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, dx, off,
-                       off)
+        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, None,
+                       None, None)
         if nis != NO_STANCE:
             _count(params, nis, counters)
         _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
