@@ -24,7 +24,7 @@ Constraint variants (``constraints[0]`` of the layout, ``fuser.method: projectio
 * ``independent``: ``fuser.method: none`` — each foot on its own.
 * ``DC projection``: ``kind: max`` at the layout's limit (1.0 m on the simulation) with
   ``fuser.inequality: projection`` — an active limit puts the estimate on the bound and
-  collapses its covariance across it, the papers' eqs. ([Xu2024] eq. 23, [Deng2026] eq. 22).
+  collapses its covariance across it, as both papers do ([Xu2024] §3.2, [Deng2026] §3.3).
   Neither paper states its limit; 1.0 m holds at every instant of the simulated walk (its
   true separation at the constraint epochs, the stance starts, is 0.37–0.92 m, median
   0.75 m: a 0.8 m limit would be broken by the truth itself).
@@ -37,28 +37,30 @@ Constraint variants (``constraints[0]`` of the layout, ``fuser.method: projectio
 The "minimum distance constraint" and the project's kinds. [Xu2024] §3.2 names its
 constraint after "a minimum distance between the feet on the plane observed during human
 walking", but states it as an equality, ‖P_L − P_R‖² − d_c² = 0 with d_c "the minimum
-distance", enforced "when at least one foot lands on the ground" (eqs. 21–23). So it is not
-``min`` (‖r‖ ≥ d, an inequality rarely active: estimated feet seldom come closer than a
-step width) but ``fixed`` (‖r‖ = d). An equality holds only at the instants where the true
-separation is d_c — for the minimum (the step width, 0.2 m here) when the swinging foot
-passes the standing one, mid-swing. The fuser's epochs are stance starts, where the true
-separation is about a step (0.37–0.92 m here), so the equality there is a wrong, noise-free
-measurement of 0.2–0.7 m at every epoch: the just-landed foot, whose position is the less
-certain, is pulled back toward the other by about that much at each of its heel strikes
-(≈ 0.5 m of a 1.4 m stride), and with ``correct: all`` the same pull is spread into
-velocity, attitude and biases through their covariance with position, so the filter diverges
-(tens of km on this walk; hundreds of metres with the positions-only correction). At the
-DC's 1.0 m the equality pushes the feet apart instead (a stride-length scale error). On
-the earlier 60 m walk the same literal equality gave 3.1 m for a 0.05 m filter. The
-equality is only sound with epochs at the moments of minimum separation (mid-swing), which
-the fuser does not offer; ``max`` (and ``min``) hold at every instant and are the ones to use.
+distance", enforced "when at least one foot lands on the ground". So it is not
+``min`` (‖r‖ ≥ d: the physical reading, an inequality that is almost never active, since
+estimated feet seldom come closer than a step width) but ``fixed`` (‖r‖ = d). An equality
+holds only at the instants where the true separation is d_c — for the minimum (the step
+width, 0.2 m here) when the swinging foot passes the standing one, mid-swing. The fuser's
+epochs are stance starts, where the true separation is about a step (0.37–0.92 m here), so
+the equality there is a wrong measurement with no noise, off by 0.2–0.7 m at every epoch.
+The fuser trusts it fully; with ``correct: all`` each correction is spread through the
+covariance into velocity, attitude and biases, and the filters diverge (RMSE ~10⁴ m on this
+walk; 120–340 m with ``correct: positions``, KF, seeds 0–3). At the DC's 1.0 m the equality
+pushes the feet apart instead. On the 60 m coloured-stance walk
+(``configs/sim_dual_foot_coloured_stance.yaml``) the equality at 0.2 m gives 3.3–3.9 m
+against 0.04–0.06 m for independent feet (seeds 0–4). The equality would need epochs at
+the moments of minimum separation (mid-swing), which the fuser does not offer; ``max`` (and
+``min``) hold at every instant and are the ones to use.
 
 What a distance constraint cannot see. It measures p_L − p_R only; the feet's common
-error, the midpoint (e_L + e_R)/2, moves no constraint. With independent, equally good feet
-that common error is ≈ 1/√2 of one foot's error, so a DC that removed the whole difference
-would cut the RMSE by ≈ 29 %; the table prints the independent feet's midpoint RMSE beside
-the DC's per-foot RMSE. A heading drift common to both feet (a shared magnetic or
-turn-rate error) would be invisible altogether.
+error, the midpoint (e_L + e_R)/2, moves no constraint. A DC that removed the whole
+difference would leave each foot with about the independent feet's midpoint error, so its
+gain is about the share of the error the two feet do not have in common (for
+independent, identically distributed feet the midpoint's RMS error is 1/√2 of one foot's: a
+29 % cut). The table prints the independent feet's midpoint RMSE beside the DC's per-foot
+RMSE. A heading drift common to both feet (a shared magnetic or turn-rate error) would be
+invisible altogether.
 
 Noise pairing, the same for every run: the white-noise kinds (ekf, enekf) take the stance
 noise's stationary σ (``zupt_sigma_mps`` = σ_ξ / √(1 − α²)); the coloured kinds (ckf,
@@ -72,8 +74,9 @@ reference, not comparable numbers; their "mean" is (east RMSE + north RMSE) / 2)
 gain, not the constraint's.
 
 Usage: python examples/estimator_variants.py [--seeds 20] [--vicon-seeds 5] [--jobs 1] [--quick]
-(--quick: 3 seeds, KF and cKF only, one Vicon seed.) Run time with one process: about a
-minute per seed (ensemble kinds, 100 members, dominate), a few seconds per seed for KF and cKF.
+(--quick: 3 seeds, KF and cKF only, one Vicon seed: under a minute.) Run time with one
+process: 65 s per seed (the ensemble kinds, 100 members, dominate; KF and cKF take a few
+seconds), 24 minutes for the default 20 seeds and the Vicon walk.
 """
 
 from __future__ import annotations
