@@ -342,23 +342,24 @@ def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, nz: n
 
 @numba.njit(cache=True)
 def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float, params: np.ndarray,
-                  lam: np.ndarray, Lam: np.ndarray) -> None:
+                  lam: np.ndarray, Lam: np.ndarray, Hc: np.ndarray, K: np.ndarray, W: np.ndarray) -> None:
     """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
     G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G), then the adjoint of the gated ZUPT
     as the filter made it (:func:`bodyfusion.nav.zupt.zero_velocity_update`, from its prior
     nominal state ``x_prior`` and covariance ``P_prior``): with H its Jacobian, S its innovation
     covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
-    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H."""
+    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H.
+    ``Hc`` (3, 4), ``K`` (15, 3) and ``W`` (15, 4) are scratch."""
     lam[8] += a0 * lam[3] + a1 * lam[4]
     for r in range(15):
         Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
     for c in range(15):
         Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
     y = np.empty(3)
-    Hc = np.zeros((3, 4))
     for k in range(3):
         y[k] = -x_prior[3 + k]
-        Hc[k, k] = 1.0
+        for m in range(3):
+            Hc[k, m] = 1.0 if k == m else 0.0
     Hc[0, 3] = x_prior[4]  # the heading column, bodyfusion.nav.zupt.unobservable_yaw_column
     Hc[1, 3] = -x_prior[3]
     Hc[2, 3] = 0.0
@@ -367,7 +368,6 @@ def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float
     for k in range(3):
         S[k, k] += r_var
     Si = inv3_sym(S)
-    K = np.empty((15, 3))
     u = np.empty(3)
     for c in range(3):
         u[c] = Si[c, 0] * y[0] + Si[c, 1] * y[1] + Si[c, 2] * y[2]
@@ -378,8 +378,7 @@ def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float
         for c in range(3):
             K[r, c] = m0 * Si[0, c] + m1 * Si[1, c] + m2 * Si[2, c]
             u[c] += K[r, c] * lam[r]
-    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹
-    W = np.empty((15, 4))
+    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S)
     for r in range(15):
         w0 = w1 = w2 = 0.0
         for k in range(15):
@@ -389,7 +388,7 @@ def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float
             w2 += lrk * K[k, 2]
         W[r, 0], W[r, 1], W[r, 2] = w0, w1, w2
         W[r, 3] = w0 * Hc[0, 3] + w1 * Hc[1, 3]
-    Z = np.empty((3, 3))
+    Z = S
     for r in range(3):
         for c in range(3):
             s = Si[r, c]
@@ -404,7 +403,7 @@ def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float
         for r in range(15):
             Lam[r, col] -= W[r, m]
             Lam[col, r] -= W[r, m]
-    ZH = np.empty((3, 4))  # + Hᵀ Z H on the columns 3, 4, 5, 8
+    ZH = W  # + Hᵀ Z H on the columns 3, 4, 5, 8 (Z H into the first rows of W)
     for r in range(3):
         for m in range(4):
             ZH[r, m] = Z[r, 0] * Hc[0, m] + Z[r, 1] * Hc[1, m] + Z[r, 2] * Hc[2, m]
@@ -497,6 +496,9 @@ def mbf_block(xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndar
     nnz = np.empty(15, dtype=np.int64)
     d = np.empty(15)
     y = np.empty(16)
+    Hc = np.empty((3, 4))
+    K = np.empty((15, 3))
+    W4 = np.empty((15, 4))
     failed = 0
     for j in range(L, -1, -1):
         P = Ppost[j]
@@ -537,7 +539,7 @@ def mbf_block(xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndar
                     for c in range(15):
                         Lam[r, c] = 0.0
         elif stance[j]:
-            _zupt_adjoint(xp[j], Pprior[j], yaw_reset[j, 0], yaw_reset[j, 1], params, lam, Lam)
+            _zupt_adjoint(xp[j], Pprior[j], yaw_reset[j, 0], yaw_reset[j, 1], params, lam, Lam, Hc, K, W4)
         _transition_adjoint(Phi[j], lam, Lam, nz, nnz, W, lam2, Lam2)
         for r in range(15):
             lam[r] = lam2[r]
