@@ -1,4 +1,4 @@
-"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | report | plugins``.
+"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | report | example | plugins``.
 
 Each command imports what it needs when it runs (the compiled kernels, matplotlib, Dask are
 heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
@@ -203,6 +203,28 @@ def report(folder: Annotated[Path, typer.Argument(metavar="RUN_OR_STUDY_DIR",
     from bodyfusion.evaluation.report import write_report
 
     say(f"wrote {write_report(folder)}")
+
+
+@app.command()
+def example(name: Annotated[str | None, typer.Argument(help="The example to write (fusion example --list).")] = None,
+            out: Annotated[Path | None, typer.Option("--out", help="Folder to write it into (default ./NAME).")] = None,
+            list_: Annotated[bool, typer.Option("--list", help="List the examples.")] = False) -> None:
+    """Write a packaged example into a folder: its layouts, scenarios or study, the recordings
+    they read (with their licences) and a README; then run it as the lines printed say."""
+    from bodyfusion.examples import EXAMPLES, commands, write_example
+    from bodyfusion.examples import example as find
+
+    if list_:
+        for ex in EXAMPLES.values():
+            typer.echo(f"{ex.name:<24} {ex.summary}")
+        return
+    if name is None:
+        raise FusionError("name an example: fusion example NAME (fusion example --list lists them)")
+    folder = out if out is not None else Path(name)
+    written = write_example(name, folder)
+    say(f"wrote {folder}: {', '.join(str(p.relative_to(folder)) + '/' * p.is_dir() for p in written)}")
+    for line in commands(find(name), folder):
+        say(f"next: {line}")
 
 
 @app.command()
