@@ -134,6 +134,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     nees = {name: horizontal_nees(trajectories[name], score, transform, truth_cfg.alignment)
             for name, score in scores.items()}
     timings["scoring_s"] = time.perf_counter() - t0
+    log.debug("stage times: %s", ", ".join(f"{k} {v:.3f}" for k, v in timings.items()))
     return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
                      aiding, smoothed_constraints, nees)
 
