@@ -95,3 +95,40 @@ def test_the_graph_sees_imports():
     """The checks above are not vacuous: known edges are found."""
     assert "bodyfusion.nav.error_state" in GRAPH["bodyfusion.plugins.foot_ins.kernels"]
     assert "bodyfusion.core.layout" in GRAPH["bodyfusion.plugins.foot_ins.config"]
+
+
+def _layer_map() -> list[str]:
+    """The code block under "## Layers" in docs/architecture.md: the package map."""
+    text = (PACKAGE.parents[1] / "docs" / "architecture.md").read_text()
+    section = text.split("## Layers", 1)[1]
+    return section.split("```", 2)[1].splitlines()[1:]
+
+
+def _package_text(lines: list[str], package: str) -> str:
+    """The map's lines for ``package`` (``foot_ins/``): its own line and those indented below it."""
+    for k, line in enumerate(lines):
+        if line.strip().split(" ")[0] == package:
+            indent = len(line) - len(line.lstrip())
+            out = [line]
+            for nxt in lines[k + 1:]:
+                if nxt.strip() and len(nxt) - len(nxt.lstrip()) <= indent:
+                    break
+                out.append(nxt)
+            return "\n".join(out)
+    return ""
+
+
+def test_the_module_map_names_every_module():
+    """docs/architecture.md's map names every module under its own package's entry."""
+    import re
+
+    lines = _layer_map()
+    missing = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE)
+        if rel.name in ("__init__.py", "__main__.py"):
+            continue
+        where = _package_text(lines, rel.parts[-2] + "/") if len(rel.parts) > 1 else "\n".join(lines)
+        if not re.search(rf"\b{re.escape(rel.stem)}\b", where):
+            missing.append(str(rel))
+    assert not missing, missing
