@@ -276,6 +276,7 @@ class _LevelFormatter(logging.Formatter):
 
 def main() -> None:
     """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
+    CONSOLE.verbosity = 0  # until the global options say otherwise
     configure_logging()
     try:
         app(standalone_mode=False)
