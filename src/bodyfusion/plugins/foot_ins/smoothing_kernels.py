@@ -60,11 +60,14 @@ def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
-def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, n: int, m: int, Lw: np.ndarray) -> bool:
+def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> bool:
     """Solve A X = B for symmetric positive-definite A (n×n, top-left block used) and
-    B (n×m), Jacobi-scaled (A's diagonal may span many decades: diffuse and pinned states)
-    before the Cholesky factorisation in ``Lw`` (n×n scratch). A tiny diagonal jitter is
-    added when the factorisation meets a non-positive pivot; returns False if it still fails."""
+    B (n×m, its shape gives n and m; X the same), Jacobi-scaled (A's diagonal may span many
+    decades: diffuse and pinned states) before the Cholesky factorisation in ``Lw`` (n×n
+    scratch). A tiny diagonal jitter is added when the factorisation meets a non-positive
+    pivot; returns False if it still fails. (Sizes from the shapes, not arguments: integer
+    constants at the call sites would each compile a signature of their own.)"""
+    n, m = B.shape
     d = np.empty(n)
     for r in range(n):
         if not A[r, r] > 0.0:
@@ -249,7 +252,7 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
                 if f != 0.0:
                     for c in range(15):
                         M[r, c] += f * Ppost[j, k, c]
-        if not chol_solve(Pprior[j + 1], M, Kt, 15, 15, Lw):
+        if not chol_solve(Pprior[j + 1], M, Kt, Lw):
             failed += 1
             for r in range(15):
                 dxs[j, r] = 0.0
@@ -453,13 +456,13 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
     B[4, 15] -= a1 * dxs[8]
     X = np.empty((15, 16))
     Lw = np.empty((15, 15))
-    if not chol_solve(P_prior, B, X, 15, 16, Lw):
+    if not chol_solve(P_prior, B, X, Lw):
         return False
     for r in range(15):
         lam[r] = -X[r, 15]
         for c in range(15):
             D[r, c] = X[c, r]
-    if not chol_solve(P_prior, D, PL, 15, 15, Lw):
+    if not chol_solve(P_prior, D, PL, Lw):
         return False
     for r in range(15):
         for c in range(r, 15):
@@ -623,7 +626,7 @@ def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L
             for c in range(15):
                 B[r, c] = N[fr, c]
             B[r, 15] = d[fr]
-        ok = chol_solve(S, B, Z, n, 16, Lw)
+        ok = chol_solve(S, B, Z, Lw)
         for r in range(15):
             d[r] = 0.0
             for c in range(15):
