@@ -307,37 +307,37 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
 
 
 @numba.njit(cache=True)
-def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, nz: np.ndarray, nnz: np.ndarray,
-                        W: np.ndarray, lam_out: np.ndarray, Lam_out: np.ndarray) -> None:
-    """lam_out = Φᵀ lam, Lam_out = Φᵀ Lam Φ (symmetric: the upper triangle mirrored) over the
-    non-zero entries of Φ (15, 15; block-sparse); ``nz`` (15, 15) int, ``nnz`` (15,) int and
-    ``W`` (15, 15) scratch."""
+def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, ek: np.ndarray, ev: np.ndarray,
+                        V: np.ndarray, lam_out: np.ndarray, Lam_out: np.ndarray) -> None:
+    """lam_out = Φᵀ lam, Lam_out = Φᵀ Lam Φ (Lam symmetric; the result's upper triangle
+    mirrored) with Φ = I + E over the non-zero entries of E (a first-order transition: a few
+    dozen of 225). ``ek`` (225, 2) int and ``ev`` (225,) hold them; ``V`` (15, 15) scratch:
+    V = Φᵀ Lam = Lam + Eᵀ Lam (Lam symmetric: its row k is its column k), Lam_out = V + V E."""
+    n = 0
     for k in range(15):
-        n = 0
         for c in range(15):
-            if Phi[k, c] != 0.0:
-                nz[k, n] = c
+            e = Phi[k, c] - (1.0 if k == c else 0.0)
+            if e != 0.0:
+                ek[n, 0] = k
+                ek[n, 1] = c
+                ev[n] = e
                 n += 1
-        nnz[k] = n
-    for r in range(15):  # W = Lam Φ
-        for c in range(15):
-            W[r, c] = 0.0
-        for k in range(15):
-            lrk = Lam[r, k]
-            for q in range(nnz[k]):
-                c = nz[k, q]
-                W[r, c] += lrk * Phi[k, c]
     for r in range(15):
-        lam_out[r] = 0.0
+        lam_out[r] = lam[r]
         for c in range(15):
-            Lam_out[r, c] = 0.0
-    for k in range(15):  # Φᵀ W, Φᵀ lam
-        for q in range(nnz[k]):
-            r = nz[k, q]
-            f = Phi[k, r]
-            lam_out[r] += f * lam[k]
-            for c in range(15):
-                Lam_out[r, c] += f * W[k, c]
+            V[r, c] = Lam[r, c]
+    for q in range(n):
+        k, c, e = ek[q, 0], ek[q, 1], ev[q]
+        lam_out[c] += e * lam[k]
+        for m in range(15):
+            V[c, m] += e * Lam[k, m]
+    for r in range(15):
+        for c in range(15):
+            Lam_out[r, c] = V[r, c]
+    for q in range(n):
+        k, c, e = ek[q, 0], ek[q, 1], ev[q]
+        for r in range(15):
+            Lam_out[r, c] += V[r, k] * e
     for r in range(15):
         for c in range(r + 1, 15):
             Lam_out[c, r] = Lam_out[r, c]
@@ -494,9 +494,9 @@ def mbf_block(xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndar
     zero adjoints there, as :func:`rts_block` from the filter)."""
     lam2 = np.empty(15)
     Lam2 = np.empty((15, 15))
-    W = np.empty((15, 15))
-    nz = np.empty((15, 15), dtype=np.int64)
-    nnz = np.empty(15, dtype=np.int64)
+    V = np.empty((15, 15))
+    ek = np.empty((225, 2), dtype=np.int64)
+    ev = np.empty(225)
     d = np.empty(15)
     y = np.empty(16)
     Hc = np.empty((3, 4))
@@ -543,7 +543,7 @@ def mbf_block(xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndar
                         Lam[r, c] = 0.0
         elif stance[j]:
             _zupt_adjoint(xp[j], Pprior[j], yaw_reset[j, 0], yaw_reset[j, 1], params, lam, Lam, Hc, K, W4)
-        _transition_adjoint(Phi[j], lam, Lam, nz, nnz, W, lam2, Lam2)
+        _transition_adjoint(Phi[j], lam, Lam, ek, ev, V, lam2, Lam2)
         for r in range(15):
             lam[r] = lam2[r]
             for c in range(15):
