@@ -92,20 +92,23 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
     sample the gated ZUPT (and ZARU) of :func:`bodyfusion.nav.zupt.stance_update`.
 
     x (16,), P (15, 15), ``mech_memory`` (6,) and ``phi`` (the transition accumulated for the
-    fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch. For the smoothers, when
-    ``Phi`` is not empty, the step also writes its prior nominal state ``x_prior`` (16,), prior
-    covariance ``P_prior`` (15, 15) and transition ``Phi`` (15, 15, :func:`transition`); an
-    empty (0, 0) ``Phi`` skips them, and None (the filter) leaves them out of the compiled
-    step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
+    fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch; ``f_n`` (3,) receives the
+    step's mean specific force in the navigation frame (m/s²). For the smoothers, the step also
+    writes its prior nominal state ``x_prior`` (16,) and covariance ``P_prior`` (15, 15) when
+    ``P_prior`` is not empty, and its transition ``Phi`` (15, 15, :func:`transition`) when
+    ``Phi`` is not empty; an empty (0, 0) array skips them, None (the filter) leaves them out of
+    the compiled step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
     C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
-    if Phi is not None:  # pruned at compile time when None
-        if Phi.shape[0] > 0:
-            transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
+    if P_prior is not None:  # pruned at compile time when None
+        if P_prior.shape[0] > 0:
             for r in range(15):
                 for c in range(15):
                     P_prior[r, c] = P[r, c]
             for k in range(16):
                 x_prior[k] = x[k]
+    if Phi is not None:
+        if Phi.shape[0] > 0:
+            transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
     if stance[i]:
         return stance_update(x, P, gyro_b[i], params, dx, phi)
     return NO_STANCE

@@ -11,8 +11,11 @@ compiled step (:func:`bodyfusion.plugins.foot_ins.kernels.ekf_step`), the gap po
 inflations and the covariances set outside the compiled loop (fuser corrections, position
 fixes, the ckf's coloured updates): the same numbers, bit for bit
 (``state_rebuild_max_abs_error`` and ``covariance_rebuild_rel_error`` in the diagnostics: the
-replayed against the recorded states, and the last covariance). Only the current block is
-held (O(longest block) × 15 × 15 floats).
+replayed against the recorded states, and the last covariance). The segmented kinds hold only
+the current block (O(longest block) × 15 × 15 floats); the whole-run RTS keeps a compact record
+of the replay (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, about 1.3 kB
+per sample) for as much of the run as :data:`STORE_BYTES` allows, so a run of up to some
+50 000 samples is replayed once.
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
 ``min_stance_s`` are ignored so a one-sample detector flicker does not cut a stride; gaps
@@ -24,7 +27,7 @@ Kinds:
 * ``rts`` (§3.2): Rauch–Tung–Striebel over the closed-loop error states; ``span: whole`` (the
   default) carries the backward sweep across the blocks — the fixed-interval smoother of the
   whole run, swept in the modified Bryson–Frazier form, which needs no covariance inverse
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.mbf_block`; the same smoother, equal
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`; the same smoother, equal
   to the textbook sweep to rounding); ``span: segment`` smooths every segment on its own
   (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`) — the paper's segmented
   RTS, which at a segment's end is the filter.
@@ -86,8 +89,8 @@ from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, filter_pass, fuse_block,
-                                                           integrate_position, mbf_block, position_covariance,
-                                                           rts_block)
+                                                           integrate_position, position_covariance, rts_block)
+from bodyfusion.plugins.foot_ins.smoothing_mbf import mbf_sweep, record_pass
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +101,12 @@ DIFFUSE_SCALE = 10.0
 """The backward pass's prior σ of each state but the yaw: this many times the larger of the
 forward σ at the segment end and the filter's initial σ (information ≤ 1 % of the forward
 pass's)."""
+
+STORE_BYTES = 64 * 2**20
+"""What the whole-run RTS keeps of the filter's replay at once (bytes): about 1 kB per sample
+and 0.5 kB more per stance sample (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
+so a run of up to some 50 000 samples (8 min at 100 Hz) is replayed once; a longer one in
+chunks, each but the last replayed twice (once for the covariance at its start)."""
 
 _BACKWARD_SIGN = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
 """Error-state signs of the backward form: velocity and gyro bias negated."""
@@ -136,6 +145,22 @@ def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_
             out.append(a + (gap * k) // pieces)
         out.append(int(b))
     return np.asarray(out, dtype=np.int64)
+
+
+def _chunks(bounds: np.ndarray, plain: np.ndarray, general: np.ndarray) -> list[tuple[int, int]]:
+    """Consecutive sample ranges (a, b) over the segment ``bounds``, each as long as what
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` stores of it fits
+    :data:`STORE_BYTES` (at least one segment): 8 bytes × (123 per sample, 65 per ZUPT
+    sample ``plain``, 242 per ``general`` update)."""
+    cost = 8 * (123 + 65 * np.cumsum(plain, dtype=np.int64) + 242 * np.cumsum(general, dtype=np.int64))
+    cost += 8 * 123 * np.arange(plain.size, dtype=np.int64)
+    out, a = [], int(bounds[0])
+    for k in range(1, bounds.size):
+        b, nxt = int(bounds[k]), int(bounds[min(k + 1, bounds.size - 1)])
+        if k == bounds.size - 1 or cost[nxt] - cost[a] > STORE_BYTES:
+            out.append((a, b))
+            a = b
+    return out
 
 
 def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
@@ -200,7 +225,7 @@ class _Record:
     def general_updates(self) -> np.ndarray:
         """(n,) bool: the samples whose update is more than the ekf's ZUPT (a correction outside
         the filter's loop, or the ZARU after the ZUPT), which the whole-run smoother steps back
-        through in general form (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.mbf_block`)."""
+        through in general form (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`)."""
         out = self.stance.copy() if self.params[P_ZARU_SIGMA] > 0 else np.zeros(self.n, dtype=np.bool_)
         out[self.ov_idx] = True
         return out
@@ -258,9 +283,10 @@ def _latency(ms: list[float]) -> dict:
 
 def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
          diag: dict) -> tuple[np.ndarray, list[float]]:
-    """RTS over the whole run (the sweep carried across blocks, each block replayed from a
-    checkpoint of the filter's covariance) or per segment. Returns the filter's last
-    covariance as replayed and the per-segment latencies (segmented only)."""
+    """RTS over the whole run (the sweep carried back across chunks of segments, :func:`_chunks`;
+    every chunk but the last is replayed first for the filter's covariance at its start, then
+    again with its record) or per segment. Returns the filter's last covariance as replayed and
+    the per-segment latencies (segmented only)."""
     size = int(np.max(np.diff(bounds))) + 1
     fw = _Pass(size)
     failed = 0
@@ -277,19 +303,27 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
             latencies.append((time.perf_counter_ns() - t0) / 1e6)
         diag["rts_gain_failures"] = failed
         return P, latencies
-    ckpt = np.empty((bounds.size, 15, 15))
-    ckpt[0] = r.P0
-    for k in range(bounds.size - 1):
-        ckpt[k + 1] = r.forward(int(bounds[k]), int(bounds[k + 1]), ckpt[k], False, fw)
     general = r.general_updates()
+    plain = r.stance & ~general
+    chunks = _chunks(bounds, plain, general)
+    ckpt = [r.P0]  # the filter's covariance at each chunk start; the last chunk is replayed once
+    for a, b in chunks[:-1]:
+        ckpt.append(r.forward(a, b, ckpt[-1], False, fw))
     lam, Lam = np.zeros(15), np.zeros((15, 15))
-    for k in range(bounds.size - 2, -1, -1):
-        a, b = int(bounds[k]), int(bounds[k + 1])
-        r.forward(a, b, ckpt[k], True, fw)
-        failed += mbf_block(fw.xs, fw.xp, fw.Ppost, fw.Pprior, fw.Phi, fw.dx, fw.yaw_reset, r.stance[a:b + 1],
-                            general[a:b + 1], r.params, b - a, lam, Lam, out_x, out_var, a)
+    P_last = r.P0
+    for k in range(len(chunks) - 1, -1, -1):
+        a, b = chunks[k]
+        ns, ng = int(np.count_nonzero(plain[a + 1:b + 1])), int(np.count_nonzero(general[a + 1:b + 1]))
+        store = (np.empty((b - a + 1, 120)), np.empty((b - a + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
+                 np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)))
+        P_b, error = record_pass(r.hist_x[a], ckpt[k], r.memory(a), r.t, r.acc, r.gyro, r.stance, general, r.params,
+                                 a, b, r.hist_x, r.ov_idx, r.ov_P, r.gap_idx, r.gap_dP, *store)
+        r.state_error = max(r.state_error, error)
+        if k == len(chunks) - 1:
+            P_last = P_b
+        failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, *store, lam, Lam, out_x, out_var)
     diag["rts_gain_failures"] = failed
-    return ckpt[-1], latencies
+    return P_last, latencies
 
 
 def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,

@@ -11,7 +11,8 @@ nominal states, ``Ppost`` / ``Pprior`` (L+1, 15, 15) posterior / prior covarianc
 (L+1, 15, 15) the transition from j−1 to j, ``dx`` (L+1, 15) the correction injected at j
 (posterior ⊖ prior nominal), ``jump`` (L+1, 3) the position moved by a correction made
 outside the filter's loop. Only one block is held at a time: O(longest block) memory, never
-N×15×15. Scalar loops only (array expressions cost numba compile time).
+N×15×15 (the whole-run RTS stores less: :mod:`bodyfusion.plugins.foot_ins.smoothing_mbf`).
+Scalar loops only (array expressions cost numba compile time).
 """
 
 from __future__ import annotations
@@ -22,9 +23,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_multiply
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, inject, innovation_covariance, inv3_sym,
-                                       process_noise_diag)
-from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
+from bodyfusion.nav.error_state import inject, process_noise_diag
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
 
 YAW = 8
@@ -151,7 +150,6 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     memory = memory0.copy()
     no_phi = np.empty((0, 0))
     x_prior = np.empty(16)
-    P_prior = np.empty((15, 15))
     ptr = np.searchsorted(ov_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
     if store:
@@ -177,7 +175,7 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         j = i - i0
         # storing, the step writes its prior and transition straight into the block buffers;
         # not storing, it skips them (an empty transition)
-        x_prior_j, P_prior_j, Phi_j = (xp[j], Pprior[j], Phi[j]) if store else (x_prior, P_prior, no_phi)
+        x_prior_j, P_prior_j, Phi_j = (xp[j], Pprior[j], Phi[j]) if store else (x_prior, no_phi, no_phi)
         nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior_j,
                        P_prior_j, Phi_j)
         if store:
@@ -303,251 +301,6 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
                 v = Ppost[j, r, c] + M[r, c]
                 Ps[j, r, c] = v
                 Ps[j, c, r] = v
-    return failed
-
-
-@numba.njit(cache=True)
-def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, ek: np.ndarray, ev: np.ndarray,
-                        V: np.ndarray, lam_out: np.ndarray, Lam_out: np.ndarray) -> None:
-    """lam_out = Φᵀ lam, Lam_out = Φᵀ Lam Φ (Lam symmetric; the result's upper triangle
-    mirrored) with Φ = I + E over the non-zero entries of E (a first-order transition: a few
-    dozen of 225). ``ek`` (225, 2) int and ``ev`` (225,) hold them; ``V`` (15, 15) scratch:
-    V = Φᵀ Lam = Lam + Eᵀ Lam (Lam symmetric: its row k is its column k), Lam_out = V + V E."""
-    n = 0
-    for k in range(15):
-        for c in range(15):
-            e = Phi[k, c] - (1.0 if k == c else 0.0)
-            if e != 0.0:
-                ek[n, 0] = k
-                ek[n, 1] = c
-                ev[n] = e
-                n += 1
-    for r in range(15):
-        lam_out[r] = lam[r]
-        for c in range(15):
-            V[r, c] = Lam[r, c]
-    for q in range(n):
-        k, c, e = ek[q, 0], ek[q, 1], ev[q]
-        lam_out[c] += e * lam[k]
-        for m in range(15):
-            V[c, m] += e * Lam[k, m]
-    for r in range(15):
-        for c in range(15):
-            Lam_out[r, c] = V[r, c]
-    for q in range(n):
-        k, c, e = ek[q, 0], ek[q, 1], ev[q]
-        for r in range(15):
-            Lam_out[r, c] += V[r, k] * e
-    for r in range(15):
-        for c in range(r + 1, 15):
-            Lam_out[c, r] = Lam_out[r, c]
-
-
-@numba.njit(cache=True)
-def _zupt_adjoint(x_prior: np.ndarray, P_prior: np.ndarray, a0: float, a1: float, params: np.ndarray,
-                  lam: np.ndarray, Lam: np.ndarray, Hc: np.ndarray, K: np.ndarray, W: np.ndarray) -> None:
-    """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
-    G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G), then the adjoint of the gated ZUPT
-    as the filter made it (:func:`bodyfusion.nav.zupt.zero_velocity_update`, from its prior
-    nominal state ``x_prior`` and covariance ``P_prior``): with H its Jacobian, S its innovation
-    covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
-    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H.
-    ``Hc`` (3, 4), ``K`` (15, 3) and ``W`` (15, 4) are scratch."""
-    lam[8] += a0 * lam[3] + a1 * lam[4]
-    for r in range(15):
-        Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
-    for c in range(15):
-        Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
-    y = np.empty(3)
-    for k in range(3):
-        y[k] = -x_prior[3 + k]
-        for m in range(3):
-            Hc[k, m] = 1.0 if k == m else 0.0
-    Hc[0, 3] = x_prior[4]  # the heading column, bodyfusion.nav.zupt.unobservable_yaw_column
-    Hc[1, 3] = -x_prior[3]
-    Hc[2, 3] = 0.0
-    S = innovation_covariance(P_prior, ZUPT_COLUMNS, Hc, 0.0)
-    r_var = gate_noise_variance(S, y, params[P_ZUPT_SIGMA] ** 2, params[P_ZUPT_GATE])
-    for k in range(3):
-        S[k, k] += r_var
-    Si = inv3_sym(S)
-    u = np.empty(3)
-    for c in range(3):
-        u[c] = Si[c, 0] * y[0] + Si[c, 1] * y[1] + Si[c, 2] * y[2]
-    for r in range(15):
-        m0 = P_prior[r, 3] + P_prior[r, 8] * Hc[0, 3]
-        m1 = P_prior[r, 4] + P_prior[r, 8] * Hc[1, 3]
-        m2 = P_prior[r, 5]
-        for c in range(3):
-            K[r, c] = m0 * Si[0, c] + m1 * Si[1, c] + m2 * Si[2, c]
-            u[c] += K[r, c] * lam[r]
-    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S)
-    for r in range(15):
-        w0 = w1 = w2 = 0.0
-        for k in range(15):
-            lrk = Lam[r, k]
-            w0 += lrk * K[k, 0]
-            w1 += lrk * K[k, 1]
-            w2 += lrk * K[k, 2]
-        W[r, 0], W[r, 1], W[r, 2] = w0, w1, w2
-        W[r, 3] = w0 * Hc[0, 3] + w1 * Hc[1, 3]
-    Z = S
-    for r in range(3):
-        for c in range(3):
-            s = Si[r, c]
-            for k in range(15):
-                s += K[k, r] * W[k, c]
-            Z[r, c] = s
-    for m in range(3):  # lam ← lam − Hᵀ u
-        lam[3 + m] -= u[m]
-    lam[8] -= Hc[0, 3] * u[0] + Hc[1, 3] * u[1]
-    for m in range(4):  # Lam ← Lam − W H − (W H)ᵀ
-        col = ZUPT_COLUMNS[m]
-        for r in range(15):
-            Lam[r, col] -= W[r, m]
-            Lam[col, r] -= W[r, m]
-    ZH = W  # + Hᵀ Z H on the columns 3, 4, 5, 8 (Z H into the first rows of W)
-    for r in range(3):
-        for m in range(4):
-            ZH[r, m] = Z[r, 0] * Hc[0, m] + Z[r, 1] * Hc[1, m] + Z[r, 2] * Hc[2, m]
-    for n in range(4):
-        for m in range(4):
-            Lam[ZUPT_COLUMNS[n], ZUPT_COLUMNS[m]] += Hc[0, n] * ZH[0, m] + Hc[1, n] * ZH[1, m] + Hc[2, n] * ZH[2, m]
-
-
-@numba.njit(cache=True)
-def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, dx: np.ndarray, a0: float, a1: float,
-                     lam: np.ndarray, Lam: np.ndarray) -> bool:
-    """(lam, Lam) in place from after a sample to before its update, whatever the update was
-    (a correction outside the filter's loop, a ZARU): the smoothed error dxs = −P⁺ lam and
-    covariance Ps = P⁺ − P⁺ Lam P⁺ there, taken to the prior by the heading reset's G⁻¹ and
-    the injected correction dx (as :func:`rts_block`), give lam = −(P⁻)⁻¹ e and
-    Lam = (P⁻)⁻¹ (P⁻ − G⁻¹ Ps G⁻ᵀ) (P⁻)⁻¹. False when P⁻ cannot be factorised."""
-    PL = np.empty((15, 15))
-    D = np.empty((15, 15))
-    for r in range(15):
-        for c in range(15):
-            PL[r, c] = 0.0
-        for k in range(15):
-            prk = P_post[r, k]
-            for c in range(15):
-                PL[r, c] += prk * Lam[k, c]
-    for r in range(15):
-        for c in range(15):
-            D[r, c] = 0.0
-        for k in range(15):
-            lrk = PL[r, k]
-            for c in range(15):
-                D[r, c] += lrk * P_post[k, c]
-        for c in range(15):
-            D[r, c] = P_post[r, c] - D[r, c]
-    for c in range(15):
-        D[3, c] -= a0 * D[8, c]
-        D[4, c] -= a1 * D[8, c]
-    for r in range(15):
-        D[r, 3] -= a0 * D[r, 8]
-        D[r, 4] -= a1 * D[r, 8]
-    B = np.empty((15, 16))
-    for r in range(15):
-        for c in range(15):
-            B[r, c] = P_prior[r, c] - D[r, c]
-        B[r, 15] = dxs[r] + dx[r]
-    B[3, 15] -= a0 * dxs[8]
-    B[4, 15] -= a1 * dxs[8]
-    X = np.empty((15, 16))
-    Lw = np.empty((15, 15))
-    if not chol_solve(P_prior, B, X, Lw):
-        return False
-    for r in range(15):
-        lam[r] = -X[r, 15]
-        for c in range(15):
-            D[r, c] = X[c, r]
-    if not chol_solve(P_prior, D, PL, Lw):
-        return False
-    for r in range(15):
-        for c in range(r, 15):
-            v = 0.5 * (PL[r, c] + PL[c, r])
-            Lam[r, c] = v
-            Lam[c, r] = v
-    return True
-
-
-@numba.njit(cache=True)
-def mbf_block(xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray,
-              yaw_reset: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, L: int,
-              lam: np.ndarray, Lam: np.ndarray, out_x: np.ndarray, out_var: np.ndarray, a: int) -> int:
-    """The fixed-interval (RTS) smoother over one block of the forward pass's buffers (j = 0 … L,
-    :func:`filter_pass`), in the modified Bryson–Frazier form (G. J. Bierman, Factorization
-    Methods for Discrete Sequential Estimation, 1977): the backward sweep carries the adjoint lam (15,) and Lam (15, 15) instead of a smoothed state and
-    covariance, so that at each sample
-
-        dxs_j = −P⁺_j lam_j,   Ps_j = P⁺_j − P⁺_j Lam_j P⁺_j,
-
-    and steps back through the updates (:func:`_zupt_adjoint`; :func:`_general_adjoint` where
-    ``general[j]``) and the transitions (lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ): no inverse of a
-    covariance and no process noise (the same smoother as :func:`rts_block` in exact
-    arithmetic, a third of its operations). ``stance`` (L+1,) says which samples had a stance
-    update. On entry (lam, Lam) is the adjoint at j = L (zeros at the end of the run), on
-    return at j = 0. Writes out_x[a + j] = xs[j] ⊞ dxs_j and out_var[a + j] (variances east,
-    north, up, covariance east–north of Ps_j, m²). Returns the samples whose update could not
-    be undone (general updates with a non-positive-definite prior; the sweep restarts from
-    zero adjoints there, as :func:`rts_block` from the filter)."""
-    lam2 = np.empty(15)
-    Lam2 = np.empty((15, 15))
-    V = np.empty((15, 15))
-    ek = np.empty((225, 2), dtype=np.int64)
-    ev = np.empty(225)
-    d = np.empty(15)
-    y = np.empty(16)
-    Hc = np.empty((3, 4))
-    K = np.empty((15, 3))
-    W4 = np.empty((15, 4))
-    failed = 0
-    for j in range(L, -1, -1):
-        P = Ppost[j]
-        for r in range(15):
-            s = 0.0
-            for k in range(15):
-                s += P[r, k] * lam[k]
-            d[r] = -s
-        for k in range(16):
-            y[k] = xs[j, k]
-        inject(y, d)
-        for k in range(16):
-            out_x[a + j, k] = y[k]
-        # position block of P Lam P: T = Lam P[:, 0:3], then P[0:3, :] T
-        q00 = q11 = q22 = q01 = 0.0
-        for k in range(15):
-            t0 = t1 = t2 = 0.0
-            for m in range(15):
-                lkm = Lam[k, m]
-                t0 += lkm * P[m, 0]
-                t1 += lkm * P[m, 1]
-                t2 += lkm * P[m, 2]
-            q00 += P[0, k] * t0
-            q11 += P[1, k] * t1
-            q22 += P[2, k] * t2
-            q01 += P[0, k] * t1
-        out_var[a + j, 0] = P[0, 0] - q00
-        out_var[a + j, 1] = P[1, 1] - q11
-        out_var[a + j, 2] = P[2, 2] - q22
-        out_var[a + j, 3] = P[0, 1] - q01
-        if j == 0:
-            break
-        if general[j]:
-            if not _general_adjoint(P, Pprior[j], d, dx[j], yaw_reset[j, 0], yaw_reset[j, 1], lam, Lam):
-                failed += 1
-                for r in range(15):
-                    lam[r] = 0.0
-                    for c in range(15):
-                        Lam[r, c] = 0.0
-        elif stance[j]:
-            _zupt_adjoint(xp[j], Pprior[j], yaw_reset[j, 0], yaw_reset[j, 1], params, lam, Lam, Hc, K, W4)
-        _transition_adjoint(Phi[j], lam, Lam, ek, ev, V, lam2, Lam2)
-        for r in range(15):
-            lam[r] = lam2[r]
-            for c in range(15):
-                Lam[r, c] = Lam2[r, c]
     return failed
 
 

@@ -1,0 +1,401 @@
+"""The whole-run RTS of the foot INS in the modified Bryson–Frazier form
+(:mod:`bodyfusion.plugins.foot_ins.smoothing`, ``smoother.kind: rts``).
+
+:func:`record_pass` replays the filter (its own compiled step,
+:func:`bodyfusion.plugins.foot_ins.kernels.ekf_step`, bit for bit) and stores compactly what
+the backward sweep needs: the packed posterior covariance and the step's specific force per
+sample, the ZUPT's four prior covariance columns per stance sample, the prior covariance and
+the injected correction at the few samples corrected outside the filter's loop. :func:`mbf_sweep`
+sweeps it back carrying the adjoint (lam, Lam) (G. J. Bierman, Factorization Methods for
+Discrete Sequential Estimation, 1977): no covariance inverse but at those few samples, no
+process noise, and the transition rebuilt from the recorded state and the stored specific
+force. In exact arithmetic it is the textbook RTS sweep of
+:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`; in floating point it agrees
+to rounding. Scalar loops only (array expressions cost numba compile time).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from bodyfusion.nav.attitude import quat_to_dcm
+from bodyfusion.nav.error_state import P_ZUPT_GATE, P_ZUPT_SIGMA, inject, inv3_sym, process_noise_diag
+from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
+from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, transition
+from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, chol_solve
+
+PACKED = np.array([(r, c) for r in range(15) for c in range(r, 15)], dtype=np.int64)
+"""(120, 2): row and column of each element of a symmetric 15×15 matrix stored as its upper
+triangle by rows."""
+
+
+@numba.njit(cache=True)
+def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, ek: np.ndarray, ev: np.ndarray,
+                        V: np.ndarray, lam_out: np.ndarray, Lam_out: np.ndarray) -> None:
+    """lam_out = Φᵀ lam, Lam_out = Φᵀ Lam Φ (Lam symmetric; the result's upper triangle
+    mirrored) with Φ = I + E over the non-zero entries of E (a first-order transition: a few
+    dozen of 225). ``ek`` (225, 2) int and ``ev`` (225,) hold them; ``V`` (15, 15) scratch:
+    V = Φᵀ Lam = Lam + Eᵀ Lam (Lam symmetric: its row k is its column k), Lam_out = V + V E."""
+    n = 0
+    for k in range(15):
+        for c in range(15):
+            e = Phi[k, c] - (1.0 if k == c else 0.0)
+            if e != 0.0:
+                ek[n, 0] = k
+                ek[n, 1] = c
+                ev[n] = e
+                n += 1
+    for r in range(15):
+        lam_out[r] = lam[r]
+        for c in range(15):
+            V[r, c] = Lam[r, c]
+    for q in range(n):
+        k, c, e = ek[q, 0], ek[q, 1], ev[q]
+        lam_out[c] += e * lam[k]
+        for m in range(15):
+            V[c, m] += e * Lam[k, m]
+    for r in range(15):
+        for c in range(15):
+            Lam_out[r, c] = V[r, c]
+    for q in range(n):
+        k, c, e = ek[q, 0], ek[q, 1], ev[q]
+        for r in range(15):
+            Lam_out[r, c] += V[r, k] * e
+    for r in range(15):
+        for c in range(r + 1, 15):
+            Lam_out[c, r] = Lam_out[r, c]
+
+
+@numba.njit(cache=True)
+def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray) -> np.ndarray:
+    """H P⁻ Hᵀ (3, 3) of the ZUPT from the prior's columns ``Pc`` (15, 4) at
+    :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`: the loop of
+    :func:`bodyfusion.nav.error_state.innovation_covariance` (noise 0), so the same number
+    and the same gate decision as the filter's."""
+    S = np.empty((3, 3))
+    for r in range(3):
+        for c in range(r, 3):
+            s = 0.0
+            for a in range(4):
+                row = 0.0
+                for b in range(4):
+                    row += Pc[ZUPT_COLUMNS[a], b] * Hc[c, b]
+                s += Hc[r, a] * row
+            S[r, c] = s
+            S[c, r] = s
+    return S
+
+
+@numba.njit(cache=True)
+def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
+                  Hc: np.ndarray, K: np.ndarray, W: np.ndarray) -> None:
+    """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
+    G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (5,): the prior velocity v⁻ (m/s)
+    and a = (v[3], v[4]) on the east and north velocity rows), then the adjoint of the gated ZUPT
+    as the filter made it (:func:`bodyfusion.nav.zupt.zero_velocity_update`, from the prior
+    covariance's columns ``Pc`` (15, 4) at ZUPT_COLUMNS): with H its Jacobian, S its innovation
+    covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
+    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H.
+    ``Hc`` (3, 4), ``K`` (15, 3) and ``W`` (15, 4) are scratch."""
+    a0, a1 = v[3], v[4]
+    lam[8] += a0 * lam[3] + a1 * lam[4]
+    for r in range(15):
+        Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
+    for c in range(15):
+        Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
+    y = np.empty(3)
+    for k in range(3):
+        y[k] = -v[k]
+        for m in range(3):
+            Hc[k, m] = 1.0 if k == m else 0.0
+    Hc[0, 3] = v[1]  # the heading column, bodyfusion.nav.zupt.unobservable_yaw_column
+    Hc[1, 3] = -v[0]
+    Hc[2, 3] = 0.0
+    S = _zupt_innovation(Pc, Hc)
+    r_var = gate_noise_variance(S, y, params[P_ZUPT_SIGMA] ** 2, params[P_ZUPT_GATE])
+    for k in range(3):
+        S[k, k] += r_var
+    Si = inv3_sym(S)
+    u = np.empty(3)
+    for c in range(3):
+        u[c] = Si[c, 0] * y[0] + Si[c, 1] * y[1] + Si[c, 2] * y[2]
+    for r in range(15):
+        m0 = Pc[r, 0] + Pc[r, 3] * Hc[0, 3]
+        m1 = Pc[r, 1] + Pc[r, 3] * Hc[1, 3]
+        m2 = Pc[r, 2]
+        for c in range(3):
+            K[r, c] = m0 * Si[0, c] + m1 * Si[1, c] + m2 * Si[2, c]
+            u[c] += K[r, c] * lam[r]
+    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S)
+    for r in range(15):
+        w0 = w1 = w2 = 0.0
+        for k in range(15):
+            lrk = Lam[r, k]
+            w0 += lrk * K[k, 0]
+            w1 += lrk * K[k, 1]
+            w2 += lrk * K[k, 2]
+        W[r, 0], W[r, 1], W[r, 2] = w0, w1, w2
+        W[r, 3] = w0 * Hc[0, 3] + w1 * Hc[1, 3]
+    Z = S
+    for r in range(3):
+        for c in range(3):
+            s = Si[r, c]
+            for k in range(15):
+                s += K[k, r] * W[k, c]
+            Z[r, c] = s
+    for m in range(3):  # lam ← lam − Hᵀ u
+        lam[3 + m] -= u[m]
+    lam[8] -= Hc[0, 3] * u[0] + Hc[1, 3] * u[1]
+    for m in range(4):  # Lam ← Lam − W H − (W H)ᵀ
+        col = ZUPT_COLUMNS[m]
+        for r in range(15):
+            Lam[r, col] -= W[r, m]
+            Lam[col, r] -= W[r, m]
+    ZH = W  # + Hᵀ Z H on the columns 3, 4, 5, 8 (Z H into the first rows of W)
+    for r in range(3):
+        for m in range(4):
+            ZH[r, m] = Z[r, 0] * Hc[0, m] + Z[r, 1] * Hc[1, m] + Z[r, 2] * Hc[2, m]
+    for n in range(4):
+        for m in range(4):
+            Lam[ZUPT_COLUMNS[n], ZUPT_COLUMNS[m]] += Hc[0, n] * ZH[0, m] + Hc[1, n] * ZH[1, m] + Hc[2, n] * ZH[2, m]
+
+
+@numba.njit(cache=True)
+def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, dx: np.ndarray, a0: float, a1: float,
+                     lam: np.ndarray, Lam: np.ndarray) -> bool:
+    """(lam, Lam) in place from after a sample to before its update, whatever the update was
+    (a correction outside the filter's loop, a ZARU): the smoothed error dxs = −P⁺ lam and
+    covariance Ps = P⁺ − P⁺ Lam P⁺ there, taken to the prior by the heading reset's G⁻¹ and
+    the injected correction dx (as
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`), give lam = −(P⁻)⁻¹ e
+    and Lam = (P⁻)⁻¹ (P⁻ − G⁻¹ Ps G⁻ᵀ) (P⁻)⁻¹. False when P⁻ cannot be factorised."""
+    PL = np.empty((15, 15))
+    D = np.empty((15, 15))
+    for r in range(15):
+        for c in range(15):
+            PL[r, c] = 0.0
+        for k in range(15):
+            prk = P_post[r, k]
+            for c in range(15):
+                PL[r, c] += prk * Lam[k, c]
+    for r in range(15):
+        for c in range(15):
+            D[r, c] = 0.0
+        for k in range(15):
+            lrk = PL[r, k]
+            for c in range(15):
+                D[r, c] += lrk * P_post[k, c]
+        for c in range(15):
+            D[r, c] = P_post[r, c] - D[r, c]
+    for c in range(15):
+        D[3, c] -= a0 * D[8, c]
+        D[4, c] -= a1 * D[8, c]
+    for r in range(15):
+        D[r, 3] -= a0 * D[r, 8]
+        D[r, 4] -= a1 * D[r, 8]
+    B = np.empty((15, 16))
+    for r in range(15):
+        for c in range(15):
+            B[r, c] = P_prior[r, c] - D[r, c]
+        B[r, 15] = dxs[r] + dx[r]
+    B[3, 15] -= a0 * dxs[8]
+    B[4, 15] -= a1 * dxs[8]
+    X = np.empty((15, 16))
+    Lw = np.empty((15, 15))
+    if not chol_solve(P_prior, B, X, Lw):
+        return False
+    for r in range(15):
+        lam[r] = -X[r, 15]
+        for c in range(15):
+            D[r, c] = X[c, r]
+    if not chol_solve(P_prior, D, PL, Lw):
+        return False
+    for r in range(15):
+        for c in range(r, 15):
+            v = 0.5 * (PL[r, c] + PL[c, r])
+            Lam[r, c] = v
+            Lam[c, r] = v
+    return True
+
+
+@numba.njit(cache=True)
+def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
+                gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
+                recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, gap_idx: np.ndarray,
+                gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
+                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray) -> tuple[np.ndarray, float]:
+    """The ekf over i0 < i ≤ i1 as
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass` (from the filter's
+    state, covariance and mechanisation memory at i0, its corrections outside the loop and its
+    gaps replayed), storing compactly what :func:`mbf_sweep` needs, j = i − i0:
+
+    * ``Pu`` (L+1, 120): the posterior covariance, upper triangle by rows (:data:`PACKED`);
+    * ``f_ns`` (L+1, 3): the step's mean specific force, navigation frame (m/s²; with the
+      recorded state before the step it gives the step's transition again, exactly);
+    * per stance sample with the ekf's own ZUPT (in order): ``st_v`` (·, 5) the prior velocity
+      (m/s) and the heading reset's a (``yaw_reset`` of ``filter_pass``), ``st_P`` (·, 15, 4)
+      the prior covariance's columns at ZUPT_COLUMNS;
+    * per sample with a ``general`` update (in order): ``gen_P`` (·, 15, 15) the prior
+      covariance, ``gen_dx`` (·, 15) the correction injected (posterior ⊖ prior nominal),
+      ``gen_a`` (·, 2) the heading reset's a.
+
+    Returns the covariance at i1 and the largest |replayed − recorded| nominal state element."""
+    q_diag = process_noise_diag(params)
+    work = np.empty((2, 15, 15))
+    f_n = np.empty(3)
+    scratch = np.empty(15)
+    x = x0.copy()
+    P = P0.copy()
+    memory = memory0.copy()
+    x_prior = np.empty(16)
+    P_prior = np.empty((15, 15))
+    no_phi = np.empty((0, 0))
+    ptr = np.searchsorted(ov_idx, i0 + 1)
+    gptr = np.searchsorted(gap_idx, i0 + 1)
+    ns = ng = 0
+    error = 0.0
+    for q in range(120):
+        Pu[0, q] = P[PACKED[q, 0], PACKED[q, 1]]
+    for k in range(3):
+        f_ns[0, k] = 0.0
+    for i in range(i0 + 1, i1 + 1):
+        while gptr < gap_idx.shape[0] and gap_idx[gptr] == i:
+            for r in range(15):
+                for c in range(15):
+                    P[r, c] += gap_dP[gptr, r, c]
+            gptr += 1
+        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior,
+                       P_prior, None)
+        j = i - i0
+        stanced = nis != NO_STANCE
+        a0 = -(x[4] - x_prior[4]) if stanced else 0.0
+        a1 = (x[3] - x_prior[3]) if stanced else 0.0
+        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+                ptr += 1
+            for k in range(16):
+                x[k] = recorded_x[i, k]
+            for r in range(15):
+                for c in range(15):
+                    P[r, c] = ov_P[ptr - 1, r, c]
+        for k in range(16):
+            error = max(error, abs(x[k] - recorded_x[i, k]))
+        for q in range(120):
+            Pu[j, q] = P[PACKED[q, 0], PACKED[q, 1]]
+        for k in range(3):
+            f_ns[j, k] = f_n[k]
+        if general[i]:
+            for r in range(15):
+                for c in range(15):
+                    gen_P[ng, r, c] = P_prior[r, c]
+            boxminus(x, x_prior, scratch)
+            for k in range(15):
+                gen_dx[ng, k] = scratch[k]
+            gen_a[ng, 0] = a0
+            gen_a[ng, 1] = a1
+            ng += 1
+        elif stanced:
+            for k in range(3):
+                st_v[ns, k] = x_prior[3 + k]
+            st_v[ns, 3] = a0
+            st_v[ns, 4] = a1
+            for r in range(15):
+                for m in range(4):
+                    st_P[ns, r, m] = P_prior[r, ZUPT_COLUMNS[m]]
+            ns += 1
+    return P, error
+
+
+@numba.njit(cache=True)
+def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray,
+              i0: int, L: int, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
+              gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
+              out_x: np.ndarray, out_var: np.ndarray) -> int:
+    """The fixed-interval (RTS) smoother over samples i0 … i0 + L of a run, from what
+    :func:`record_pass` stored, in the modified Bryson–Frazier form (G. J. Bierman,
+    Factorization Methods for Discrete Sequential Estimation, 1977): the backward sweep
+    carries the adjoint lam (15,) and Lam (15, 15) instead of a smoothed state and covariance,
+    so that at each sample
+
+        dxs_i = −P⁺_i lam_i,   Ps_i = P⁺_i − P⁺_i Lam_i P⁺_i,
+
+    and steps back through the updates (:func:`_zupt_adjoint`; :func:`_general_adjoint` where
+    ``general[i]``) and the transitions (lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ, Φ of
+    :func:`~bodyfusion.plugins.foot_ins.kernels.transition` from the recorded state ``hist_x``
+    before the step and the stored specific force): no inverse of a covariance and no process
+    noise (in exact arithmetic the textbook sweep of ``rts_block``, a third of its
+    operations). On entry (lam, Lam) is the adjoint at i0 + L (zeros at the end of the run), on
+    return at i0. Writes out_x[i] = hist_x[i] ⊞ dxs_i and out_var[i] (variances east, north,
+    up, covariance east–north of Ps_i, m²). Returns the samples whose update could not be
+    undone (general updates with a non-positive-definite prior; the sweep restarts from zero
+    adjoints there, as ``rts_block`` from the filter)."""
+    q_diag = process_noise_diag(params)
+    work = np.empty((15, 15))
+    Phi = np.empty((15, 15))
+    P = np.empty((15, 15))
+    lam2 = np.empty(15)
+    Lam2 = np.empty((15, 15))
+    V = np.empty((15, 15))
+    ek = np.empty((225, 2), dtype=np.int64)
+    ev = np.empty(225)
+    d = np.empty(15)
+    y = np.empty(16)
+    Hc = np.empty((3, 4))
+    K = np.empty((15, 3))
+    W4 = np.empty((15, 4))
+    ns, ng = st_v.shape[0], gen_P.shape[0]
+    failed = 0
+    for j in range(L, -1, -1):
+        i = i0 + j
+        for q in range(120):
+            v = Pu[j, q]
+            P[PACKED[q, 0], PACKED[q, 1]] = v
+            P[PACKED[q, 1], PACKED[q, 0]] = v
+        for r in range(15):
+            s = 0.0
+            for k in range(15):
+                s += P[r, k] * lam[k]
+            d[r] = -s
+        for k in range(16):
+            y[k] = hist_x[i, k]
+        inject(y, d)
+        for k in range(16):
+            out_x[i, k] = y[k]
+        # position block of P Lam P: T = Lam P[:, 0:3], then P[0:3, :] T
+        q00 = q11 = q22 = q01 = 0.0
+        for k in range(15):
+            t0 = t1 = t2 = 0.0
+            for m in range(15):
+                lkm = Lam[k, m]
+                t0 += lkm * P[m, 0]
+                t1 += lkm * P[m, 1]
+                t2 += lkm * P[m, 2]
+            q00 += P[0, k] * t0
+            q11 += P[1, k] * t1
+            q22 += P[2, k] * t2
+            q01 += P[0, k] * t1
+        out_var[i, 0] = P[0, 0] - q00
+        out_var[i, 1] = P[1, 1] - q11
+        out_var[i, 2] = P[2, 2] - q22
+        out_var[i, 3] = P[0, 1] - q01
+        if j == 0:
+            break
+        if general[i]:
+            ng -= 1
+            if not _general_adjoint(P, gen_P[ng], d, gen_dx[ng], gen_a[ng, 0], gen_a[ng, 1], lam, Lam):
+                failed += 1
+                for r in range(15):
+                    lam[r] = 0.0
+                    for c in range(15):
+                        Lam[r, c] = 0.0
+        elif stance[i]:
+            ns -= 1
+            _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
+        transition(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, Phi, work)
+        _transition_adjoint(Phi, lam, Lam, ek, ev, V, lam2, Lam2)
+        for r in range(15):
+            lam[r] = lam2[r]
+            for c in range(15):
+                Lam[r, c] = Lam2[r, c]
+    return failed
