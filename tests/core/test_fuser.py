@@ -215,6 +215,10 @@ def test_truncated_moments_are_stable_in_both_tails():
     assert mean == pytest.approx(0.0, abs=1e-12) and var == pytest.approx(1.0)
     mean, var = truncated_moments(-40.0)  # all but the edge cut: the bound itself
     assert mean == pytest.approx(-40.0, rel=1e-3) and 0.0 <= var < 1e-3
+    mean, var = truncated_moments(-1e30)  # an estimate 1e6 m beyond a 1 µm σ: no overflow
+    assert mean == pytest.approx(-1e30) and 0.0 <= var < 1e-59
+    (m0, v0), (m1, v1) = truncated_moments(-29.999), truncated_moments(-30.001)  # either side of the switch
+    assert m0 == pytest.approx(m1, rel=1e-4) and v0 == pytest.approx(v1, abs=1e-5)
 
 
 def test_an_equality_is_the_projection_under_truncation_too():

@@ -92,3 +92,26 @@ def test_repeats_previous_marks_a_receiver_holding_its_position():
     lon = np.array([11.0, 11.0, 11.0, 11.0, 11.00001])
     f = GnssFixes(np.arange(5.0), lat, lon, np.zeros(5), *(np.full(5, np.nan) for _ in range(3)))
     assert f.repeats_previous().tolist() == [False, True, True, False, False]
+
+
+@pytest.mark.parametrize(("height", "accuracy"), [("1e308", "4.0"), ("390", "1e308"), ("390", "-2")])
+def test_fixes_with_impossible_height_or_accuracy_are_dropped_and_counted(tmp_path, height, accuracy):
+    """A height no receiver reports (1e308 m moved the phone off any float) or an accuracy
+    that is no fix's: the fix is dropped and said, the others kept (a non-finite cell is refused
+    with its line by the table reader)."""
+    path = tmp_path / "gnss.csv"
+    path.write_text(f"t,lat,lon,h,acc\n0,49.4613,11.1109,390,4.0\n1,49.46131,11.11091,{height},{accuracy}\n"
+                    "2,49.46132,11.11092,390,4.0\n")
+    fixes = read_gnss_csv(path, time_column="t", lat_column="lat", lon_column="lon", height_column="h",
+                          accuracy_column="acc")
+    np.testing.assert_array_equal(fixes.t, [0.0, 2.0])
+    assert fixes.report.dropped_samples == 1
+    assert any("height or accuracy out of range" in note for note in fixes.report.notes)
+
+
+def test_an_nmea_altitude_of_infinity_drops_its_fix(tmp_path):
+    fields = ("092751.000", "4807.038", "N", "01131.000", "E", "1", "08", "0.9", "inf", "M", "46.9", "M", "", "")
+    bad = str(pynmea2.GGA("GP", "GGA", fields))
+    fixes = read_nmea(write(tmp_path, [gga("092750.000", "4807.038", "N", "01131.000", "E"), bad,
+                                       gga("092752.000", "4807.038", "N", "01131.000", "E")]))
+    assert len(fixes) == 2 and np.all(np.isfinite(fixes.height_m))

@@ -429,3 +429,15 @@ def test_vicon_imu_and_truth():
         },
     )
     assert tr["left"].pos_n.shape == (7201, 3) and tr["right"].t.shape == (7201,)
+
+
+def test_long_truth_with_cr_cr_lf_line_ends_reads_and_a_stray_cr_is_refused(tmp_path):
+    from bodyfusion.io.truth import read_truth_long_csv
+
+    path = tmp_path / "truth.csv"
+    path.write_bytes(b"system,t,east_m,north_m,up_m\r\r\nfoot,0,0,0,0\r\r\nfoot,1,1,0,0\r\r\n")
+    track = read_truth_long_csv(path)["foot"]
+    np.testing.assert_array_equal(track.pos_n[:, 0], [0.0, 1.0])
+    path.write_bytes(b"system,t,east_m,north_m,up_m\nfo\rot,0,0,0,0\nfoot,1,1,0,0\n")
+    with pytest.raises(InputError, match=r"truth.csv:2: a carriage return inside the line"):
+        read_truth_long_csv(path)

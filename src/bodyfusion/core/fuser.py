@@ -128,7 +128,10 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
 
 def truncated_moments(beta: float) -> tuple[float, float]:
     """Mean and variance of a standard normal truncated to X ≤ β: −φ(β)/Φ(β) and
-    1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))² (in log space: stable far in either tail)."""
+    1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))² (in log space: stable far in either tail); below
+    β = −30 their asymptotic forms β + 1/β and 1/β² (Mills' ratio), free of cancellation."""
+    if beta < -30.0:
+        return beta + 1.0 / beta, 1.0 / (beta * beta)
     ratio = math.exp(-0.5 * beta * beta - 0.5 * math.log(2.0 * math.pi) - float(log_ndtr(beta)))
     return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
 

@@ -66,15 +66,26 @@ def enu_to_geodetic(pos_n: np.ndarray, origin: tuple[float, float, float]) -> np
     return np.column_stack([lat, lon, h])
 
 
+HEIGHT_LIMIT_M = 100_000.0
+"""Largest |height| (m) of a fix a pedestrian's receiver can report."""
+ACCURACY_LIMIT_M = 10_000.0
+"""Largest reported accuracy (m) of a usable fix."""
+
+
 def clean_fixes(rows: np.ndarray, path: str | Path, report: InputReport) -> GnssFixes:
-    """Rows (t, lat, lon, h, accuracy, speed, course) → fixes with out-of-range coordinates
-    and non-increasing times dropped and counted."""
+    """Rows (t, lat, lon, h, accuracy, speed, course) → fixes with out-of-range or non-finite
+    coordinates, heights beyond :data:`HEIGHT_LIMIT_M`, negative accuracies or accuracies beyond
+    :data:`ACCURACY_LIMIT_M` (a missing accuracy, NaN, stays) and non-increasing times dropped
+    and counted."""
     if rows.size == 0:
         raise InputError(path, "no usable GNSS fix")
-    ok = (np.abs(rows[:, 1]) <= 90) & (np.abs(rows[:, 2]) <= 180) & np.isfinite(rows[:, :3]).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        ok = ((np.abs(rows[:, 1]) <= 90) & (np.abs(rows[:, 2]) <= 180) & (np.abs(rows[:, 3]) <= HEIGHT_LIMIT_M)
+              & np.isfinite(rows[:, 0]) & ~(rows[:, 4] > ACCURACY_LIMIT_M) & ~(rows[:, 4] < 0))
     if (~ok).any():
         report.dropped_samples += int((~ok).sum())
-        report.notes.append(f"dropped {int((~ok).sum())} GNSS fixes with coordinates out of range")
+        report.notes.append(f"dropped {int((~ok).sum())} GNSS fixes with coordinates, height or accuracy out of "
+                            "range")
     rows = rows[ok]
     keep, last = [], -np.inf
     for k, t in enumerate(rows[:, 0]):

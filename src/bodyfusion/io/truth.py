@@ -120,8 +120,11 @@ def _long_rows(source: str | Path | TableSection) -> tuple[np.ndarray, np.ndarra
     if "system" not in header:
         raise InputError(path, f"missing column 'system'; the header has {header}", line=1)
     j = header.index("system")
-    column = np.loadtxt([lines[k - 1] for k in line_no], dtype=str, delimiter=",", usecols=j, ndmin=1,
-                        quotechar='"', comments=None)
+    rows = [lines[k - 1].rstrip("\r") for k in line_no]  # CR LF (or CR CR LF) line ends
+    stray = next((k for k, row in zip(line_no, rows) if "\r" in row), None)
+    if stray is not None:
+        raise InputError(path, "a carriage return inside the line", line=int(stray))
+    column = np.loadtxt(rows, dtype=str, delimiter=",", usecols=j, ndmin=1, quotechar='"', comments=None)
     raw, inverse = np.unique(column, return_inverse=True)
     return np.array([clean_cell(str(v)) for v in raw], dtype=object)[inverse], data, line_no, where
 
