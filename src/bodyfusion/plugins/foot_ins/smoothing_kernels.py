@@ -281,22 +281,30 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
         for r in range(15):
             for c in range(15):
                 D[r, c] -= Pprior[j + 1, r, c]
-        # KD = K D
+        # KD = K D, then Ps = P⁺ + (K D) Kᵀ (upper triangle mirrored): five columns at a time
+        # in registers
         for r in range(15):
-            for c in range(15):
-                KD[r, c] = 0.0
-            for k in range(15):
-                kr = Kt[k, r]
-                for c in range(15):
-                    KD[r, c] += kr * D[k, c]
-        # Ps = P⁺ + (K D) Kᵀ, upper triangle mirrored
+            for c0 in range(0, 15, 5):
+                s0 = s1 = s2 = s3 = s4 = 0.0
+                for k in range(15):
+                    kr = Kt[k, r]
+                    s0 += kr * D[k, c0]
+                    s1 += kr * D[k, c0 + 1]
+                    s2 += kr * D[k, c0 + 2]
+                    s3 += kr * D[k, c0 + 3]
+                    s4 += kr * D[k, c0 + 4]
+                KD[r, c0], KD[r, c0 + 1], KD[r, c0 + 2], KD[r, c0 + 3], KD[r, c0 + 4] = s0, s1, s2, s3, s4
         for r in range(15):
-            for c in range(r, 15):
-                M[r, c] = 0.0
-            for k in range(15):
-                kdr = KD[r, k]
-                for c in range(r, 15):
-                    M[r, c] += kdr * Kt[k, c]
+            for c0 in range(5 * (r // 5), 15, 5):
+                s0 = s1 = s2 = s3 = s4 = 0.0
+                for k in range(15):
+                    kdr = KD[r, k]
+                    s0 += kdr * Kt[k, c0]
+                    s1 += kdr * Kt[k, c0 + 1]
+                    s2 += kdr * Kt[k, c0 + 2]
+                    s3 += kdr * Kt[k, c0 + 3]
+                    s4 += kdr * Kt[k, c0 + 4]
+                M[r, c0], M[r, c0 + 1], M[r, c0 + 2], M[r, c0 + 3], M[r, c0 + 4] = s0, s1, s2, s3, s4
             for c in range(r, 15):
                 v = Ppost[j, r, c] + M[r, c]
                 Ps[j, r, c] = v
