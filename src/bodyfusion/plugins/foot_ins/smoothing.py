@@ -287,11 +287,10 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     every chunk but the last is replayed first for the filter's covariance at its start, then
     again with its record) or per segment. Returns the filter's last covariance as replayed and
     the per-segment latencies (segmented only)."""
-    size = int(np.max(np.diff(bounds))) + 1
-    fw = _Pass(size)
     failed = 0
     latencies: list[float] = []
     if not whole:
+        fw = _Pass(int(np.max(np.diff(bounds))) + 1)
         P = r.P0.copy()
         for k in range(bounds.size - 1):
             a, b = int(bounds[k]), int(bounds[k + 1])
@@ -308,7 +307,7 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     chunks = _chunks(bounds, plain, general)
     ckpt = [r.P0]  # the filter's covariance at each chunk start; the last chunk is replayed once
     for a, b in chunks[:-1]:
-        ckpt.append(r.forward(a, b, ckpt[-1], False, fw))
+        ckpt.append(r.forward(a, b, ckpt[-1], False, _Pass(1)))
     lam, Lam = np.zeros(15), np.zeros((15, 15))
     P_last = r.P0
     for k in range(len(chunks) - 1, -1, -1):
