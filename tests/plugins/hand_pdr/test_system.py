@@ -368,3 +368,23 @@ def test_ipin_trial22_whose_gnss_never_moves_15_m_runs():
     heading = result.systems["hand_phone"].diagnostics()["heading"]
     assert heading["initial"] == "gnss_track" and heading["reopened"] >= 1
     assert result.scores["hand_phone"].metrics["horizontal_error_m"]["p75"] < 10.3  # GNSS alone: 10.3 m
+
+
+def test_a_phone_logs_policies_are_counted_once(tmp_path):
+    """The phone's IMU and GNSS come from one log with one report: what its reader dropped and
+    noted reaches the run once, not once per use (a log of 50 extra lines of an unused type,
+    a malformed line and a repeated fix)."""
+    from bodyfusion.io.phone_log import read_getsensordata
+    from tests.fuzz.recording import write_recording
+
+    layouts = write_recording(tmp_path)
+    log = tmp_path / "hand_phone_log.txt"
+    lines = log.read_text().splitlines()
+    gnss = next(k for k, line in enumerate(lines) if line.startswith("GNSS;"))
+    lines[gnss + 1:gnss + 1] = [lines[gnss], "GYRO;x;y"] + ["WIFI;1;2;3"] * 50
+    log.write_text("\n".join(lines) + "\n")
+    own = read_getsensordata(log).report
+    assert own.dropped_samples >= 2 and any("WIFI" in note for note in own.notes)
+    report = run_layout(load_layout(layouts["phone_log"])).input_report
+    assert report.dropped_samples == own.dropped_samples
+    assert sorted(report.notes) == sorted(set(report.notes))

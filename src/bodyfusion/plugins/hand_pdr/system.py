@@ -156,7 +156,7 @@ class HandPdr(SensorSystem):
                                   speed_column=g.speed_column, course_column=g.course_column)
         elif g is not None and g.format == "nmea":
             fixes = read_nmea(g.path)
-        if fixes is not None:
+        if fixes is not None and fixes.report is not report:  # a phone log's fixes share its report
             report = report.merge(fixes.report)
         self._report = report
         if fixes is not None and len(fixes) and not np.any((fixes.t >= self.t[0]) & (fixes.t <= self.t[-1])):
