@@ -276,6 +276,20 @@ def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: 
 
 
 @numba.njit(cache=True)
+def congruence_by_yaw_reset(M: np.ndarray, a0: float, a1: float) -> None:
+    """M ← G M Gᵀ in place for the heading reset G = I + a e_ψᵀ of
+    :func:`keep_yaw_unobservable` whose east and north velocity rows are a = (a0, a1); its
+    inverse G⁻¹ = I − a e_ψᵀ (e_ψᵀ a = 0) is the call with (−a0, −a1). M symmetric (15, 15)."""
+    for c in range(15):
+        M[3, c] += a0 * M[8, c]
+        M[4, c] += a1 * M[8, c]
+    for r in range(15):
+        M[r, 3] += a0 * M[r, 8]
+        M[r, 4] += a1 * M[r, 8]
+    M[3, 4] = M[4, 3]  # equal but for rounding: keep M exactly symmetric
+
+
+@numba.njit(cache=True)
 def keep_yaw_unobservable(P: np.ndarray, dv: np.ndarray, phi: np.ndarray) -> None:
     """Closed-loop reset of a stance update that moved the velocity by ``dv`` (3,) (m/s).
 
@@ -290,13 +304,7 @@ def keep_yaw_unobservable(P: np.ndarray, dv: np.ndarray, phi: np.ndarray) -> Non
     e_z × dp is a translation, unobservable anyway): P ← G P Gᵀ and, unless empty,
     phi ← G phi."""
     a0, a1 = -dv[1], dv[0]
-    for c in range(15):
-        P[3, c] += a0 * P[8, c]
-        P[4, c] += a1 * P[8, c]
-    for r in range(15):
-        P[r, 3] += a0 * P[r, 8]
-        P[r, 4] += a1 * P[r, 8]
-    P[3, 4] = P[4, 3]  # equal but for rounding: keep P exactly symmetric
+    congruence_by_yaw_reset(P, a0, a1)
     if phi.shape[0] > 0:
         for c in range(15):
             phi[3, c] += a0 * phi[8, c]

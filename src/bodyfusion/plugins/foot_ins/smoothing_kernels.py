@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_multiply
-from bodyfusion.nav.error_state import inject, process_noise_diag
+from bodyfusion.nav.error_state import congruence_by_yaw_reset, inject, process_noise_diag
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
 
 YAW = 8
@@ -262,12 +262,7 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
             for c in range(15):
                 D[r, c] = Ps[j + 1, r, c]
         if a0 != 0.0 or a1 != 0.0:  # G⁻¹ Ps G⁻ᵀ
-            for c in range(15):
-                D[3, c] -= a0 * D[8, c]
-                D[4, c] -= a1 * D[8, c]
-            for r in range(15):
-                D[r, 3] -= a0 * D[r, 8]
-                D[r, 4] -= a1 * D[r, 8]
+            congruence_by_yaw_reset(D, -a0, -a1)
         for k in range(15):
             e[k] = dxs[j + 1, k] + dx[j + 1, k]
         e[3] -= a0 * dxs[j + 1, 8]

@@ -20,7 +20,8 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm
-from bodyfusion.nav.error_state import P_ZUPT_GATE, P_ZUPT_SIGMA, inject, inv3_sym, process_noise_diag
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, congruence_by_yaw_reset, inject, inv3_sym,
+                                       process_noise_diag)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, transition
 from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, chol_solve
@@ -188,12 +189,7 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
                 D[r, c] += lrk * P_post[k, c]
         for c in range(15):
             D[r, c] = P_post[r, c] - D[r, c]
-    for c in range(15):
-        D[3, c] -= a0 * D[8, c]
-        D[4, c] -= a1 * D[8, c]
-    for r in range(15):
-        D[r, 3] -= a0 * D[r, 8]
-        D[r, 4] -= a1 * D[r, 8]
+    congruence_by_yaw_reset(D, -a0, -a1)  # G⁻¹ D G⁻ᵀ
     B = np.empty((15, 16))
     for r in range(15):
         for c in range(15):
