@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Set
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -244,12 +244,17 @@ class JointState:
             P[b, b] = s.covariance()
         return P
 
-    def correct(self, dx: np.ndarray, P_new: np.ndarray, which: list[int]) -> None:
-        """Hand each system in ``which`` its block of δx and P*; keep P*'s cross-covariances
-        when tracking (then ``which`` must be every system: all of them moved)."""
+    def correct(self, dx: np.ndarray, P_new: np.ndarray, which: list[int], measured: Set[int] = frozenset()) -> None:
+        """Hand each system in ``which`` its block of δx and P*: as its own correction to the
+        ``measured`` systems, as a relative one (derived from the others' estimates too) to
+        the rest; keep P*'s cross-covariances when tracking (then ``which`` must be every
+        system: all of them moved)."""
         for k in which:
             b = self.blocks[k]
-            self.systems[k].apply_correction(dx[b], P_new[b, b])
+            if k in measured:
+                self.systems[k].apply_correction(dx[b], P_new[b, b])
+            else:
+                self.systems[k].apply_relative_correction(dx[b], P_new[b, b])
         if self.track:
             self.cross = P_new.copy()
             for b in self.blocks:
@@ -334,7 +339,9 @@ class Fuser:
         if dx is None:
             return
         if joint:
-            self.joint.correct(dx, P_new, which)
+            # a measurement of one system is its own; one between systems (or spread to the
+            # others by the cross-covariances) is relative for every system it moves
+            self.joint.correct(dx, P_new, which, measured=frozenset(joint) if len(names) == 1 else frozenset())
         else:
             measured[0].apply_correction(dx, P_new)
 

@@ -127,14 +127,17 @@ class SmootherConfig(StrictModel):
     ``span``: ``whole`` (the default of ``rts``: one RTS sweep over the whole run) or
     ``segment`` (each segment on its own, the paper's segmented RTS; ``fb`` and ``fb-rts``
     always run per segment). Distance constraints act in the forward pass through the fuser
-    (``fuser.method``); ``constrain_smoothed`` applies them again on the smoothed tracks.
+    (``fuser.method``); the smoothers keep the fuser's corrections as the filter made them
+    (each foot is smoothed on its own and cannot re-derive a correction made from the other
+    foot's estimate), and ``constrain_smoothed`` (default on) applies the constraints again
+    on the smoothed tracks, so that they hold there too.
     """
 
     kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
     span: Literal["whole", "segment"] | None = None
     min_stance_s: float = Field(default=0.04, ge=0)
     max_segment_s: float = Field(default=10.0, gt=0)
-    constrain_smoothed: bool = False
+    constrain_smoothed: bool = True
 
     @model_validator(mode="after")
     def _span_of_kind(self) -> "SmootherConfig":

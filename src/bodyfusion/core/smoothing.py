@@ -1,4 +1,4 @@
-"""Smoothing after the fuser: each system's own smoother, then (optionally) the layout's distance
+"""Smoothing after the fuser: each system's own smoother, then (by default) the layout's distance
 constraints on the smoothed tracks.
 
 The core knows no smoother: it calls every system's :meth:`~bodyfusion.core.system.SensorSystem.smooth`

@@ -240,6 +240,15 @@ class SensorSystem(Plugin):
         """Closed-loop reset: add error-state correction ``dx`` (n,) to the nominal
         state and replace the covariance with ``P`` (n, n)."""
 
+    def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """A correction derived from other systems' estimates as well as this one's (a
+        distance constraint, a measurement of another system spread by the cross-covariances):
+        :meth:`apply_correction`. A system that smooths its run afterwards overrides it to keep
+        such a correction as the filter made it — its own smoother cannot re-derive it from the
+        other systems' smoothed estimates, and would otherwise count it as a measurement of
+        its own state (see :mod:`bodyfusion.plugins.foot_ins.smoothing`)."""
+        self.apply_correction(dx, P)
+
     def track_transition(self) -> None:
         """Start accumulating the error-state transition Φ between the fuser's syncs
         (needed when the fuser tracks cross-covariances between systems)."""

@@ -38,8 +38,10 @@ class RunData:
     (nominal state; position covariance: variances east, north, up and the east–north
     covariance, m²; the stance update's NIS, :data:`~bodyfusion.plugins.foot_ins.kernels.NO_STANCE`
     where there is none: at swing samples, and at every sample of the ensemble kinds, which keep
-    no NIS), the counters, and the covariances it leaves
-    outside the plain EKF recursion (sample index, covariance) for the smoothers."""
+    no NIS), the counters, the covariances it leaves
+    outside the plain EKF recursion (sample index, covariance) for the smoothers, and the
+    kept corrections (sample index, nominal state before the correction): those derived from
+    other systems' estimates, which the smoothers keep as the filter made them."""
 
     t: np.ndarray
     acc_b: np.ndarray
@@ -52,6 +54,8 @@ class RunData:
     counters: np.ndarray
     override_idx: list[np.ndarray] = field(default_factory=list)
     override_P: list[np.ndarray] = field(default_factory=list)
+    kept_idx: list[int] = field(default_factory=list)
+    kept_x: list[np.ndarray] = field(default_factory=list)
 
 
 class Estimator:

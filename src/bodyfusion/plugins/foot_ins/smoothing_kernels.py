@@ -120,8 +120,8 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> b
 @numba.njit(cache=True)
 def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
                 gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, i0: int, i1: int, recorded_x: np.ndarray,
-                ov_idx: np.ndarray, ov_P: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, store: bool,
-                xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray,
+                ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray, kept_x: np.ndarray,
+                gap_idx: np.ndarray, gap_dP: np.ndarray, store: bool, xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray,
                 dx: np.ndarray, jump: np.ndarray, yaw_reset: np.ndarray) -> np.ndarray:
     """The ekf over i0 < i ≤ i1 (:func:`~bodyfusion.plugins.foot_ins.kernels.ekf_step`) from
     the nominal state x0 (16,), covariance P0 (15, 15) and mechanisation memory ``memory0``
@@ -132,7 +132,8 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     * after the step at an override sample (``ov_idx``, sorted: fuser corrections, position
       fixes, the ckf's coloured updates), the state becomes the recorded one
       (``recorded_x[i]``) and the covariance the one the correction left (the last ``ov_P``
-      at i).
+      at i); where one of them was a kept correction (``kept_idx``, :func:`replay_corrections`)
+      ``dx`` is the update up to the state before it (``kept_x``).
 
     From the filter's recorded state and memory at i0 this is the filter itself, bit for
     bit; on time-reversed samples it is the backward navigation. With ``store`` the block
@@ -151,7 +152,9 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     no_phi = np.empty((0, 0))
     x_prior = np.empty(16)
     ptr = np.searchsorted(ov_idx, i0 + 1)
+    kptr = np.searchsorted(kept_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
+    moved = np.empty(3)
     if store:
         for k in range(16):
             xs[0, k] = x[k]
@@ -179,32 +182,56 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior_j,
                        P_prior_j, Phi_j)
         if store:
-            for k in range(3):
-                jump[j, k] = 0.0
             stanced = nis != NO_STANCE
             yaw_reset[j, 0] = -(x[4] - x_prior_j[4]) if stanced else 0.0
             yaw_reset[j, 1] = (x[3] - x_prior_j[3]) if stanced else 0.0
-        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-                ptr += 1
-            if store:
-                for k in range(3):
-                    jump[j, k] = recorded_x[i, k] - x[k]
-            for k in range(16):
-                x[k] = recorded_x[i, k]
-            for r in range(15):
-                for c in range(15):
-                    P[r, c] = ov_P[ptr - 1, r, c]
+        ptr, kptr = replay_corrections(i, x, P, x_prior_j, recorded_x, ov_idx, ov_P, kept_idx, kept_x, ptr, kptr,
+                                       store, scratch, moved)
         if store:
+            for k in range(3):
+                jump[j, k] = moved[k]
             for k in range(16):
                 xs[j, k] = x[k]
             for r in range(15):
                 for c in range(15):
                     Ppost[j, r, c] = P[r, c]
-            boxminus(x, x_prior_j, scratch)
             for k in range(15):
                 dx[j, k] = scratch[k]
     return P
+
+
+@numba.njit(cache=True)
+def replay_corrections(i: int, x: np.ndarray, P: np.ndarray, x_prior: np.ndarray, recorded_x: np.ndarray,
+                       ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray, kept_x: np.ndarray, ptr: int,
+                       kptr: int, want_dx: bool, dx: np.ndarray, moved: np.ndarray) -> tuple[int, int]:
+    """After the filter's step to sample i (x, P its posterior in place, x_prior its prior): the
+    corrections the filter made outside its loop at i, from the pointers ``ptr`` into the
+    sorted ``ov_idx`` and ``kptr`` into the sorted ``kept_idx``. With an override at i the
+    state becomes the recorded one and the covariance the last one left at i; ``moved`` (3,)
+    gets the position it moved (m; zero without one). With ``want_dx``, ``dx`` (15,) gets the
+    update the smoothers step through at i: posterior ⊖ prior; where a kept correction was made
+    at i — one derived from other systems' estimates (a distance constraint), which a
+    per-system smoother cannot re-derive from their smoothed estimates and so keeps as the
+    filter made it — the state before it (``kept_x``) ⊖ prior: the jump is then a known input
+    of the smoothed model, not information. Returns the advanced pointers."""
+    for k in range(3):
+        moved[k] = 0.0
+    if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+        while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
+            ptr += 1
+        for k in range(3):
+            moved[k] = recorded_x[i, k] - x[k]
+        for k in range(16):
+            x[k] = recorded_x[i, k]
+        for r in range(15):
+            for c in range(15):
+                P[r, c] = ov_P[ptr - 1, r, c]
+    kept = kptr < kept_idx.shape[0] and kept_idx[kptr] == i
+    if want_dx:
+        boxminus(kept_x[kptr] if kept else x, x_prior, dx)
+    while kptr < kept_idx.shape[0] and kept_idx[kptr] == i:
+        kptr += 1
+    return ptr, kptr
 
 
 @numba.njit(cache=True)

@@ -24,7 +24,7 @@ from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, congruence_by
                                        process_noise_diag)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, transition
-from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, chol_solve
+from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
 
 PACKED = np.array([(r, c) for r in range(15) for c in range(r, 15)], dtype=np.int64)
 """(120, 2): row and column of each element of a symmetric 15×15 matrix stored as its upper
@@ -218,8 +218,8 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
 @numba.njit(cache=True)
 def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
                 gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
-                recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, gap_idx: np.ndarray,
-                gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
+                recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
+                kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
                 gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray) -> tuple[np.ndarray, float]:
     """The ekf over i0 < i ≤ i1 as
     :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass` (from the filter's
@@ -248,7 +248,9 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     P_prior = np.empty((15, 15))
     no_phi = np.empty((0, 0))
     ptr = np.searchsorted(ov_idx, i0 + 1)
+    kptr = np.searchsorted(kept_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
+    moved = np.empty(3)
     ns = ng = 0
     error = 0.0
     for q in range(120):
@@ -267,14 +269,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         stanced = nis != NO_STANCE
         a0 = -(x[4] - x_prior[4]) if stanced else 0.0
         a1 = (x[3] - x_prior[3]) if stanced else 0.0
-        if ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-            while ptr < ov_idx.shape[0] and ov_idx[ptr] == i:
-                ptr += 1
-            for k in range(16):
-                x[k] = recorded_x[i, k]
-            for r in range(15):
-                for c in range(15):
-                    P[r, c] = ov_P[ptr - 1, r, c]
+        ptr, kptr = replay_corrections(i, x, P, x_prior, recorded_x, ov_idx, ov_P, kept_idx, kept_x, ptr, kptr,
+                                       general[i], scratch, moved)
         for k in range(16):
             error = max(error, abs(x[k] - recorded_x[i, k]))
         for q in range(120):
@@ -285,7 +281,6 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
             for r in range(15):
                 for c in range(15):
                     gen_P[ng, r, c] = P_prior[r, c]
-            boxminus(x, x_prior, scratch)
             for k in range(15):
                 gen_dx[ng, k] = scratch[k]
             gen_a[ng, 0] = a0

@@ -419,6 +419,14 @@ class FootIns(SensorSystem):
         self.filter.correct(dx, 0.5 * (P + P.T))
         self._record_state(self._i)
 
+    def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """As :meth:`apply_correction`; the smoothers keep it as the filter made it (the
+        state before it is recorded)."""
+        if self.filter.smoothable:
+            self.run_data.kept_idx.append(self._i)
+            self.run_data.kept_x.append(self.x.copy())
+        self.apply_correction(dx, P)
+
     def _record_state(self, i: int) -> None:
         """History row i after a correction outside the compiled loop (fuser, fix, gap); the
         covariance left there is recorded for the smoothers."""
@@ -453,9 +461,10 @@ class FootIns(SensorSystem):
         covariances set outside the compiled loop): IMU samples, stance flags, filter
         parameters, the recorded nominal history, the initial covariance, the gaps (sample
         index after each gap, sorted, and the covariance the gap policy added before the step
-        to it: process noise of that step), and the sample indices (sorted) with the
+        to it: process noise of that step), the sample indices (sorted) with the
         covariance left there by a fuser correction or a fix (and, for the ckf, after every
-        coloured update). Ensemble kinds have no such record."""
+        coloured update), and the kept corrections' sample indices (sorted, one per sample)
+        with the nominal state before the first of them there. Ensemble kinds have no such record."""
         if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
@@ -463,6 +472,10 @@ class FootIns(SensorSystem):
         Ps = np.concatenate([np.empty((0, 15, 15)), *self.run_data.override_P])
         order = np.argsort(idx, kind="stable")
         idx, Ps = idx[order], Ps[order]
+        kept_idx = np.asarray(self.run_data.kept_idx, dtype=np.int64)
+        kept_x = np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)
+        first = np.ones(kept_idx.size, dtype=bool)  # the state before the first at a sample
+        first[1:] = kept_idx[1:] != kept_idx[:-1]
         gaps = self._gap_index <= self._i
         gap_idx = self._gap_index[gaps]
         # the gap policy's inflation went through apply_correction: the last override at g − 1
@@ -471,7 +484,8 @@ class FootIns(SensorSystem):
         return {"t": self._t_nav[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
                 "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[keep]),
-                "override_P": np.ascontiguousarray(Ps[keep]), "gap_idx": np.ascontiguousarray(gap_idx),
+                "override_P": np.ascontiguousarray(Ps[keep]), "kept_idx": np.ascontiguousarray(kept_idx[first]),
+                "kept_x": np.ascontiguousarray(kept_x[first]), "gap_idx": np.ascontiguousarray(gap_idx),
                 "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
                 "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
 
