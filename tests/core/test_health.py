@@ -37,6 +37,7 @@ class BadCovariance(SensorSystem):
         self.t = np.round(np.arange(1001) * 0.01, 6)
         self.bad_from_s = bad_from_s
         self._i = 0
+        self.corrections = 0
 
     @property
     def samples(self) -> int:
@@ -73,7 +74,7 @@ class BadCovariance(SensorSystem):
         return P
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        raise NotImplementedError
+        self.corrections += 1
 
     def sync_times(self) -> np.ndarray:
         return self.t[50::50]
@@ -205,3 +206,12 @@ def test_uwb_tag_reports_the_nis_of_the_ranges_the_fuser_applied(tmp_path):
     assert tag.health() == {"nis": {
         "anchor_ranges": {"dof": 1, "expected": 1.0, "count": 3, "mean": 14.0, "beyond_gate": 1},
         "peer_ranges": {"dof": 1, "expected": 1.0, "count": 1, "mean": 2.0, "beyond_gate": 0}}}
+
+
+def test_every_correction_own_or_relative_is_checked():
+    system = BadCovariance(bad_from_s=100.0)
+    monitor = CovarianceMonitor(system)
+    monitor.apply_correction(np.zeros(3), np.eye(3))
+    monitor.apply_relative_correction(np.zeros(3), np.eye(3))
+    monitor.flush()
+    assert system.corrections == 2 and system.health()["covariance"]["checks"] == 2

@@ -63,6 +63,11 @@ class CovarianceMonitor:
         self.system.apply_correction(dx, P)
         self._check()
 
+    def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """The system's ``apply_relative_correction(dx, P)``, then a check."""
+        self.system.apply_relative_correction(dx, P)
+        self._check()
+
     def _check(self) -> None:
         self._t.append(self.system.t_now)
         self._covs.append(self.system.covariance())
