@@ -45,7 +45,7 @@ class ConstraintLog:
         e = self.n
         self.t[e] = t
         self.before_m[e] = self.separations(p_hat)
-        self.after_m[e] = self.separations(p_after)
+        self.after_m[e] = self.before_m[e] if p_after is p_hat else self.separations(p_after)
         self.multiplier[e] = solution.multipliers
         self.active[e, solution.active] = True
         self.n += 1

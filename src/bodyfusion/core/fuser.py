@@ -154,7 +154,8 @@ def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, sol
     n = P.shape[0]
     dx = np.zeros(n)
     P = P.copy()
-    others = np.setdiff1d(np.arange(n), pos) if positions_only else np.empty(0, dtype=np.int64)
+    others = np.full(n, positions_only)  # the rows a positions-only correction leaves
+    others[pos] = False
     for row, k in zip(solution.jacobian, solution.active):
         h = np.zeros(n)
         h[pos] = row

@@ -13,6 +13,8 @@ itself syncs there. Checks are buffered and made in batches (one vectorised eige
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from bodyfusion.core.system import SensorSystem
@@ -40,7 +42,7 @@ class CovarianceMonitor:
 
     def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
         self.system = system
-        self._stride_t = stride_times(system.sync_times(), stride_s)
+        self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
         self._t: list[float] = []
         self._covs: list[np.ndarray] = []
 
@@ -50,10 +52,10 @@ class CovarianceMonitor:
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split at the stride times between now and t."""
         s = self.system
-        a, b = np.searchsorted(self._stride_t, [s.t_now, t], side="right")
+        a, b = bisect.bisect_right(self._stride_t, s.t_now), bisect.bisect_right(self._stride_t, t)
         for ts in self._stride_t[a:b]:
             if ts < t:
-                s.advance(float(ts))
+                s.advance(ts)
                 self._check()
         s.advance(t)
         self._check()

@@ -370,6 +370,10 @@ class FootIns(SensorSystem):
         i = self._i + 1
         if i1 <= i:
             return
+        if self._gap_index.size == 0:  # the usual case: one compiled call
+            self.filter.run(self.run_data, i, i1, self.phi)
+            self._i = i1 - 1
+            return
         gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
         for a, b in zip([i, *gaps], [*gaps, i1]):
             if a in gaps:
