@@ -129,15 +129,16 @@ class SmootherConfig(StrictModel):
     always run per segment). Distance constraints act in the forward pass through the fuser
     (``fuser.method``); the smoothers keep the fuser's corrections as the filter made them
     (each foot is smoothed on its own and cannot re-derive a correction made from the other
-    foot's estimate), and ``constrain_smoothed`` (default on) applies the constraints again
-    on the smoothed tracks, so that they hold there too.
+    foot's estimate), and ``constrain_smoothed`` applies the constraints again on the smoothed
+    tracks, so that they hold there too: by default (unset) wherever the fuser enforces them
+    (``fuser.method`` not ``none``); ``true`` also after independent filters; ``false`` never.
     """
 
     kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
     span: Literal["whole", "segment"] | None = None
     min_stance_s: float = Field(default=0.04, ge=0)
     max_segment_s: float = Field(default=10.0, gt=0)
-    constrain_smoothed: bool = True
+    constrain_smoothed: bool | None = None
 
     @model_validator(mode="after")
     def _span_of_kind(self) -> "SmootherConfig":

@@ -121,7 +121,10 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     t0 = time.perf_counter()
     trajectories = {name: s.trajectory() for name, s in systems.items()}
     smoothed_constraints = None
-    if loaded.layout.smoother.constrain_smoothed and loaded.layout.constraints and smoothed:
+    constrain = loaded.layout.smoother.constrain_smoothed
+    if constrain is None:
+        constrain = loaded.layout.fuser.method != "none"
+    if constrain and loaded.layout.constraints and smoothed:
         trajectories, smoothed_constraints = constrain_trajectories(trajectories, set(smoothed),
                                                                     loaded.layout.constraints, loaded.layout.fuser)
     truth_cfg = loaded.layout.truth

@@ -300,6 +300,13 @@ def test_constrained_rts_is_not_worse_than_the_constrained_filter_on_the_vicon_w
     assert smoothed.smoothed_constraints["method"] == "projection"
 
 
+def test_smoothed_tracks_are_constrained_by_default_only_where_the_fuser_enforces_the_constraints():
+    independent = ["fuser.method=none", "smoother.kind=rts"]
+    assert run_layout(load_layout(VICON_CFG, independent)).smoothed_constraints is None
+    asked = run_layout(load_layout(VICON_CFG, [*independent, "smoother.constrain_smoothed=true"]))
+    assert asked.smoothed_constraints["constrained_samples"] > 0
+
+
 # --------------------------------------------------------------------------- never fail
 
 

@@ -72,7 +72,7 @@ in each foot's smoother against the other's *filtered* estimate, and an inequali
 constraint, recorded only where it was active, would be spread back over the samples where it
 held without the information that it held: on a simulated dual-foot walk (6 seeds) that made
 the smoothed feet 40–55 % worse than the constrained filter. The gap policy's inflation is
-process noise of the step across the gap. ``smoother.constrain_smoothed`` (default on) has
+process noise of the step across the gap. ``smoother.constrain_smoothed`` (by default wherever the fuser enforces them) has
 the core apply the constraints again to the smoothed tracks
 (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
 
