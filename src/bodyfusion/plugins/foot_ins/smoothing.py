@@ -54,7 +54,8 @@ is recomputed from the fused velocity by the mechanisation's trapezoid (the pape
 re-forward navigation, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.integrate_position`),
 from the fused position at the segment start, plus the position the filter's corrections
 outside its loop moved (fuser constraints, position fixes: the backward pass cannot replay
-them, so FB keeps them as the filter made them; FB-RTS spreads them through the forward RTS).
+them, so FB keeps them as the filter made them; FB-RTS spreads the foot's own ones through the
+forward RTS and keeps the relative ones, below).
 Started instead from the previous segment's recomputed end, as the paper chains its
 segments, the track would be a pure integral of velocity whose small per-segment
 differences from the smoothed position add up over the run. Its covariance is the fused one.
