@@ -23,7 +23,8 @@ time), beside the 95 % band of a mean over that many runs. Cases (``--cases``):
 Nothing here is tuned: the layouts are the scenario's with the defaults of every estimator.
 Writes into ``--out``: ``results.json`` (every run's figures and the profiles) and
 ``nees_profile_<minutes>min.png``; the simulations go to ``--out``/sim and are removed after
-each seed unless ``--keep``. A run that fails is reported and left out.
+each seed unless ``--keep``. A run that fails is reported and left out; results.json is
+rewritten after every seed, so a stopped harness leaves the runs it made.
 
 Usage: python examples/consistency.py [--seeds 20] [--minutes 5 30 60] [--cases ...]
                                       [--quick] [--out out/consistency] [--keep]
@@ -193,8 +194,8 @@ def print_profile(table: dict[tuple[str, int, str], Runs], minutes: int) -> None
               + f"   [{lo:.2f}, {hi:.2f}]")
 
 
-def save(table: dict[tuple[str, int, str], Runs], minutes: list[int], out: Path) -> None:
-    """results.json and the profile plots."""
+def save(table: dict[tuple[str, int, str], Runs], minutes: list[int], out: Path, plots: bool = True) -> None:
+    """results.json and (``plots``) the profile plots."""
     doc = []
     for (key, m, row), runs in table.items():
         mc = runs.monte_carlo()
@@ -205,7 +206,7 @@ def save(table: dict[tuple[str, int, str], Runs], minutes: list[int], out: Path)
                     "mean_nees": runs.mean_nees, "in_band_fraction": runs.in_band, "rmse_m": runs.rmse,
                     "monte_carlo_nees_per_minute": per_minute})
     (out / "results.json").write_text(json.dumps(doc, indent=1, allow_nan=True) + "\n")
-    for m in minutes:
+    for m in minutes if plots else []:
         tracks = {CASES[key].label + (f" ({row})" if len(CASES[key].rows) > 1 else ""):
                   NeesTrack(runs.grid, runs.monte_carlo(), runs=len(runs.nees))
                   for (key, mm, row), runs in table.items() if mm == m and runs.nees}
@@ -229,6 +230,7 @@ def main() -> None:
     for m in minutes:
         for seed in range(seeds):
             run_seed(seed, m, args.cases, args.out, args.keep, table)
+            save(table, minutes, args.out, plots=False)  # the runs so far, should the harness be stopped
     table = dict(sorted(table.items(), key=lambda kv: (list(CASES).index(kv[0][0]), kv[0][1])))
     print(f"\nHorizontal NEES (2 dof, expected 2; one epoch's 95 % band [0.0506, 7.38]) and RMSE, "
           f"{seeds} seed(s), {time.perf_counter() - t0:.0f} s")
