@@ -48,6 +48,7 @@ a layout that ``fusion run`` runs as is.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -221,6 +222,19 @@ class Simulated:
         tables["truth"] = self.truth_columns()
         return layout, tables
 
+    def relaid(self, loaded: LoadedScenario, overrides: Sequence[str] | Mapping[str, Any] | None,
+               outages: Mapping[str, Sequence[tuple[float, float]]]) -> Simulated:
+        """This walk and its data under the scenario ``loaded`` (the same scenario with other
+        overrides of its ``layout`` section and of the ``outages`` of its systems), each system in
+        ``outages`` with those (start s, duration s) windows: what :func:`simulated` gives for it,
+        without simulating again. A system's outages only mask its data in the layout (its GNSS
+        fixes stay in the file), so the data are the same; everything else that differs between
+        the two scenarios must be in their ``layout`` sections (the caller's promise)."""
+        outputs = {name: out if name not in outages else dataclasses.replace(out, outages=[
+            {"system": name, "start_s": float(start), "duration_s": float(duration)}
+            for start, duration in outages[name]]) for name, out in self.outputs.items()}
+        return _assembled(loaded, self.seed, overrides, self.plan, outputs)
+
     def write(self, out_dir: str | Path) -> SimulationResult:
         """Write the sensor files, ``truth.csv`` and ``config.yaml`` into ``out_dir`` (created if
         needed): what ``fusion simulate`` writes."""
@@ -283,14 +297,21 @@ def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
             raise ConfigError(err.key, err.reason, scenario_path) from None
     if progress is not None:
         progress(len(systems), len(systems))
-    outputs = {name: ctx.outputs[name] for name in systems}
+    return _assembled(loaded, int(seed), overrides, plan, {name: ctx.outputs[name] for name in systems})
 
+
+def _assembled(loaded: LoadedScenario, seed: int, overrides: Sequence[str] | Mapping[str, Any] | None, plan: Any,
+               outputs: dict[str, SystemOutput]) -> Simulated:
+    """The simulated walk with the layout ``config.yaml`` holds: the systems' sections and
+    outages, the truth, then the scenario's ``layout`` merged over them."""
+    scenario_cfg = loaded.scenario
+    origin = scenario_cfg.geodetic_origin if scenario_cfg.geodetic_origin is not None else DEFAULT_GEODETIC_ORIGIN
     layout: dict[str, Any] = {
-        "name": scenario_cfg.name or (scenario_path.stem if scenario_path is not None else "scenario"),
+        "name": scenario_cfg.name or (loaded.file.stem if loaded.file is not None else "scenario"),
         "gravity_mps2": scenario_cfg.gravity_mps2,
     }
     if scenario_cfg.geodetic_origin is not None or any(out.uses_geodetic_origin for out in outputs.values()):
-        layout["geodetic_origin"] = list(ctx.geodetic_origin)
+        layout["geodetic_origin"] = [float(v) for v in origin]
     layout["systems"] = {n: out.layout for n, out in outputs.items()}
     outages = [o for out in outputs.values() for o in out.outages]
     if outages:
@@ -300,8 +321,8 @@ def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
     if outages and isinstance(over.get("outages"), list):
         over["outages"] = outages + list(over["outages"])
     layout = _deep_merge(layout, over)
-    validate_section(Layout, layout, key="layout", path=scenario_path, base_dir=None)
-    return Simulated(loaded, int(seed), list(_override_texts(overrides)), plan, outputs, layout)
+    validate_section(Layout, layout, key="layout", path=loaded.file, base_dir=None)
+    return Simulated(loaded, seed, list(_override_texts(overrides)), plan, outputs, layout)
 
 
 def _override_texts(overrides: Sequence[str] | Mapping[str, Any] | None) -> list[str]:
