@@ -27,7 +27,7 @@ from bodyfusion.io.tables import (
     source_name,
 )
 from bodyfusion.nav.earth import STANDARD_GRAVITY
-from bodyfusion.nav.frames import AxisMap, apply_axis_map
+from bodyfusion.nav.frames import AxisMap
 
 ACC_UNITS: dict[str, float] = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
@@ -164,26 +164,34 @@ def read_imu_csv(
             f"at least {min_samples} are needed"
         )
 
-    acc = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in acc_cols]) * ACC_UNITS[acc_unit])
-    gyro = apply_axis_map(tuple(axes), np.column_stack([arrays[c] for c in gyro_cols]) * GYRO_UNITS[gyro_unit])
+    acc = _body_frame(tuple(axes), [arrays[c] for c in acc_cols], ACC_UNITS[acc_unit])
+    for c in set(acc_cols) - {time_column, stance_column, *gyro_cols}:
+        del arrays[c]  # each column goes once it is used: the file's numbers are held about once
+    gyro = _body_frame(tuple(axes), [arrays[c] for c in gyro_cols], GYRO_UNITS[gyro_unit])
+    if kept.size < n:  # the samples the timestamp policy keeps (all, usually: then no copies)
+        t, acc, gyro = t[kept], acc[kept], gyro[kept]
+        stance = None if stance is None else stance[kept]
     for what, x, limit, unit in (("accelerometer", acc, ACC_LIMIT_MPS2, "m/s^2"),
                                  ("gyroscope", gyro, GYRO_LIMIT_RADPS, "rad/s")):
-        bad = np.flatnonzero(np.any(np.abs(x[kept]) > limit, axis=1))
+        if x.max() <= limit and x.min() >= -limit:
+            continue
+        bad = np.flatnonzero(np.any(np.abs(x) > limit, axis=1))
         if bad.size:
-            k = int(kept[bad[0]])
-            raise row_error(where, f"{what} reading {np.max(np.abs(x[k])):.3g} {unit} is beyond any sensor's range "
-                            f"({limit:g} {unit}): a corrupt value ({bad.size} such samples)", line_no, k)
-    gap = np.diff(t[kept])
+            raise row_error(where, f"{what} reading {np.max(np.abs(x[bad[0]])):.3g} {unit} is beyond any sensor's range "
+                            f"({limit:g} {unit}): a corrupt value ({bad.size} such samples)", line_no,
+                            int(kept[bad[0]]))
+    gap = np.diff(t)
     if gap.size and gap.max() > max_gap_s:
         j = int(np.argmax(gap))
-        raise row_error(where, f"a gap of {gap[j]:.6g} s in the timestamps (t = {t[kept[j]]:.6g} → "
-                        f"{t[kept[j + 1]]:.6g} s), longer than max_gap_s ({max_gap_s:g} s): split the recording "
-                        "there, or raise max_gap_s", line_no, int(kept[j + 1]))
+        raise row_error(where, f"a gap of {gap[j]:.6g} s in the timestamps (t = {t[j]:.6g} → {t[j + 1]:.6g} s), "
+                        f"longer than max_gap_s ({max_gap_s:g} s): split the recording there, or raise max_gap_s",
+                        line_no, int(kept[j + 1]))
+    del gap, arrays
     stream = ImuStream(
-        t=np.ascontiguousarray(t[kept]),
-        acc_b=np.ascontiguousarray(acc[kept]),
-        gyro_b=np.ascontiguousarray(gyro[kept]),
-        stance=None if stance is None else np.ascontiguousarray(stance[kept]),
+        t=np.ascontiguousarray(t),
+        acc_b=acc,
+        gyro_b=gyro,
+        stance=None if stance is None else np.ascontiguousarray(stance),
         source=where,
         report=report,
     )
@@ -193,6 +201,17 @@ def read_imu_csv(
     for message in stream.checks.warnings:
         report.warn(message)
     return stream
+
+
+def _body_frame(axes: tuple[str, str, str], columns: list[np.ndarray], unit: float) -> np.ndarray:
+    """(N, 3) vectors in the body frame from the file's x, y, z ``columns`` in a unit ``unit``
+    SI units large: :func:`~bodyfusion.nav.frames.apply_axis_map` of the columns times ``unit``
+    (the same numbers: a sign flip commutes with the rounding), written once."""
+    out = np.empty((len(columns[0]), 3))
+    for k, entry in enumerate(axes):
+        source = columns[{"x": 0, "y": 1, "z": 2}[entry.lstrip("-")]]
+        np.multiply(source, -unit if entry.startswith("-") else unit, out=out[:, k])
+    return out
 
 
 def read_imu(section: ImuCsvConfig) -> ImuStream:

@@ -4,10 +4,12 @@ Every problem with an input file raises :class:`bodyfusion.base.errors.InputErro
 naming the file and, when the problem is one cell or one row, the 1-based
 line number of the file (as an editor shows it).
 
-Parsing strategy: the rows are first handed to ``numpy.loadtxt`` (C parser,
-fast); only when that fails, or when a column may hold missing cells, are the
-rows parsed one by one in Python, which is also what locates the offending
-line for the error message.  A 28 000-row IMU file reads in a few tens of ms.
+Parsing strategy: a file is read a chunk of lines at a time (:mod:`bodyfusion.io.lines`)
+into arrays sized once from its line count, so a long recording costs its numbers and one
+chunk's text. Each chunk's rows are first handed to ``numpy.loadtxt`` (C parser, fast); only
+when that fails, or when a column may hold missing cells, are they parsed one by one in
+Python, which is also what locates the offending line for the error message.  A 28 000-row
+IMU file reads in a few tens of ms.
 
 Timestamps are never silently integrated with a zero or negative step: see
 :func:`apply_timestamp_policy`.
@@ -16,8 +18,9 @@ Timestamps are never silently integrated with a zero or negative step: see
 from __future__ import annotations
 
 import csv
+import itertools
 import math
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +29,7 @@ import numpy as np
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
+from bodyfusion.io.lines import line_chunks, read_lines, scan_lines  # noqa: F401 (read_lines: other readers take it from here)
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
 
@@ -44,24 +48,6 @@ def split_line(line: str, delimiter: str) -> list[str]:
     if '"' in line or "'" in line:
         return next(csv.reader([line], delimiter=delimiter, skipinitialspace=True))
     return line.split(delimiter)
-
-
-def read_lines(path: Path) -> list[str]:
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except IsADirectoryError:
-        raise InputError(path, "is a directory, not a file") from None
-    except OSError as err:
-        raise InputError(path, f"cannot read file: {err.strerror or err}") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        line = raw[: err.start].count(b"\n") + 1
-        raise InputError(path, "not a UTF-8 text file", line) from None
-    lines = text.split("\n")
-    return [ln.removesuffix("\r") for ln in lines]
 
 
 def file_time_span(path: str | Path, time_column: str, *, time_scale: float = 1.0, delimiter: str = ",",
@@ -92,8 +78,10 @@ def _slow_parse(
     delimiter: str,
     allow_missing: Collection[str],
     n_header: int,
+    last: bool = True,
 ) -> np.ndarray:
-    """Row-by-row parse; raises at the first bad cell with its line number."""
+    """Row-by-row parse; raises at the first bad cell with its line number (``last``: the rows
+    end the file, so a short last row may have been cut off)."""
     out = np.empty((len(rows), len(idx)), dtype=np.float64)
     need = max(idx) + 1
     for r, line in enumerate(rows):
@@ -103,7 +91,7 @@ def _slow_parse(
                 path,
                 f"row has {len(cells)} fields, the header has {n_header} "
                 f"(column {names[int(np.argmax(np.asarray(idx) >= len(cells)))]!r} is missing)"
-                + ("; the last row: was the file cut off? remove that row" if r == len(rows) - 1 else ""),
+                + ("; the last row: was the file cut off? remove that row" if last and r == len(rows) - 1 else ""),
                 int(line_no[r]),
             )
         for c, (j, name) in enumerate(zip(idx, names)):
@@ -120,6 +108,67 @@ def _slow_parse(
                     path, f"non-numeric value {cell!r} in column {name!r}", int(line_no[r])
                 ) from None
     return out
+
+
+def _parse_rows(path: Path, rows: list[str], line_no: np.ndarray, idx: list[int], names: Sequence[str],
+                delimiter: str, allow_missing: Collection[str], n_header: int, last: bool) -> np.ndarray:
+    """(len(rows), len(idx)) numbers of one chunk of rows: ``numpy.loadtxt`` where it parses them
+    all, else row by row (:func:`_slow_parse`, which names the first bad cell's line)."""
+    if not names:
+        return np.empty((len(rows), 0))
+    data: np.ndarray | None = None
+    if not allow_missing:
+        try:
+            data = np.loadtxt(rows, delimiter=delimiter, usecols=idx, dtype=np.float64, ndmin=2, quotechar='"',
+                              comments=None)
+        except (ValueError, IndexError):
+            data = None
+        if data is not None and data.shape != (len(rows), len(idx)):
+            data = None
+    if data is None:
+        data = _slow_parse(path, rows, line_no, idx, names, delimiter, set(allow_missing), n_header, last)
+    return data
+
+
+def _non_finite(path: Path, data: np.ndarray, names: Sequence[str], allowed: np.ndarray,
+                line_no: np.ndarray) -> InputError | None:
+    """The error for the chunk's first non-finite cell (NaN allowed only in ``allowed`` columns,
+    infinity never), or None."""
+    bad = ~np.isfinite(data)
+    if not bad.any():
+        return None
+    bad &= ~(np.isnan(data) & allowed[None, :])
+    if not bad.any():
+        return None
+    r, c = np.argwhere(bad)[0]
+    what = "NaN" if np.isnan(data[r, c]) else "infinite value"
+    return InputError(path, f"{what} in column {names[c]!r}", int(line_no[r]))
+
+
+def _labels(path: Path, rows: list[str], line_no: np.ndarray, j: int, label: str, n_header: int,
+            names: dict[str, int], out: np.ndarray) -> InputError | None:
+    """The codes (into ``names``, extended in order of first appearance) of one chunk's text
+    cells in column ``j`` (surrounding whitespace and quotes stripped) into ``out``; or the
+    error of the chunk's first row with a carriage return inside it or without the cell."""
+    rows = [row.rstrip("\r") for row in rows]  # CR LF (or CR CR LF) line ends
+    stray = next((k for k, row in zip(line_no, rows) if "\r" in row), None)
+    if stray is not None:
+        return InputError(path, "a carriage return inside the line", int(stray))
+    try:
+        cells = np.loadtxt(rows, dtype=str, delimiter=",", usecols=j, ndmin=1, quotechar='"', comments=None)
+    except (ValueError, IndexError):
+        split = [split_line(row, ",") for row in rows]
+        short = next((k for k, row in enumerate(split) if len(row) <= j), None)
+        if short is not None:
+            return InputError(path, f"row has {len(split[short])} fields, the header has {n_header} (column "
+                                    f"{label!r} is missing)", int(line_no[short]))
+        cells = np.array([row[j] for row in split], dtype=str)
+    raw, first, inverse = np.unique(cells, return_index=True, return_inverse=True)
+    code = np.empty(raw.size, dtype=out.dtype)
+    for u in np.argsort(first, kind="stable"):
+        code[u] = names.setdefault(clean_cell(str(raw[u])), len(names))
+    out[:] = code[inverse.reshape(-1)]
+    return None
 
 
 def read_table(
@@ -142,20 +191,57 @@ def read_table(
     Cells must be finite numbers.  For columns listed in ``allow_missing`` an
     empty cell or NaN is accepted and returned as NaN (motion-capture drop-outs);
     infinity is an error in every column.
+
+    The file is read a chunk of lines at a time (:data:`CHUNK_BYTES`) into arrays sized
+    once; an error is the one the whole file's first bad line gives.
     """
+    arrays, line_no, _ = read_labelled_table(path, columns, None, skip_rows=skip_rows, delimiter=delimiter,
+                                             allow_missing=allow_missing)
+    return arrays, line_no
+
+
+def read_labelled_table(
+    path: str | Path,
+    columns: Sequence[str],
+    label: str | None,
+    *,
+    skip_rows: int = 0,
+    delimiter: str = ",",
+    allow_missing: Collection[str] = (),
+) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None]:
+    """:func:`read_table`, and with a ``label`` column (of names: the system of a long-format
+    row) its cells as ``(codes, names)``: (N,) int32 codes into the names, in order of first
+    appearance, each name stripped of surrounding whitespace and quotes. Errors about the
+    label column (missing from the header, a carriage return inside a row) come after those
+    about the numbers."""
     path = Path(path)
     columns = list(columns)
     if skip_rows < 0:
         raise InputError(path, f"skip_rows must be >= 0, got {skip_rows}")
     if not delimiter:
         raise InputError(path, "delimiter must not be empty")
-    lines = read_lines(path)
-    if len(lines) <= skip_rows or all(not ln.strip() for ln in lines[skip_rows:]):
-        raise InputError(path, "empty file: no header line" + (f" after skipping {skip_rows} rows" if skip_rows else ""))
+    n_lines = scan_lines(path)
+    empty = InputError(path, "empty file: no header line" + (f" after skipping {skip_rows} rows" if skip_rows else ""))
+    if n_lines <= skip_rows:
+        raise empty
     header_line = skip_rows + 1
-    header_text = lines[skip_rows]
+    chunks = line_chunks(path)
+    for start, lines in chunks:
+        if start + len(lines) > header_line:  # the header is in this chunk
+            header_text = lines[header_line - start]
+            body = itertools.chain([(header_line + 1, lines[header_line - start + 1:])], chunks)
+            break
+
+    def row_chunks() -> Iterator[tuple[list[str], np.ndarray]]:
+        for first, part in body:
+            keep = [i for i, ln in enumerate(part) if ln.strip()]
+            if keep:
+                yield [part[i] for i in keep], np.asarray(keep, dtype=np.int64) + first
+
+    rows = row_chunks()
+    pending = next(rows, None)
     if not header_text.strip():
-        raise InputError(path, "header line is empty", header_line)
+        raise empty if pending is None else InputError(path, "header line is empty", header_line)
     header = [clean_cell(h) for h in split_line(header_text, delimiter)]
 
     idx: list[int] = []
@@ -170,42 +256,43 @@ def read_table(
         if len(hits) > 1:
             raise InputError(path, f"column {name!r} appears {len(hits)} times in the header", header_line)
         idx.append(hits[0])
-
-    body = lines[skip_rows + 1 :]
-    keep = [i for i, ln in enumerate(body) if ln.strip()]
-    rows = [body[i] for i in keep]
-    line_no = np.asarray(keep, dtype=np.int64) + header_line + 1
-    if not rows:
+    if pending is None:
         raise InputError(path, "no data rows after the header", header_line)
 
-    data: np.ndarray | None = None
-    if not columns:
-        data = np.empty((len(rows), 0))
-    elif not allow_missing:
-        try:
-            data = np.loadtxt(
-                rows, delimiter=delimiter, usecols=idx, dtype=np.float64, ndmin=2,
-                quotechar='"', comments=None,
-            )
-        except (ValueError, IndexError):
-            data = None
-        if data is not None and data.shape != (len(rows), len(idx)):
-            data = None
-    if data is None:
-        data = _slow_parse(path, rows, line_no, idx, columns, delimiter, set(allow_missing), len(header))
-
-    # Non-finite cells: NaN allowed only where asked for; inf never.
-    bad = ~np.isfinite(data)
-    if bad.any():
-        allowed = np.array([c in allow_missing for c in columns], dtype=bool)
-        bad &= ~(np.isnan(data) & allowed[None, :])
-        if bad.any():
-            r, c = np.argwhere(bad)[0]
-            what = "NaN" if np.isnan(data[r, c]) else "infinite value"
-            raise InputError(path, f"{what} in column {columns[c]!r}", int(line_no[r]))
-
-    arrays = {name: np.ascontiguousarray(data[:, c]) for c, name in enumerate(columns)}
-    return arrays, line_no
+    deferred: InputError | None = None
+    label_j = None
+    if label is not None:
+        if label in header:
+            label_j = header.index(label)
+        else:
+            deferred = InputError(path, f"missing column {label!r}; the header has {header}", header_line)
+    cap = n_lines - header_line
+    cols = [np.empty(cap) for _ in columns]
+    line_no = np.empty(cap, dtype=np.int64)
+    codes = np.empty(cap if label_j is not None else 0, dtype=np.int32)
+    names: dict[str, int] = {}
+    allowed = np.array([c in allow_missing for c in columns], dtype=bool)
+    bad: InputError | None = None
+    n = 0
+    while pending is not None:
+        chunk, lines_of = pending
+        pending = next(rows, None)
+        data = _parse_rows(path, chunk, lines_of, idx, columns, delimiter, allow_missing, len(header),
+                           pending is None)
+        m = len(chunk)
+        for c, col in enumerate(cols):
+            col[n:n + m] = data[:, c]
+        line_no[n:n + m] = lines_of
+        bad = bad or _non_finite(path, data, columns, allowed, lines_of)
+        if label_j is not None and deferred is None:
+            deferred = _labels(path, chunk, lines_of, label_j, label, len(header), names, codes[n:n + m])
+        n += m
+    if bad is not None:
+        raise bad
+    if deferred is not None:
+        raise deferred
+    arrays = {name: cols[c][:n] for c, name in enumerate(columns)}
+    return arrays, line_no[:n], (codes[:n], list(names)) if label_j is not None else None
 
 
 # --------------------------------------------------------------------------- in-memory tables
@@ -471,6 +558,6 @@ def sample_times(
     arrays: dict[str, np.ndarray], n: int, time_column: str | None, time_scale: float, rate_hz: float | None
 ) -> np.ndarray:
     if time_column is not None:
-        return arrays[time_column] * time_scale
+        return arrays[time_column] if time_scale == 1.0 else arrays[time_column] * time_scale
     assert rate_hz is not None
     return np.arange(n, dtype=np.float64) / rate_hz

@@ -16,13 +16,11 @@ from bodyfusion.io.tables import (
     apply_timestamp_policy,
     check_columns,
     check_time_source,
-    clean_cell,
     has_column,
-    read_lines,
+    read_labelled_table,
     read_source,
     sample_times,
     source_name,
-    split_line,
     table_columns,
     table_text_column,
     tables_by_name,
@@ -93,40 +91,41 @@ def read_truth_csv(
 LONG_TRUTH_COLUMNS = ("system", "t", "east_m", "north_m", "up_m")
 
 
-def _long_rows(source: str | Path | TableSection) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, str]:
-    """System names (N,), numbers (N, 4: t, east, north, up), file lines (None for a table) and
-    the name errors give, of long-format truth: a file, one in-memory table with a ``system``
+def _long_rows(source: str | Path | TableSection) -> tuple[np.ndarray, list[str], dict[str, np.ndarray],
+                                                          np.ndarray | None, str]:
+    """Long-format truth as (N,) codes of the rows' systems into the system names (in order of
+    their first rows), the columns ``t``, ``east_m``, ``north_m``, ``up_m`` (N,), the file's lines
+    (None for a table) and the name errors give: of a file (read a chunk at a time,
+    :func:`~bodyfusion.io.tables.read_labelled_table`), one in-memory table with a ``system``
     column, or a mapping of system name → table (``t``, ``east_m``, ``north_m``, and ``up_m``
     unless the truth is horizontal)."""
     where = source_name(source)
     table = source.table if isinstance(source, TableSection) else None
-    if table is not None and tables_by_name(table):
-        parts = []
+    numbers = list(LONG_TRUTH_COLUMNS[1:])
+    if table is None:
+        path = source.path if isinstance(source, TableSection) else Path(source)
+        arrays, line_no, labels = read_labelled_table(path, numbers, "system")
+        codes, names = labels
+        return codes, names, arrays, line_no, str(path)
+    if tables_by_name(table):
+        parts = {}
         for name, tab in table.items():
             label = f"{where}: {name}"
             arrays = table_columns(tab, ["t", "east_m", "north_m"], where=label)
-            up = table_columns(tab, ["up_m"], where=label)["up_m"] if has_column(tab, "up_m") else None
-            parts.append((name, np.column_stack([arrays["t"], arrays["east_m"], arrays["north_m"],
-                                                 up if up is not None else np.full(len(arrays["t"]), np.nan)])))
-        names = np.concatenate([np.full(len(data), name, dtype=object) for name, data in parts])
-        return names, np.concatenate([data for _, data in parts]), None, where
-    arrays, line_no, where = read_source(source, LONG_TRUTH_COLUMNS[1:])
-    data = np.column_stack([arrays[c] for c in LONG_TRUTH_COLUMNS[1:]])
-    if table is not None:
-        return table_text_column(table, "system", where=where), data, None, where
-    path = Path(where)
-    lines = read_lines(path)
-    header = [clean_cell(c) for c in split_line(lines[0], ",")]
-    if "system" not in header:
-        raise InputError(path, f"missing column 'system'; the header has {header}", line=1)
-    j = header.index("system")
-    rows = [lines[k - 1].rstrip("\r") for k in line_no]  # CR LF (or CR CR LF) line ends
-    stray = next((k for k, row in zip(line_no, rows) if "\r" in row), None)
-    if stray is not None:
-        raise InputError(path, "a carriage return inside the line", line=int(stray))
-    column = np.loadtxt(rows, dtype=str, delimiter=",", usecols=j, ndmin=1, quotechar='"', comments=None)
-    raw, inverse = np.unique(column, return_inverse=True)
-    return np.array([clean_cell(str(v)) for v in raw], dtype=object)[inverse], data, line_no, where
+            arrays["up_m"] = (table_columns(tab, ["up_m"], where=label)["up_m"] if has_column(tab, "up_m")
+                              else np.full(len(arrays["t"]), np.nan))
+            parts[str(name)] = arrays
+        text = np.concatenate([np.full(len(arrays["t"]), name, dtype=object) for name, arrays in parts.items()])
+        columns = {c: np.concatenate([arrays[c] for arrays in parts.values()]) for c in numbers}
+        line_no = None
+    else:
+        columns, line_no, where = read_source(source, numbers)
+        text = table_text_column(table, "system", where=where)
+    raw, first, inverse = np.unique(text.astype(str), return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty(raw.size, dtype=np.int32)
+    rank[order] = np.arange(raw.size, dtype=np.int32)
+    return rank[inverse.reshape(-1)], [str(raw[u]) for u in order], columns, line_no, where
 
 
 def read_truth_long_csv(source: str | Path | TableSection, *, sparse: bool = False) -> dict[str, TruthTrack]:
@@ -135,13 +134,17 @@ def read_truth_long_csv(source: str | Path | TableSection, *, sparse: bool = Fal
     From a file (numbers as :func:`~bodyfusion.io.tables.read_table` reads them, a bad cell
     refused with its line, the system names from their own column) or a table section's
     in-memory data (see :func:`_long_rows`)."""
-    names, data, line_no, where = _long_rows(source)
-    raw, first, which = np.unique(names.astype(str), return_index=True, return_inverse=True)
+    codes, names, columns, line_no, where = _long_rows(source)
     out: dict[str, TruthTrack] = {}
-    for u in np.argsort(first):  # in the order of their first rows
-        rows = np.flatnonzero(which == u)
-        kept, _ = apply_timestamp_policy(data[rows, 0], "error", where,
+    for u, name in enumerate(names):  # in the order of their first rows
+        rows = np.flatnonzero(codes == u)
+        kept, _ = apply_timestamp_policy(columns["t"][rows], "error", where,
                                          lines=None if line_no is None else line_no[rows])
-        out[str(raw[u])] = TruthTrack(t=np.ascontiguousarray(data[rows[kept], 0]),
-                                      pos_n=np.ascontiguousarray(data[rows[kept], 1:4]), sparse=sparse)
+        rows = rows[kept]
+        # a system's rows are usually one block of the file: slices, no index arrays
+        sel = slice(int(rows[0]), int(rows[-1]) + 1) if rows.size and rows[-1] - rows[0] + 1 == rows.size else rows
+        pos = np.empty((rows.size, 3))
+        for k, col in enumerate(LONG_TRUTH_COLUMNS[2:]):
+            pos[:, k] = columns[col][sel]
+        out[name] = TruthTrack(t=np.array(columns["t"][sel]), pos_n=pos, sparse=sparse)
     return out
