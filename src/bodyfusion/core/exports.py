@@ -87,6 +87,23 @@ def frame_metadata(geodetic_origin: tuple[float, float, float] | None) -> dict:
             "time": {"unit": "s", "epoch": "the input's clock (no absolute epoch)"}}
 
 
+def _numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
+    """A float64 (int32 for int32 ``values``) Arrow array on a copy of ``values``, null where
+    ``mask``; as ``pa.array`` makes it, which imports pandas (0.3 s) to ask whether the values
+    are a pandas object."""
+    data = np.array(values, dtype=np.int32 if np.asarray(values).dtype == np.int32 else np.float64)  # a C-order copy
+    validity = None if mask is None or not mask.any() else pa.py_buffer(np.packbits(~mask, bitorder="little"))
+    return pa.Array.from_buffers(pa.from_numpy_dtype(data.dtype), len(data), [validity, pa.py_buffer(data)],
+                                 null_count=0 if validity is None else int(mask.sum()))
+
+
+def _strings(values: list[str]) -> pa.Array:
+    """A string Arrow array of ``values``, without ``pa.array`` (see :func:`_numbers`)."""
+    encoded = [v.encode() for v in values]
+    offsets = np.concatenate(([0], np.cumsum([len(e) for e in encoded]))).astype(np.int32)
+    return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
+
+
 def trajectory_table(trajectories: Mapping[str, Trajectory], decimate: int = 1) -> pa.Table:
     """The long-format table: ``system`` dictionary-encoded, the numbers float64, the covariance
     null for a system that gives none; field metadata ``unit`` and ``description``."""
@@ -98,10 +115,9 @@ def trajectory_table(trajectories: Mapping[str, Trajectory], decimate: int = 1) 
                np.concatenate([np.full(n, np.nan) if tr.pos_cov_en is None else np.asarray(tr.pos_cov_en)[::decimate]
                                for tr, n in zip(trajs, sizes)])]
     missing = np.repeat([tr.pos_cov_en is None for tr in trajs], sizes)
-    system = pa.DictionaryArray.from_arrays(pa.array(np.repeat(np.arange(len(trajs), dtype=np.int32), sizes)),
-                                            pa.array(list(trajectories), pa.string()))
-    arrays = [system, *(pa.array(c, pa.float64()) for c in columns[:-1]),
-              pa.array(columns[-1], pa.float64(), mask=missing)]
+    system = pa.DictionaryArray.from_arrays(_numbers(np.repeat(np.arange(len(trajs), dtype=np.int32), sizes)),
+                                            _strings(list(trajectories)))
+    arrays = [system, *(_numbers(c) for c in columns[:-1]), _numbers(columns[-1], mask=missing)]
     fields = [pa.field(c, a.type, nullable=c == COV_EN_COLUMN,
                        metadata={"description": _DESCRIPTIONS[c], **({"unit": _UNITS[c]} if c in _UNITS else {})})
               for c, a in zip((*TRAJECTORY_COLUMNS, COV_EN_COLUMN), arrays)]
@@ -172,7 +188,7 @@ def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None) -> p
     q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)) if q_wxyz is None else q_wxyz
     cols = {"timestamp": t, "tx": pos_n[:, 0], "ty": pos_n[:, 1], "tz": np.nan_to_num(pos_n[:, 2], nan=0.0),
             "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "qw": q[:, 0]}
-    return pa.table({k: pa.array(v, pa.float64()) for k, v in cols.items()})
+    return pa.table({k: _numbers(v) for k, v in cols.items()})
 
 
 def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapping[str, TruthTrack],

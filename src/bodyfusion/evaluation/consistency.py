@@ -22,7 +22,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import Trajectory
@@ -37,12 +36,22 @@ PROFILE_BINS = 10
 """Time windows of the NEES profile in metrics.json."""
 
 
+def chi2_quantile(p: float, dof: int) -> float:
+    """The ``p`` quantile of the χ² distribution of ``dof`` degrees of freedom, 2 P⁻¹(dof/2, p)
+    with P⁻¹ the inverse of the regularised lower incomplete gamma function: the number
+    ``scipy.stats.chi2.ppf(p, dof)`` returns, bit for bit, without importing scipy.stats (a
+    second and more at start-up)."""
+    from scipy.special import gammaincinv
+
+    return float(2 * gammaincinv(dof / 2, p))
+
+
 def chi2_band(dof: int, probability: float = BAND_PROBABILITY, runs: int = 1) -> tuple[float, float]:
     """Two-sided ``probability`` band of the mean of ``runs`` independent χ² values of ``dof``
     degrees of freedom (one epoch: runs = 1; a Monte-Carlo average over N runs: runs = N)."""
     tail = 0.5 * (1.0 - probability)
     n = dof * runs
-    return float(chi2.ppf(tail, n) / runs), float(chi2.ppf(1.0 - tail, n) / runs)
+    return chi2_quantile(tail, n) / runs, chi2_quantile(1.0 - tail, n) / runs
 
 
 # --------------------------------------------------------------------------- covariance

@@ -29,7 +29,6 @@ import math
 
 import numba
 import numpy as np
-from scipy.ndimage import percentile_filter
 
 __all__ = [
     "acceleration_magnitude",
@@ -224,6 +223,9 @@ def adaptive_shoe_threshold(statistic: np.ndarray, rate_hz: float, *, gamma_stil
     the strides around it (a running stance). ``rate_hz`` (Hz) sets the window in samples.
     Returns an array shaped like ``statistic``.
     """
+    # imported here: only adaptive thresholds need it, and scipy.ndimage is slow to import
+    from scipy.ndimage import percentile_filter
+
     z = np.log10(np.maximum(np.asarray(statistic, dtype=float), 1e-300))
     if z.size == 0:
         return np.empty(0)

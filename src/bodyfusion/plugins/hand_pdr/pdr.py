@@ -8,13 +8,16 @@ filter then walks the detected steps in time order.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import butter, find_peaks, sosfiltfilt
 
 from bodyfusion.plugins.hand_pdr.config import StepConfig
 
 
 def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
     """Zero-phase 2nd-order Butterworth low-pass along axis 0."""
+    # imported here: scipy.signal (which imports scipy.stats) is slow to import, and a run
+    # without a phone loads this plugin but never filters
+    from scipy.signal import butter, sosfiltfilt
+
     sos = butter(2, min(cutoff_hz / (0.5 * rate_hz), 0.99), output="sos")
     return sosfiltfilt(sos, x, axis=0)
 
@@ -54,6 +57,8 @@ def azimuth_increments(t: np.ndarray, gyro_b: np.ndarray, up_b: np.ndarray) -> n
 def detect_steps(t: np.ndarray, acc_b: np.ndarray, cfg: StepConfig, gravity: float) -> np.ndarray:
     """Sample indices of steps: peaks of the low-passed ‖f‖ − g above the threshold, at least
     ``min_interval_s`` apart (debounced)."""
+    from scipy.signal import find_peaks
+
     rate = 1.0 / np.median(np.diff(t))
     a = lowpass(np.linalg.norm(acc_b, axis=1) - gravity, rate, cfg.lowpass_hz)
     peaks, _ = find_peaks(a, height=cfg.threshold_mps2, distance=max(1, int(round(cfg.min_interval_s * rate))))
