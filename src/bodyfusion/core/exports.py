@@ -29,8 +29,9 @@ so no calendar time is written):
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 import pyarrow as pa
@@ -64,17 +65,31 @@ _DESCRIPTIONS = {
 }
 
 
-def _rows(traj: Trajectory, decimate: int) -> np.ndarray:
-    """(N, 7) t, position, σ of every ``decimate``-th epoch."""
-    return np.column_stack([traj.t, traj.pos_n, traj.pos_sd])[::decimate]
+ROWS = 1 << 16
+"""Epochs a trajectory writer formats at once: a file is written in pieces of this many rows
+(the same bytes as at once), never holding a whole long track's rows, strings or tables."""
+
+
+def _pieces(n: int, decimate: int) -> Iterator[slice]:
+    """Slices of the epochs 0..n that keep every ``decimate``-th, :data:`ROWS` kept epochs each."""
+    step = ROWS * decimate
+    for a in range(0, n, step):
+        yield slice(a, min(a + step, n), decimate)
+
+
+def _rows(traj: Trajectory, epochs: slice) -> np.ndarray:
+    """(n, 7) t, position, σ of the ``epochs``."""
+    return np.column_stack([traj.t[epochs], traj.pos_n[epochs], traj.pos_sd[epochs]])
 
 
 def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], decimate: int = 1) -> None:
-    """``trajectories.csv``: long format, times s (µs printed), positions and σ m (10 µm printed)."""
+    """``trajectories.csv``: long format, times s (µs printed), positions and σ m (10 µm printed);
+    written :data:`ROWS` rows at a time."""
     with path.open("w") as fh:
         fh.write(TRAJECTORY_HEADER + "\n")
         for name, traj in trajectories.items():
-            np.savetxt(fh, _rows(traj, decimate), fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
+            for epochs in _pieces(len(traj.t), decimate):
+                np.savetxt(fh, _rows(traj, epochs), fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
 
 
 def frame_metadata(geodetic_origin: tuple[float, float, float] | None) -> dict:
@@ -104,38 +119,64 @@ def _strings(values: list[str]) -> pa.Array:
     return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
 
 
+def _trajectory_columns(names: list[str], k: int, traj: Trajectory, epochs: slice) -> list[pa.Array]:
+    """The long-format table's columns for the ``epochs`` of system ``k`` of ``names``."""
+    t = traj.t[epochs]
+    cov = np.full(len(t), np.nan) if traj.pos_cov_en is None else np.asarray(traj.pos_cov_en)[epochs]
+    system = pa.DictionaryArray.from_arrays(_numbers(np.full(len(t), k, dtype=np.int32)), _strings(names))
+    return [system, _numbers(t), *(_numbers(getattr(traj, a)[epochs, j]) for a in ("pos_n", "pos_sd") for j in range(3)),
+            _numbers(cov, mask=np.full(len(t), traj.pos_cov_en is None))]
+
+
+def _trajectory_schema(columns: list[pa.Array]) -> pa.Schema:
+    """The table's schema: field metadata ``unit`` and ``description``, the covariance nullable."""
+    return pa.schema([pa.field(c, a.type, nullable=c == COV_EN_COLUMN,
+                               metadata={"description": _DESCRIPTIONS[c], **({"unit": _UNITS[c]} if c in _UNITS else {})})
+                      for c, a in zip((*TRAJECTORY_COLUMNS, COV_EN_COLUMN), columns)])
+
+
+def _trajectory_pieces(trajectories: Mapping[str, Trajectory], decimate: int) -> Iterator[list[pa.Array]]:
+    """The long-format table's columns, :data:`ROWS` epochs of one system at a time (at least
+    one piece, empty for no trajectories)."""
+    names = list(trajectories)
+    empty = True
+    for k, traj in enumerate(trajectories.values()):
+        for epochs in _pieces(len(traj.t), decimate):
+            empty = False
+            yield _trajectory_columns(names, k, traj, epochs)
+    if empty:
+        yield _trajectory_columns(names, 0, Trajectory(np.empty(0), np.empty((0, 3)), np.empty((0, 3))), slice(None))
+
+
 def trajectory_table(trajectories: Mapping[str, Trajectory], decimate: int = 1) -> pa.Table:
     """The long-format table: ``system`` dictionary-encoded, the numbers float64, the covariance
     null for a system that gives none; field metadata ``unit`` and ``description``."""
-    trajs = list(trajectories.values())
-    sizes = [len(tr.t[::decimate]) for tr in trajs]
-    columns = [np.concatenate([tr.t[::decimate] for tr in trajs]),
-               *(np.concatenate([getattr(tr, a)[::decimate, k] for tr in trajs])
-                 for a in ("pos_n", "pos_sd") for k in range(3)),
-               np.concatenate([np.full(n, np.nan) if tr.pos_cov_en is None else np.asarray(tr.pos_cov_en)[::decimate]
-                               for tr, n in zip(trajs, sizes)])]
-    missing = np.repeat([tr.pos_cov_en is None for tr in trajs], sizes)
-    system = pa.DictionaryArray.from_arrays(_numbers(np.repeat(np.arange(len(trajs), dtype=np.int32), sizes)),
-                                            _strings(list(trajectories)))
-    arrays = [system, *(_numbers(c) for c in columns[:-1]), _numbers(columns[-1], mask=missing)]
-    fields = [pa.field(c, a.type, nullable=c == COV_EN_COLUMN,
-                       metadata={"description": _DESCRIPTIONS[c], **({"unit": _UNITS[c]} if c in _UNITS else {})})
-              for c, a in zip((*TRAJECTORY_COLUMNS, COV_EN_COLUMN), arrays)]
-    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+    pieces = list(_trajectory_pieces(trajectories, decimate))
+    schema = _trajectory_schema(pieces[0])
+    return pa.Table.from_batches([pa.RecordBatch.from_arrays(p, schema=schema) for p in pieces], schema=schema)
 
 
 def write_trajectories_parquet(path: Path, trajectories: Mapping[str, Trajectory], *, config_sha256: str,
                                geodetic_origin: tuple[float, float, float] | None, decimate: int = 1) -> None:
     """``trajectories.parquet``: :func:`trajectory_table` with the schema metadata
     ``bodyfusion.format_version``, ``bodyfusion.version``, ``bodyfusion.config_sha256`` and
-    ``bodyfusion.frame`` (JSON, :func:`frame_metadata`)."""
+    ``bodyfusion.frame`` (JSON, :func:`frame_metadata`); written :data:`ROWS` epochs of one
+    system at a time (a row group each)."""
     from bodyfusion import __version__
 
-    table = trajectory_table(trajectories, decimate)
     meta = {"bodyfusion.format_version": TRAJECTORY_FORMAT_VERSION, "bodyfusion.version": __version__,
             "bodyfusion.config_sha256": config_sha256,
             "bodyfusion.frame": json.dumps(frame_metadata(geodetic_origin))}
-    pq.write_table(table.replace_schema_metadata(meta), path, compression="zstd", use_dictionary=["system"])
+    writer = None
+    try:
+        for piece in _trajectory_pieces(trajectories, decimate):
+            if writer is None:
+                schema = _trajectory_schema(piece).with_metadata(meta)
+                writer = pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=["system"])
+            writer.write_batch(pa.RecordBatch.from_arrays(piece, schema=schema))
+    finally:
+        if writer is not None:
+            writer.close()
 
 
 def read_trajectories(path: str | Path) -> dict[str, Trajectory]:
@@ -175,12 +216,30 @@ QUATERNION_STATES = ("qw", "qx", "qy", "qz")
 def system_attitudes(systems: Mapping[str, SensorSystem]) -> dict[str, np.ndarray]:
     """(N, 4) attitude quaternions ``[w, x, y, z]`` (body to ENU) at the trajectory's epochs of
     every system whose :meth:`~bodyfusion.core.system.SensorSystem.states` give one."""
-    out = {}
-    for name, system in systems.items():
-        states = system.states()
-        if all(k in states for k in QUATERNION_STATES):
-            out[name] = np.column_stack([states[k] for k in QUATERNION_STATES])
-    return out
+    return dict(SystemAttitudes(systems))
+
+
+class SystemAttitudes(Mapping[str, np.ndarray]):
+    """:func:`system_attitudes` computed one system at a time, when asked for (the writers hold
+    one system's states at once, not every system's)."""
+
+    def __init__(self, systems: Mapping[str, SensorSystem]) -> None:
+        self._systems = systems
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        states = self._systems[name].states()
+        if not all(k in states for k in QUATERNION_STATES):
+            raise KeyError(name)
+        return np.column_stack([states[k] for k in QUATERNION_STATES])
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name in self._systems if self.get(name) is not None)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+_TUM_COLUMNS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 
 
 def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None) -> pa.Table:
@@ -197,20 +256,25 @@ def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapp
     truth decimated like the estimate, surveyed points all): ``timestamp tx ty tz qx qy qz qw``,
     s and ENU m at full precision, space-separated, no header. ``attitudes``: a system's (N, 4)
     quaternions ``[w, x, y, z]`` (body to ENU) at its trajectory's epochs
-    (:func:`system_attitudes`); the identity for the others and the truth. Returns the files written."""
-    attitudes = attitudes or {}
-    tracks = {name: (tr.t[::decimate], tr.pos_n[::decimate],
-                     attitudes[name][::decimate] if name in attitudes else None)
-              for name, tr in trajectories.items()}
+    (:func:`system_attitudes`, or :class:`SystemAttitudes`: asked for one system at a time);
+    the identity for the others and the truth. Each file is written :data:`ROWS` rows at a
+    time. Returns the files written."""
+    attitudes = attitudes if attitudes is not None else {}
+    tracks: dict[str, tuple[np.ndarray, np.ndarray, int, str | None]] = {
+        name: (tr.t, tr.pos_n, decimate, name) for name, tr in trajectories.items()}
     for name, tr in truths.items():
-        step = 1 if tr.sparse else decimate
-        tracks[f"{name}_truth"] = (tr.t[::step], tr.pos_n[::step], None)
+        tracks[f"{name}_truth"] = (tr.t, tr.pos_n, 1 if tr.sparse else decimate, None)
     folder.mkdir(parents=True, exist_ok=True)
     options = pacsv.WriteOptions(include_header=False, delimiter=" ", quoting_style="none")
+    schema = pa.schema([(c, pa.float64()) for c in _TUM_COLUMNS])
     written = []
-    for name, (t, pos, q) in tracks.items():
+    for name, (t, pos, step, system) in tracks.items():
         written.append(folder / f"{name}.txt")
-        pacsv.write_csv(_tum_table(t, pos, q), written[-1], options)
+        q = None if system is None else attitudes.get(system)
+        with pacsv.CSVWriter(written[-1], schema, write_options=options) as writer:
+            for epochs in _pieces(len(t), step):
+                writer.write_table(_tum_table(t[epochs], pos[epochs], None if q is None else q[epochs]))
+        del q
     return written
 
 
@@ -232,17 +296,67 @@ def map_epochs(t: np.ndarray, decimate: int = 1, step_s: float = GEOJSON_STEP_S)
     return idx[keep]
 
 
-def _lon_lat_h(pos_n: np.ndarray, origin: tuple[float, float, float]) -> list[list[float]]:
+def _lon_lat_h(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool) -> list[list[float]]:
     """GeoJSON positions ``[lon, lat, h]`` (deg, deg, m above the ellipsoid; 1e-9 deg and 0.1 mm
-    printed); ``[lon, lat]`` for a track without heights (NaN up)."""
-    flat = np.isnan(pos_n[:, 2]).all()
+    printed); ``[lon, lat]`` for a track without heights (``flat``: NaN up throughout)."""
     llh = enu_to_geodetic(np.nan_to_num(pos_n, nan=0.0), origin)
     cols = [np.round(llh[:, 1], 9), np.round(llh[:, 0], 9)] + ([] if flat else [np.round(llh[:, 2], 4)])
     return np.column_stack(cols).tolist()
 
 
-def _feature(properties: dict, kind: str, coordinates: list) -> dict:
+class _JsonArray:
+    """A JSON array :func:`_write_json` writes a piece at a time: ``pieces()`` yields lists, its
+    consecutive elements (the same text as the whole list through ``json.dumps``)."""
+
+    def __init__(self, pieces: Callable[[], Iterator[list]]) -> None:
+        self.pieces = pieces
+
+
+def _write_json(fh: TextIO, value: object) -> None:
+    """``json.dumps(value)`` into ``fh``, with :class:`_JsonArray` values written a piece at a
+    time and the elements of an iterator (not a list) one at a time."""
+    if isinstance(value, _JsonArray):
+        fh.write("[")
+        sep = ""
+        for piece in value.pieces():
+            if piece:
+                fh.write(sep + json.dumps(piece)[1:-1])
+                sep = ", "
+        fh.write("]")
+    elif isinstance(value, dict):
+        fh.write("{")
+        for k, (key, item) in enumerate(value.items()):
+            fh.write((", " if k else "") + json.dumps(key) + ": ")
+            _write_json(fh, item)
+        fh.write("}")
+    elif isinstance(value, Iterator):
+        fh.write("[")
+        for k, item in enumerate(value):
+            fh.write(", " if k else "")
+            _write_json(fh, item)
+        fh.write("]")
+    else:
+        fh.write(json.dumps(value))
+
+
+def _feature(properties: dict, kind: str, coordinates: object) -> dict:
     return {"type": "Feature", "properties": properties, "geometry": {"type": kind, "coordinates": coordinates}}
+
+
+def _line_feature(properties: dict, t: np.ndarray, pos_n: np.ndarray, sd: np.ndarray | None, k: np.ndarray,
+                  origin: tuple[float, float, float]) -> dict:
+    """A LineString feature through the epochs ``k`` with ``times`` (and ``sd_*_m`` from ``sd``)
+    among its ``properties``, its arrays written :data:`ROWS` vertices at a time."""
+    flat = bool(np.isnan(pos_n[k, 2]).all())
+
+    def column(values: np.ndarray, decimals: int) -> _JsonArray:
+        return _JsonArray(lambda: (np.round(values[k[p]], decimals).tolist() for p in _pieces(k.size, 1)))
+
+    properties = {**properties, "times": column(t, 6)}
+    if sd is not None:
+        properties.update({f"sd_{axis}_m": column(sd[:, j], 5) for j, axis in enumerate(("east", "north", "up"))})
+    coordinates = _JsonArray(lambda: (_lon_lat_h(pos_n[k[p]], origin, flat) for p in _pieces(k.size, 1)))
+    return _feature(properties, "LineString", coordinates)
 
 
 def write_geojson(path: Path, trajectories: Mapping[str, Trajectory], truths: Mapping[str, TruthTrack],
@@ -252,20 +366,22 @@ def write_geojson(path: Path, trajectories: Mapping[str, Trajectory], truths: Ma
     ``sd_north_m``/``sd_up_m`` (one-sigma, m, one per vertex); per dense truth track a
     LineString (``role`` ``truth``, ``times``); per surveyed truth point a Point with its time
     ``t``. Lines keep the epochs of :func:`map_epochs`. Positions from the ENU tracks about
-    ``geodetic_origin`` (lat deg, lon deg, h m)."""
-    features = []
-    for name, traj in trajectories.items():
-        k = map_epochs(traj.t, decimate)
-        sd = np.round(traj.pos_sd[k], 5)
-        props = {"system": name, "role": "estimate", "times": np.round(traj.t[k], 6).tolist(),
-                 "sd_east_m": sd[:, 0].tolist(), "sd_north_m": sd[:, 1].tolist(), "sd_up_m": sd[:, 2].tolist()}
-        features.append(_feature(props, "LineString", _lon_lat_h(traj.pos_n[k], geodetic_origin)))
-    for name, tr in truths.items():
-        if tr.sparse:
-            features += [_feature({"system": name, "role": "truth", "t": t}, "Point", xy)
-                         for t, xy in zip(np.round(tr.t, 6).tolist(), _lon_lat_h(tr.pos_n, geodetic_origin))]
-        else:
-            k = map_epochs(tr.t, decimate)
-            features.append(_feature({"system": name, "role": "truth", "times": np.round(tr.t[k], 6).tolist()},
-                                     "LineString", _lon_lat_h(tr.pos_n[k], geodetic_origin)))
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}) + "\n")
+    ``geodetic_origin`` (lat deg, lon deg, h m). Written a feature, and within a line
+    :data:`ROWS` vertices, at a time."""
+
+    def features() -> Iterator[dict]:
+        for name, traj in trajectories.items():
+            yield _line_feature({"system": name, "role": "estimate"}, traj.t, traj.pos_n, traj.pos_sd,
+                                map_epochs(traj.t, decimate), geodetic_origin)
+        for name, tr in truths.items():
+            if tr.sparse:
+                flat = bool(np.isnan(tr.pos_n[:, 2]).all())
+                yield from (_feature({"system": name, "role": "truth", "t": t}, "Point", xy)
+                            for t, xy in zip(np.round(tr.t, 6).tolist(), _lon_lat_h(tr.pos_n, geodetic_origin, flat)))
+            else:
+                yield _line_feature({"system": name, "role": "truth"}, tr.t, tr.pos_n, None, map_epochs(tr.t, decimate),
+                                    geodetic_origin)
+
+    with path.open("w") as fh:
+        _write_json(fh, {"type": "FeatureCollection", "features": features()})
+        fh.write("\n")

@@ -12,7 +12,7 @@ import numpy as np
 
 from bodyfusion.base.errors import FusionError
 from bodyfusion.core.exports import (
-    system_attitudes,
+    SystemAttitudes,
     write_geojson,
     write_trajectories_csv,
     write_trajectories_parquet,
@@ -130,7 +130,7 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
     write_tum(out_dir / "tum", result.trajectories, result.truths, output.decimate,
-              attitudes=system_attitudes(result.systems))
+              attitudes=SystemAttitudes(result.systems))
     if result.geodetic_origin is not None:
         write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin,
                       output.decimate)
