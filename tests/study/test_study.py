@@ -294,6 +294,21 @@ def test_killed_study_resumes_without_lost_or_duplicated_rows(tmp_path):
     assert all(run_s[r["run_key"]] == r["runtime.run_s"] for r in saved)  # saved rows kept, not re-run
 
 
+@pytest.mark.slow
+def test_one_run_per_task_gives_the_same_rows_as_shared_simulations(local_run, tmp_path):
+    """The CLI study shared simulations within its tasks; one run per task simulates every run
+    afresh: the same bits."""
+    study, out, _ = local_run
+    shared = pq.read_table(out / "results.parquet")
+    assert any(shared.column("runtime.simulation_reused").to_pylist())
+    assert not (out / "runs").exists()  # no run's files unless the study asks
+    single = run_study(study, tmp_path / "single", workers=1, runs_per_task=1)
+    assert single.tasks == 6
+    alone = pq.read_table(tmp_path / "single" / "results.parquet")
+    assert not any(alone.column("runtime.simulation_reused").to_pylist())
+    assert rows_bits(shared) == rows_bits(alone)
+
+
 def test_compaction_keeps_the_first_row_of_a_key_saved_twice(tmp_path):
     store = ResultStore(tmp_path)
     store.append([{"run_key": "a", "status": "ok", "x": 1.0}, {"run_key": "b", "status": "ok", "x": 2.0}])

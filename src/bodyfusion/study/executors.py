@@ -1,13 +1,16 @@
 """Where a study's runs execute: a local process pool or a Dask distributed cluster.
 
-``local``: a process pool of spawned workers. ``dask``: a Dask distributed ``LocalCluster``
+Runs travel in tasks (:func:`bodyfusion.study.grid.plan_tasks`: a few runs each, those that
+share a simulation together), each executed by :func:`bodyfusion.study.worker.execute_runs`
+in a worker that stays up for the whole study (its imports and compiled kernels are loaded
+once). ``local``: a process pool of spawned workers. ``dask``: a Dask distributed ``LocalCluster``
 (one process per worker, one thread each) or an existing cluster's scheduler, whose
 workers must have this package installed. Workers run single-threaded BLAS in both, so a
 run gives the same bits wherever it runs; only the timing columns
 (:func:`bodyfusion.study.results.is_timing_column`) differ. Each worker loads the compiled
 kernels from Numba's on-disk cache, which writes each entry to a temporary file and
 renames it, so workers compiling at once do not corrupt it. Each finished row is handed
-to ``on_row`` as it arrives. Workers never outlive the study: the pool's end with their
+to ``on_row`` as its task returns. Workers never outlive the study: the pool's end with their
 parent (:func:`exit_with_parent`); Dask's nannies and workers end when their scheduler's
 process does (Dask's own parent watch).
 """
@@ -33,7 +36,9 @@ from typing import Any
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.extras import import_optional
 from bodyfusion.study.grid import RunSpec
-from bodyfusion.study.worker import error_text, execute_run
+from bodyfusion.study.worker import error_text, execute_runs
+
+log = logging.getLogger(__name__)
 
 
 class Executor(str, enum.Enum):
@@ -85,17 +90,18 @@ def exit_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def run_local(specs: list[RunSpec], workers: int, on_row: Callable[[dict[str, Any]], None]) -> None:
-    """Execute ``specs`` on a pool of ``workers`` spawned processes, which end with the study
+def run_local(tasks: list[list[RunSpec]], workers: int, on_row: Callable[[dict[str, Any]], None]) -> None:
+    """Execute ``tasks`` on a pool of ``workers`` spawned processes, which end with the study
     (:func:`exit_with_parent`); a dead worker stops the study with a FusionError (the rows
-    already handed over are kept)."""
+    already handed over are kept; the runs of its task are run again on resume)."""
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=exit_with_parent, initargs=(os.getpid(),))
     try:
-        with _worker_environment():  # workers are spawned as the first runs are submitted
-            futures = [pool.submit(execute_run, s) for s in specs]
+        with _worker_environment():  # workers are spawned as the first tasks are submitted
+            futures = [pool.submit(execute_runs, task) for task in tasks]
         for fut in as_completed(futures):
-            on_row(fut.result())
+            for row in fut.result():
+                on_row(row)
     except BrokenProcessPool:
         message = "a worker process died; the finished runs are saved: run the study again to resume"
         raise FusionError(message) from None
@@ -103,10 +109,11 @@ def run_local(specs: list[RunSpec], workers: int, on_row: Callable[[dict[str, An
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def run_dask(specs: list[RunSpec], workers: int, scheduler: str | None,
+def run_dask(tasks: list[list[RunSpec]], workers: int, scheduler: str | None,
              on_row: Callable[[dict[str, Any]], None]) -> None:
-    """Execute ``specs`` on a LocalCluster of ``workers`` processes, or on the cluster at
-    ``scheduler``; a run whose worker died becomes a failed row."""
+    """Execute ``tasks`` on a LocalCluster of ``workers`` processes, or on the cluster at
+    ``scheduler``; the runs of a task whose worker died are run again one per task, and a run
+    whose worker died again becomes a failed row."""
     # late: Dask/distributed are heavy (~0.4 s to import), only this executor needs them, an optional extra
     dask = import_optional("dask", "study", "the dask executor", "dask[distributed]")
     distributed = import_optional("distributed", "study", "the dask executor", "dask[distributed]")
@@ -125,13 +132,25 @@ def run_dask(specs: list[RunSpec], workers: int, scheduler: str | None,
                 client = stack.enter_context(Client(scheduler, timeout="30s"))
             except (OSError, TimeoutError) as err:
                 raise FusionError(f"--scheduler {scheduler}: cannot connect: {err}") from None
-        futures = client.map(execute_run, specs, key=[f"fusion-run-{s.key}" for s in specs])
-        by_key = {f.key: s for f, s in zip(futures, specs)}
-        for fut in dask_as_completed(futures):
+        # a task whose worker died is split into runs of their own, so that only a run that
+        # kills its worker again is recorded as failed
+        futures = client.map(execute_runs, tasks, key=[f"fusion-runs-{task[0].key}-{len(task)}" for task in tasks])
+        by_key = {f.key: task for f, task in zip(futures, tasks)}
+        pending = dask_as_completed(futures)
+        for fut in pending:
+            task = by_key.pop(fut.key)
             if fut.status == "finished":
-                on_row(fut.result())
+                for row in fut.result():
+                    on_row(row)
+            elif len(task) > 1:
+                log.warning("a worker died running a task of %d runs (%s): running them one per task", len(task),
+                            error_text(fut.exception()))
+                for spec in task:
+                    single = client.submit(execute_runs, [spec], key=f"fusion-run-{spec.key}")
+                    by_key[single.key] = [spec]
+                    pending.add(single)
             else:  # the worker itself died running it (e.g. out of memory)
-                row = by_key[fut.key].head()
+                row = task[0].head()
                 row.update(status="failed", error=error_text(fut.exception()))
                 on_row(row)
             fut.release()

@@ -14,6 +14,8 @@ A study file (YAML, strict; paths relative to the study file)::
       durations_s: [0, 10, 20, 30, 40, 60, 120]
     seeds: 20                                 # seeds 0..19, or a list of seeds
     figures: {formats: [png, pdf], dpi: 300}  # optional: the plot files (default PNG, 120 dpi)
+    runs_per_task: 8                          # optional: runs a worker takes at once (default: up to 8)
+    run_outputs: false                        # optional: true writes each run's files (runs/<run key>/)
 
 ``parameters`` and ``set`` paths apply to the file the layout names: a scenario's paths
 (``layout.fuser.method``, ``systems.hand_phone.gnss.white_sigma_m``) or a layout's
@@ -21,6 +23,15 @@ A study file (YAML, strict; paths relative to the study file)::
 ``systems.<system>.gnss.outages``, a recorded layout's ``outages`` entries for that
 system; duration 0 means no outage (and the errors "at the end of the outage" are taken
 at ``start_s``, with GNSS on, so the 0-s row is the baseline).
+
+A study writes its rows (``results.parquet``), its summary and plots, and no file per run:
+``run_outputs: true`` also writes each run's folder ``runs/<run key>/`` in the output folder
+(a scenario's simulated sensor files, ``truth.csv`` and ``config.yaml``, then what ``fusion
+run`` writes: trajectories, ``metrics.json``, plots as the layout's ``output`` section says),
+at the cost of writing them. ``runs_per_task`` (default: up to 8, fewer when there are not two
+tasks per worker) sets how many runs a worker takes at once; runs that differ only in the
+scenario's ``layout`` section and the outage share one simulation when they are in one task
+(:mod:`bodyfusion.study.grid`). Neither changes a row or a run key.
 
 The model checks the file's own keys and values; :mod:`bodyfusion.study.validation`
 checks the layouts and overrides it names.
@@ -90,6 +101,8 @@ class StudySpec(StrictModel):
     outages: StudyOutages | None = None
     seeds: int | list[int]
     figures: FiguresConfig = Field(default_factory=FiguresConfig)
+    runs_per_task: int | None = Field(default=None, ge=1)
+    run_outputs: bool = False
 
     @field_validator("parameters")
     @classmethod
