@@ -370,11 +370,8 @@ class FootIns(SensorSystem):
         i = self._i + 1
         if i1 <= i:
             return
-        if self._gap_index.size == 0:  # the usual case: one compiled call
-            self.filter.run(self.run_data, i, i1, self.phi)
-            self._i = i1 - 1
-            return
-        gaps = self._gap_index[(self._gap_index >= i) & (self._gap_index < i1)]
+        g = self._gap_index  # sorted; the usual case, none, costs no search
+        gaps = g[np.searchsorted(g, i):np.searchsorted(g, i1)].tolist() if g.size else []
         for a, b in zip([i, *gaps], [*gaps, i1]):
             if a in gaps:
                 dP = np.zeros_like(self.P)
@@ -424,8 +421,7 @@ class FootIns(SensorSystem):
         self._record_state(self._i)
 
     def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        """As :meth:`apply_correction`; the smoothers keep it as the filter made it (the
-        state before it is recorded)."""
+        """As :meth:`apply_correction`; the smoothers keep it as made (the state before it kept)."""
         if self.filter.smoothable:
             self.run_data.kept_idx.append(self._i)
             self.run_data.kept_x.append(self.x.copy())
@@ -476,10 +472,8 @@ class FootIns(SensorSystem):
         Ps = np.concatenate([np.empty((0, 15, 15)), *self.run_data.override_P])
         order = np.argsort(idx, kind="stable")
         idx, Ps = idx[order], Ps[order]
-        kept_idx = np.asarray(self.run_data.kept_idx, dtype=np.int64)
-        kept_x = np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)
-        first = np.ones(kept_idx.size, dtype=bool)  # the state before the first at a sample
-        first[1:] = kept_idx[1:] != kept_idx[:-1]
+        # kept corrections: the state before the first at each sample
+        kept_idx, first = np.unique(np.asarray(self.run_data.kept_idx, dtype=np.int64), return_index=True)
         gaps = self._gap_index <= self._i
         gap_idx = self._gap_index[gaps]
         # the gap policy's inflation went through apply_correction: the last override at g − 1
@@ -488,8 +482,9 @@ class FootIns(SensorSystem):
         return {"t": self._t_nav[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
                 "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[keep]),
-                "override_P": np.ascontiguousarray(Ps[keep]), "kept_idx": np.ascontiguousarray(kept_idx[first]),
-                "kept_x": np.ascontiguousarray(kept_x[first]), "gap_idx": np.ascontiguousarray(gap_idx),
+                "override_P": np.ascontiguousarray(Ps[keep]), "kept_idx": kept_idx,
+                "kept_x": np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)[first],
+                "gap_idx": np.ascontiguousarray(gap_idx),
                 "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
                 "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
 
