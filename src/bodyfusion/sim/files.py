@@ -12,6 +12,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -21,16 +22,37 @@ FLOAT_FORMAT = "%.10g"
 """Printed precision of simulated values (10 significant digits)."""
 
 
+ROWS = 1 << 16
+"""Rows a simulated file is formatted at a time (the same bytes as at once)."""
+
+
 @dataclass
 class SimFile:
     """One sensor file of a simulated system: ``section``, the key (within the system's layout
-    section) of the section that reads it; ``name``, its file name; ``columns``, its table as the
-    file holds it; ``write``, which writes the file at a path."""
+    section) of the section that reads it; ``name``, its file name; ``table``, its table as the
+    file holds it (:attr:`columns`), or what makes that table when it is first asked for (a
+    walk only written to files never holds a second, printed copy of its data); ``write``, which
+    writes the file at a path."""
 
     section: str
     name: str
-    columns: dict[str, np.ndarray]
+    table: dict[str, np.ndarray] | Callable[[], dict[str, np.ndarray]]
     write: Callable[[Path], None]
+
+    @property
+    def columns(self) -> dict[str, np.ndarray]:
+        """The file's table as the file holds it (made on first use, then kept)."""
+        if callable(self.table):
+            self.table = self.table()
+        return self.table
+
+
+def savetxt_rows(fh: TextIO, columns: list[np.ndarray], fmt: str | list[str], delimiter: str = " ") -> None:
+    """``numpy.savetxt(fh, numpy.column_stack(columns), fmt, delimiter)`` (the same text),
+    :data:`ROWS` rows at a time: no table of the whole file is built."""
+    n = len(columns[0])
+    for lo in range(0, n, ROWS):
+        np.savetxt(fh, np.column_stack([c[lo:lo + ROWS] for c in columns]), fmt=fmt, delimiter=delimiter)
 
 
 _FORMAT = re.compile(r"%\.(\d+)([gf])")
@@ -78,20 +100,25 @@ def write_imu_csv(path: Path, columns: tuple[str, ...], t: np.ndarray, acc: np.n
     """An IMU CSV: ``t`` (s), specific force x y z (m/s^2), angular rate x y z (rad/s), any
     ``extra`` (N, k) float columns, then an optional 0/1 ``flags`` column (stance, step);
     ``columns`` names them all, in that order."""
-    parts = [t, acc, gyro, *extra] + ([flags.astype(float)] if flags is not None else [])
-    table = np.column_stack(parts)
-    fmt = [FLOAT_FORMAT] * (table.shape[1] - (flags is not None)) + (["%d"] if flags is not None else [])
-    np.savetxt(path, table, fmt=fmt, delimiter=",", header=",".join(columns), comments="")
+    parts = [t, acc, gyro, *extra]
+    floats = sum(1 if p.ndim == 1 else p.shape[1] for p in parts)
+    fmt = [FLOAT_FORMAT] * floats + (["%d"] if flags is not None else [])
+    with open(path, "w") as fh:
+        fh.write(",".join(columns) + "\n")
+        savetxt_rows(fh, [*parts] + ([flags] if flags is not None else []), fmt, ",")
 
 
 def imu_file(section: str, name: str, columns: tuple[str, ...], t: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
              *extra: np.ndarray, flags: np.ndarray | None = None) -> SimFile:
     """The IMU file :func:`write_imu_csv` writes, as a :class:`SimFile` read by the layout section
     ``section``: its columns at the printed precision (flags as booleans)."""
-    values = np.column_stack([t, acc, gyro, *extra])
-    table = {col: printed(values[:, j], FLOAT_FORMAT) for j, col in enumerate(columns[:values.shape[1]])}
-    if flags is not None:
-        table[columns[-1]] = np.asarray(flags, dtype=bool)
+    def table() -> dict[str, np.ndarray]:
+        values = np.column_stack([t, acc, gyro, *extra])
+        out = {col: printed(values[:, j], FLOAT_FORMAT) for j, col in enumerate(columns[:values.shape[1]])}
+        if flags is not None:
+            out[columns[-1]] = np.asarray(flags, dtype=bool)
+        return out
+
     return SimFile(section, name, table, lambda path: write_imu_csv(path, columns, t, acc, gyro, *extra, flags=flags))
 
 

@@ -63,7 +63,7 @@ from numpy.polynomial import Polynomial
 
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.sim.gait_config import Foot, StanceNoiseConfig
-from bodyfusion.sim.imu import MotionState, quat_about_axis, quat_multiply
+from bodyfusion.sim.imu import MotionState, blockwise, quat_about_axis, quat_multiply
 from bodyfusion.sim.paths import direction
 
 __all__ = ["FootMotion", "Impact", "Roll", "StanceDrift", "ground_motion_samples", "stance_drift"]
@@ -221,7 +221,10 @@ class FootMotion:
         return pos, vel, acc, theta, dtheta
 
     def evaluate(self, t: np.ndarray) -> MotionState:
-        t = np.atleast_1d(np.asarray(t, dtype=float))
+        """The motion at times ``t`` (s), computed a block of instants at a time (:func:`~bodyfusion.sim.imu.blockwise`)."""
+        return blockwise(self._evaluate, t)
+
+    def _evaluate(self, t: np.ndarray) -> MotionState:
         ts, te = self.t_start, self.t_end
         j = np.searchsorted(ts, t, side="left") - 1  # last swing that started strictly before t
         swing = (j >= 0) & (t < te[np.maximum(j, 0)])

@@ -46,7 +46,7 @@ from pydantic import Field
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.sim.gait import GaitPlan
-from bodyfusion.sim.imu import MotionState, quat_about_axis, quat_multiply
+from bodyfusion.sim.imu import MotionState, blockwise, quat_about_axis, quat_multiply
 from bodyfusion.sim.paths import Arc, BodyPath, direction, left_normal
 
 __all__ = ["HandMotion", "HandSwayConfig", "hand_motion", "heel_strikes"]
@@ -127,11 +127,9 @@ class _Wobble:
 def _curvature(path: BodyPath, s: np.ndarray) -> np.ndarray:
     """Signed curvature dψ/ds (1/m, positive turning right) at arc lengths ``s``."""
     idx = np.clip(np.searchsorted(path.s_start, s, side="right") - 1, 0, len(path.segments) - 1)
-    kappa = np.zeros(s.shape)
-    for k, seg in enumerate(path.segments):
-        if isinstance(seg, Arc):
-            kappa[idx == k] = math.copysign(1.0 / seg.radius, seg.turn)
-    return kappa
+    per_segment = np.array([math.copysign(1.0 / seg.radius, seg.turn) if isinstance(seg, Arc) else 0.0
+                            for seg in path.segments])
+    return per_segment[idx]
 
 
 @dataclass(frozen=True)
@@ -143,29 +141,46 @@ class _SmoothHeading:
     kernel K(u) = (15/16)(1 − x²)²/h, x = u/h, h = width/2, turns each kink into a C² ramp
     whose second derivative is c_j K: the heading rate of the body frame is continuous (a
     point offset from the body moves without velocity jumps) and its derivative bounded.
+
+    Each point's kinks that lie h or more behind it count as the unsmoothed azimuth there
+    (``psi``, ``rate``: the azimuth and curvature after each kink), those h or more ahead of it
+    not at all; only the few within reach are smoothed, so a walk of K kinks costs O(N + K),
+    not O(N K), and every point's value is its own (the same however the points are batched).
     """
 
     az0: float
     knots: np.ndarray
     jumps: np.ndarray
     half: float
+    psi: np.ndarray
+    rate: np.ndarray
 
     @classmethod
     def of(cls, path: BodyPath, width: float) -> "_SmoothHeading":
         kappa = _curvature(path, path.s_start + 1e-12)
         jumps = np.diff(np.concatenate([[0.0], kappa]))
         keep = jumps != 0
-        return cls(path.start[1], path.s_start[keep], jumps[keep], 0.5 * width)
+        knots, jumps = path.s_start[keep], jumps[keep]
+        rate = np.cumsum(jumps)
+        psi = path.start[1] + np.concatenate([[0.0], np.cumsum(rate[:-1] * np.diff(knots))])
+        return cls(path.start[1], knots, jumps, 0.5 * width, psi, rate)
 
     def __call__(self, s: np.ndarray) -> Deriv:
         """ψ_h(s), dψ_h/ds, d²ψ_h/ds²."""
-        h = self.half
-        v, d1, d2 = np.full(s.shape, self.az0), np.zeros(s.shape), np.zeros(s.shape)
-        for sj, c in zip(self.knots, self.jumps):
+        h, knots = self.half, self.knots
+        if knots.size == 0:
+            return np.full(s.shape, self.az0), np.zeros(s.shape), np.zeros(s.shape)
+        behind = np.searchsorted(knots, s - h, side="right")  # kinks 0 .. behind−1 lie h or more behind
+        ahead = np.searchsorted(knots, s + h, side="left")    # kinks from ahead on lie h or more ahead
+        last = np.maximum(behind - 1, 0)
+        v = np.where(behind > 0, self.psi[last] + self.rate[last] * (s - knots[last]), self.az0)
+        d1 = np.where(behind > 0, self.rate[last], 0.0)
+        d2 = np.zeros(s.shape)
+        for r in range(int(np.max(ahead - behind, initial=0))):
+            j = np.minimum(behind + r, knots.size - 1)
+            sj, c = knots[j], np.where(behind + r < ahead, self.jumps[j], 0.0)
             x = np.clip((s - sj) / h, -1.0, 1.0)
-            ramp = np.where(s - sj >= h, s - sj,
-                            h * (15 / 16 * (x**2 / 2 - x**4 / 6 + x**6 / 30) + x / 2 + 5 / 32))
-            v += c * ramp
+            v += c * h * (15 / 16 * (x**2 / 2 - x**4 / 6 + x**6 / 30) + x / 2 + 5 / 32)
             d1 += c * (15 / 16 * (x - 2 * x**3 / 3 + x**5 / 5) + 0.5)
             d2 += c * 15 / 16 * (1 - x**2) ** 2 / h
         return v, d1, d2
@@ -231,7 +246,10 @@ class HandMotion:
         return _add(up, _scale(down, -1.0))
 
     def evaluate(self, t: np.ndarray) -> MotionState:
-        t = np.atleast_1d(np.asarray(t, dtype=float))
+        """The motion at times ``t`` (s), computed a block of instants at a time (:func:`~bodyfusion.sim.imu.blockwise`)."""
+        return blockwise(self._evaluate, t)
+
+    def _evaluate(self, t: np.ndarray) -> MotionState:
         env = self.envelope(t)
         s, sd, sdd = self.progress(t)
         xy, az_path = self.path.at(s)

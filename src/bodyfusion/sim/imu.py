@@ -37,6 +37,7 @@ the other terms' draws alone.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -56,6 +57,7 @@ __all__ = [
     "MotionState",
     "PRESETS",
     "SensorErrors",
+    "blockwise",
     "corrupt",
     "dcm_from_quat",
     "error_generators",
@@ -88,6 +90,27 @@ class Motion(Protocol):
     """Anything the ideal IMU can sample: analytic in time, vectorised."""
 
     def evaluate(self, t: np.ndarray) -> MotionState: ...
+
+
+EVALUATE_BLOCK = 1 << 16
+"""Instants a motion model evaluates at once (:func:`blockwise`): its temporaries are a few
+dozen arrays of this length, whatever the length of the walk."""
+
+
+def blockwise(evaluate: Callable[[np.ndarray], MotionState], t: np.ndarray) -> MotionState:
+    """``evaluate(t)`` of a motion that computes every instant on its own (the same numbers),
+    :data:`EVALUATE_BLOCK` instants at a time into arrays sized once."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    if t.size <= EVALUATE_BLOCK:
+        return evaluate(t)
+    n = t.size
+    out = MotionState(pos=np.empty((n, 3)), vel=np.empty((n, 3)), acc=np.empty((n, 3)), q_nb=np.empty((n, 4)),
+                      omega_n=np.empty((n, 3)))
+    for lo in range(0, n, EVALUATE_BLOCK):
+        part = evaluate(t[lo:lo + EVALUATE_BLOCK])
+        for name in ("pos", "vel", "acc", "q_nb", "omega_n"):
+            getattr(out, name)[lo:lo + EVALUATE_BLOCK] = getattr(part, name)
+    return out
 
 
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -369,15 +392,42 @@ def corrupt(ideal: np.ndarray, rate_hz: float, errors: SensorErrors,
 
     bias = np.asarray(errors.bias, dtype=float) + errors.bias_sd * r["bias"].standard_normal(3)
     out += bias
+    # each random term drawn and added NOISE_BLOCK samples at a time: the same numbers as whole
     if errors.bias_instability > 0:
-        out += gauss_markov(n, dt, errors.bias_instability, errors.bias_tau_s, r["gauss_markov"])
+        sigma, tau = errors.bias_instability, errors.bias_tau_s
+        phi = math.exp(-dt / tau)
+        c = sigma * math.sqrt(-math.expm1(-2.0 * dt / tau))
+        state = np.zeros((1, 3))
+        for lo, z in _normal_blocks(r["gauss_markov"], n):
+            if lo == 0:
+                z[0] *= sigma / c  # so that b_0 = σ z_0 (stationary start), as gauss_markov
+            y, state = lfilter([c], [1.0, -phi], z, axis=0, zi=state)
+            out[lo:lo + len(z)] += y
     if errors.bias_random_walk > 0:
-        steps = errors.bias_random_walk * math.sqrt(dt) * r["random_walk"].standard_normal((n, 3))
-        steps[0] = 0.0
-        out += np.cumsum(steps, axis=0)
+        last = np.zeros(3)
+        for lo, z in _normal_blocks(r["random_walk"], n):
+            steps = errors.bias_random_walk * math.sqrt(dt) * z
+            if lo == 0:
+                steps[0] = 0.0
+            steps[0] += last
+            np.cumsum(steps, axis=0, out=steps)
+            out[lo:lo + len(z)] += steps
+            last = steps[-1]
     if errors.noise_density > 0:
-        out += errors.noise_density * math.sqrt(rate_hz) * r["white"].standard_normal((n, 3))
+        for lo, z in _normal_blocks(r["white"], n):
+            out[lo:lo + len(z)] += errors.noise_density * math.sqrt(rate_hz) * z
     return out
+
+
+NOISE_BLOCK = 1 << 16
+"""Samples of each random error term drawn at a time (:func:`corrupt`)."""
+
+
+def _normal_blocks(rng: np.random.Generator, n: int) -> Iterator[tuple[int, np.ndarray]]:
+    """``rng.standard_normal((n, 3))`` as (first row, rows) blocks of :data:`NOISE_BLOCK`
+    rows: the same numbers (a generator's draws follow each other however they are asked for)."""
+    for lo in range(0, n, NOISE_BLOCK):
+        yield lo, rng.standard_normal((min(NOISE_BLOCK, n - lo), 3))
 
 
 def measured_imu(motion: Motion, t: np.ndarray, rate_hz: float, gravity_mps2: float, imu: ImuErrorConfig,
@@ -388,4 +438,6 @@ def measured_imu(motion: Motion, t: np.ndarray, rate_hz: float, gravity_mps2: fl
     acc, gyro = ideal_imu(motion, t, gravity_mps2)
     errors = imu.resolve()
     rngs = error_generators(seed, name)
-    return corrupt(acc, rate_hz, errors.acc, rngs, "acc"), corrupt(gyro, rate_hz, errors.gyro, rngs, "gyro")
+    acc = corrupt(acc, rate_hz, errors.acc, rngs, "acc")  # the measured replaces the ideal
+    gyro = corrupt(gyro, rate_hz, errors.gyro, rngs, "gyro")
+    return acc, gyro

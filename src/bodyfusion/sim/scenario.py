@@ -65,7 +65,7 @@ from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.core.layout import Layout, apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind, SystemOutput
-from bodyfusion.sim.files import FLOAT_FORMAT, printed
+from bodyfusion.sim.files import FLOAT_FORMAT, printed, savetxt_rows
 from bodyfusion.sim.gait import plan_gait
 from bodyfusion.sim.gait_config import GaitConfig
 from bodyfusion.sim.paths import PATH_KINDS, PathConfig
@@ -251,7 +251,7 @@ class Simulated:
             fh.write(",".join(TRUTH_COLUMNS) + "\n")
             for name, out in self.outputs.items():
                 fmt = name.replace("%", "%%") + "," + ",".join([FLOAT_FORMAT] * 4)
-                np.savetxt(fh, np.column_stack([out.truth_t, out.truth_pos]), fmt=fmt)
+                savetxt_rows(fh, [out.truth_t, out.truth_pos], fmt)
         config_path = out_dir / CONFIG_FILE
         source = self.loaded.file.name if self.loaded.file is not None else "a scenario"
         header = (f"# Simulated by `fusion simulate` from {source} (seed {self.seed}"
