@@ -39,7 +39,9 @@ from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA,
                                        keep_yaw_unobservable, quadratic_inverse, update_columns, update_selected)
 
 ZUPT_COLUMNS = np.array([3, 4, 5, 8], dtype=np.int64)
-"""The error states a ZUPT's Jacobian touches: δv (3:6) and the heading δψ (8)."""
+"""The error states a ZUPT's Jacobian touches: δv (3:6) and the heading δψ (8). Kernels take
+a writable copy: numba types a global array as read-only, and a kernel given both read-only
+and writable index arrays compiles twice."""
 
 
 @numba.njit(cache=True)
@@ -106,11 +108,13 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: flo
         Hc[k, k] = 1.0
     yaw = np.empty(3)
     unobservable_yaw_column(Hc[:, 0:3], x[3:6], yaw)
-    Hc[:, 3] = yaw
-    S0 = innovation_covariance(P, ZUPT_COLUMNS, Hc, 0.0)
+    for k in range(3):  # not Hc[:, 3] = yaw: a slice assignment compiles numba's shape-error message (~2 s)
+        Hc[k, 3] = yaw[k]
+    cols = ZUPT_COLUMNS.copy()  # writable like update_selected's np.arange: one signature of each kernel
+    S0 = innovation_covariance(P, cols, Hc, 0.0)
     r_var = sigma_v * sigma_v
     nis = _nis_with_noise(S0, y, r_var)
-    update_columns(P, ZUPT_COLUMNS, Hc, y, gate_noise_variance(S0, y, r_var, gate), dx, phi)
+    update_columns(P, cols, Hc, y, gate_noise_variance(S0, y, r_var, gate), dx, phi)
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis

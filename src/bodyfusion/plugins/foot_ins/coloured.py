@@ -86,7 +86,8 @@ def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarr
         Hb[r, 3 + r] += 1.0
     yaw = np.empty(3)
     unobservable_yaw_column(Hb[:, 3:6], x[3:6], yaw)
-    Hb[:, 8] = yaw
+    for r in range(3):  # not Hb[:, 8] = yaw: a slice assignment compiles numba's shape-error message (~2 s)
+        Hb[r, 8] = yaw[r]
     # θ = Q T̄ᵀ (15, 3); R̄ = T̄ θ + R (eq. 10)
     theta = np.empty((15, 3))
     for r in range(15):
