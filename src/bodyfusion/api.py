@@ -21,9 +21,8 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError
@@ -40,9 +39,12 @@ from bodyfusion.core.output import write_outputs
 from bodyfusion.core.result import RunResult
 from bodyfusion.core.run import run_layout
 from bodyfusion.io.tables import tables_by_name
-from bodyfusion.sim.scenario import SimulationResult, simulated
-from bodyfusion.study.runner import StudyReport
-from bodyfusion.study.runner import run_study as _run_study
+
+if TYPE_CHECKING:  # imported where used: pandas, the simulator and the study runner are slow to import
+    import pandas as pd
+
+    from bodyfusion.sim.scenario import SimulationResult
+    from bodyfusion.study.runner import StudyReport
 
 LayoutSource = str | Path | Mapping[str, Any] | BaseModel | LoadedLayout
 """What a layout is made from: a YAML file, a dict (its values may be pydantic section models),
@@ -154,6 +156,10 @@ def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = No
     hand its streams over in memory with a layout that reads them (:class:`Simulation`). With
     ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte.
     ``progress``: ``True`` for a bar on stderr, or a callable told (systems simulated, systems)."""
+    import pandas as pd
+
+    from bodyfusion.sim.scenario import simulated
+
     with reporting(progress, "simulating", "systems") as told:
         sim = simulated(scenario, seed, overrides, told)
     raw, tables = sim.in_memory()
@@ -177,4 +183,6 @@ def run_study(study: str | Path, out_dir: str | Path, *, executor: str = "local"
     ``workers``) or ``dask`` (a LocalCluster, or the cluster at ``scheduler``; ``pip install
     "bodyfusion[study]"``). ``progress``: ``True`` for a bar on stderr, or a callable told
     (runs finished, runs in all)."""
+    from bodyfusion.study.runner import run_study as _run_study
+
     return _run_study(study, out_dir, executor, workers, scheduler, progress=progress)
