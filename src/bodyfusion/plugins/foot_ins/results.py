@@ -54,3 +54,69 @@ def stance_phases(t: np.ndarray, stance: np.ndarray) -> dict[str, np.ndarray]:
     sample's time (s)."""
     starts, ends = detectors.stance_events(stance)
     return {"event": np.full(starts.size, "stance"), "t": t[starts], "t_end": t[ends - 1]}
+
+
+class Rows:
+    """Rows of one ``shape`` and ``dtype`` appended one at a time into blocks of ``block`` rows,
+    each allocated when the last fills: no Python object per row, at most one block unused and
+    no copy as it grows (:meth:`array` makes the one copy)."""
+
+    def __init__(self, shape: tuple[int, ...] = (), dtype: type | np.dtype = np.float64, block: int = 1024) -> None:
+        self._shape, self._dtype, self._block = shape, dtype, block
+        self._blocks: list[np.ndarray] = []
+        self._n = 0
+
+    def append(self, row: object) -> None:
+        k = self._n % self._block
+        if k == 0:
+            self._blocks.append(np.empty((self._block, *self._shape), dtype=self._dtype))
+        self._blocks[-1][k] = row
+        self._n += 1
+
+    def __len__(self) -> int:
+        return self._n
+
+    def array(self) -> np.ndarray:
+        """The rows so far, (n, *shape) (a copy)."""
+        out = np.empty((self._n, *self._shape), dtype=self._dtype)
+        for k, block in enumerate(self._blocks):
+            rows = out[k * self._block:(k + 1) * self._block]
+            rows[...] = block[:len(rows)]
+        return out
+
+
+_UPPER = np.triu_indices(15)
+_LOWER = np.tril_indices(15, -1)
+
+
+class CovarianceLog:
+    """The (15, 15) covariances a foot INS leaves at samples by corrections outside its compiled
+    loop (fuser, position fix, gap policy), for the smoothers, kept compactly: a symmetric one
+    (every one that went through the closed-loop reset, which symmetrises) as its upper
+    triangle, 120 numbers instead of 225; any other's strict lower triangle beside it. The
+    same numbers come back (:meth:`covariances`)."""
+
+    def __init__(self) -> None:
+        self.idx = Rows((), np.int64)
+        self.upper = Rows((_UPPER[0].size,))
+        self.lower_at = Rows((), np.int64)
+        self.lower = Rows((_LOWER[0].size,))
+
+    def add(self, i: int, P: np.ndarray) -> None:
+        """The covariance ``P`` (15, 15) left at sample ``i``."""
+        if not np.array_equal(P, P.T):
+            self.lower_at.append(len(self.idx))
+            self.lower.append(P[_LOWER])
+        self.idx.append(i)
+        self.upper.append(P[_UPPER])
+
+    def __len__(self) -> int:
+        return len(self.idx)
+
+    def covariances(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) sample indices and (n, 15, 15) covariances, in the order they were added."""
+        P = np.empty((len(self.idx), 15, 15))
+        P[:, _UPPER[0], _UPPER[1]] = self.upper.array()
+        P[:, _LOWER[0], _LOWER[1]] = P[:, _LOWER[1], _LOWER[0]]
+        P[self.lower_at.array()[:, None], _LOWER[0], _LOWER[1]] = self.lower.array()
+        return self.idx.array(), P

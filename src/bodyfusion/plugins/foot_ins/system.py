@@ -30,7 +30,7 @@ from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_STANCE, run_foot_ins)
-from bodyfusion.plugins.foot_ins.results import foot_covariance, foot_states, stance_phases, zupt_columns
+from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 
 MIN_STILL_SAMPLES = 10
@@ -307,6 +307,7 @@ class FootIns(SensorSystem):
                                 np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
                                 np.zeros(COUNTERS_SIZE))
         self.run_data.hist_x[0] = self.x
+        self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
         self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
@@ -433,8 +434,7 @@ class FootIns(SensorSystem):
         self.hist_x[i] = self.x
         self._record_position_covariance(i)
         if self.filter.smoothable:
-            self.run_data.override_idx.append(np.array([i], dtype=np.int64))
-            self.run_data.override_P.append(self.P[None].copy())
+            self.corrections.add(i, self.P)
 
     def track_transition(self) -> None:
         if not self.filter.tracks_transition:
@@ -468,10 +468,10 @@ class FootIns(SensorSystem):
         if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
-        idx = np.concatenate([np.empty(0, dtype=np.int64), *self.run_data.override_idx])
-        Ps = np.concatenate([np.empty((0, 15, 15)), *self.run_data.override_P])
-        order = np.argsort(idx, kind="stable")
-        idx, Ps = idx[order], Ps[order]
+        idx, Ps = self.corrections.covariances()  # in time order; the ckf's own before them, sorted stably
+        if self.run_data.override_idx:
+            order = np.argsort(idx := np.concatenate([*self.run_data.override_idx, idx]), kind="stable")
+            idx, Ps = idx[order], np.concatenate([*self.run_data.override_P, Ps])[order]
         # kept corrections: the state before the first at each sample
         kept_idx, first = np.unique(np.asarray(self.run_data.kept_idx, dtype=np.int64), return_index=True)
         gaps = self._gap_index <= self._i
@@ -481,11 +481,10 @@ class FootIns(SensorSystem):
         keep[np.searchsorted(idx, gap_idx - 1, side="right") - 1] = False
         return {"t": self._t_nav[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
-                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": np.ascontiguousarray(idx[keep]),
-                "override_P": np.ascontiguousarray(Ps[keep]), "kept_idx": kept_idx,
+                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": idx if keep.all() else idx[keep],
+                "override_P": Ps if keep.all() else Ps[keep], "kept_idx": kept_idx,
                 "kept_x": np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)[first],
-                "gap_idx": np.ascontiguousarray(gap_idx),
-                "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
+                "gap_idx": np.ascontiguousarray(gap_idx), "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
                 "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
 
     def smooth(self, cfg: SmootherConfig) -> dict | None:
