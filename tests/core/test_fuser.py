@@ -13,7 +13,7 @@ from bodyfusion.core.constraints import (
     constrained_covariance,
     solve_projection,
 )
-from bodyfusion.core.fuser import spread_correction, truncated_moments, truncation_correction
+from bodyfusion.core.fuser import spread_correction, truncated_moments, truncation_correction, truncation_rows
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run, run_layout
 from bodyfusion.sim import simulate
@@ -37,7 +37,8 @@ def horizontal_separation(result) -> np.ndarray:
 def test_maximum_separation_holds_after_every_epoch():
     result = walkers("projection", 20.0)
     assert result.fuser.epochs == 2000
-    assert result.fuser.activations > 100
+    # the truncation cuts the estimates' tails before their means cross the limit
+    assert result.fuser.activations + result.fuser.tail_truncations > 100
     assert horizontal_separation(result).max() <= 1.5 + 1e-6
     assert result.fuser.max_violation_after_m < 1e-6
 
@@ -115,7 +116,10 @@ def test_spread_correction_moves_correlated_states_by_regression():
     assert np.linalg.eigvalsh(P_new).min() > -1e-10
 
 
-def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet(tmp_path):
+def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet_under_the_projection(tmp_path):
+    """The projection acts only where the estimates break the limit. (The truncation also cuts
+    the tail of their density beyond it, which moves estimates whose covariance exceeds their
+    error — these have none — by the cut tail's mean.)"""
     config = simulate(ROOT / "configs" / "sim_perfect_walk.yaml", tmp_path, seed=0).config_path
     free = run_layout(load_layout(config))
     truth = free.truths
@@ -124,7 +128,7 @@ def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet(tmp_path):
                                                            for c in truth["right_foot"].pos_n.T]).T)[:, :2].T)
     limit = float(np.round(sep.max() + 0.05, 2))
     constrained = run_layout(load_layout(config, [
-        "fuser.method=projection",
+        "fuser.method=projection", "fuser.inequality=projection",
         f"constraints=[{{between: [left_foot, right_foot], kind: max, distance_m: {limit}}}]"]))
     for name, score in constrained.scores.items():
         assert score.metrics["horizontal_error_m"]["max"] < 0.01, name
@@ -184,9 +188,10 @@ def test_positions_only_correction_leaves_the_other_states_and_their_variances()
 def test_truncation_gives_the_moments_of_the_density_cut_at_the_bound(violation_sd):
     """Two positions 100 m apart (the bound nearly linear over their spread) whose separation
     σ is 0.6 m, a ``max`` limit the estimate violates by ``violation_sd`` σ (−1: inside, the
-    solver finds it inactive): the corrected mean and covariance of both positions match the
-    Monte-Carlo moments of the Gaussian with the infeasible samples cut away (the projection,
-    which puts the mean on the bound, misses them by 0.2–0.3 m)."""
+    solver finds it inactive, but a sixth of the density lies beyond it): the corrected mean
+    and covariance of both positions match the Monte-Carlo moments of the Gaussian with the
+    infeasible samples cut away (the projection, which puts the mean on the bound, misses them
+    by 0.2–0.3 m, and leaves the inactive case as it was)."""
     rng = np.random.default_rng(3)
     A = rng.normal(size=(6, 6))
     Sigma = 0.02 * A @ A.T + np.diag([0.1, 0.1, 0.01, 0.05, 0.05, 0.01])
@@ -195,19 +200,28 @@ def test_truncation_gives_the_moments_of_the_density_cut_at_the_bound(violation_
     g[0:2], g[3:5] = -p_hat[3:5] / np.linalg.norm(p_hat[3:5]), p_hat[3:5] / np.linalg.norm(p_hat[3:5])
     s = np.sqrt(g @ Sigma @ g)
     limit = np.linalg.norm(p_hat[3:5]) - violation_sd * s
-    sol = ProjectionSolver(2, [DistanceConstraint(0, 1, "max", limit)]).solve(p_hat, Sigma)
-    if violation_sd < 0:
-        assert not sol.active
-        return
-    dx, P = truncation_correction(Sigma, np.arange(6), p_hat, sol, np.array([False]))
+    cons = [DistanceConstraint(0, 1, "max", limit)]
+    sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
+    assert bool(sol.active) == (violation_sd > 0)
+    dx, P = truncation_correction(Sigma, np.arange(6), p_hat, *truncation_rows(sol, p_hat, Sigma, cons)[:3])
     draws = rng.multivariate_normal(p_hat, Sigma, size=1_000_000)
     kept = draws[np.linalg.norm(draws[:, 3:5] - draws[:, 0:2], axis=1) <= limit]
     assert kept.shape[0] > 5000
     np.testing.assert_allclose(p_hat + dx, kept.mean(axis=0), atol=0.02)  # Monte-Carlo noise: 0.6 m / √5000
     np.testing.assert_allclose(P, np.cov(kept.T), atol=0.02)
     assert np.linalg.eigvalsh(P).min() > 0
-    dx_projected, _ = spread_correction(Sigma, np.arange(6), sol)
-    assert np.abs(p_hat + dx_projected - kept.mean(axis=0)).max() > 0.1
+    if sol.active:
+        dx_projected, _ = spread_correction(Sigma, np.arange(6), sol)
+        assert np.abs(p_hat + dx_projected - kept.mean(axis=0)).max() > 0.1
+
+
+def test_a_limit_far_beyond_the_estimates_density_is_not_truncated():
+    Sigma = 0.001 * np.eye(6)
+    p_hat = np.array([0.0, 0.0, 0.0, 0.5, 0.0, 0.0])
+    cons = [DistanceConstraint(0, 1, "max", 1.0), DistanceConstraint(0, 1, "min", 0.05)]
+    sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
+    rows, _, _, tail = truncation_rows(sol, p_hat, Sigma, cons)
+    assert not sol.active and rows.shape == (0, 6) and not tail.any()  # 0.45 m and more from either limit, σ 0.045 m: β ≥ 10
 
 
 def test_truncated_moments_are_stable_in_both_tails():
@@ -226,8 +240,9 @@ def test_an_equality_is_the_projection_under_truncation_too():
     A = rng.normal(size=(6, 6))
     Sigma = 0.05 * A @ A.T + 0.01 * np.eye(6)
     p_hat = np.array([0.0, 0.0, 0.0, 1.2, 0.3, 0.0])
-    sol = ProjectionSolver(2, [DistanceConstraint(0, 1, "fixed", 1.0)]).solve(p_hat, Sigma)
-    dx_t, P_t = truncation_correction(Sigma, np.arange(6), p_hat, sol, np.array([True]))
+    cons = [DistanceConstraint(0, 1, "fixed", 1.0)]
+    sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
+    dx_t, P_t = truncation_correction(Sigma, np.arange(6), p_hat, *truncation_rows(sol, p_hat, Sigma, cons)[:3])
     dx_p, P_p = spread_correction(Sigma, np.arange(6), sol)
     np.testing.assert_allclose(dx_t, dx_p, atol=1e-9)
     np.testing.assert_allclose(P_t, P_p, atol=1e-9)

@@ -77,7 +77,11 @@ def test_constraint_events_hold_every_constraint_at_every_epoch(vicon):
     active, idle = rows[rows.active], rows[~rows.active]
     assert (active.distance_before_m > active.limit_m).all()
     assert (active.distance_after_m < active.distance_before_m).all()
-    np.testing.assert_array_equal(idle.distance_after_m, idle.distance_before_m)
+    untouched, tails = idle[~idle.tail_truncated], idle[idle.tail_truncated]
+    np.testing.assert_array_equal(untouched.distance_after_m, untouched.distance_before_m)
+    assert len(tails) > 0 and (tails.distance_before_m <= tails.limit_m).all()
+    assert (tails.distance_after_m < tails.distance_before_m).all()  # the cut tail pulls the mean inside
+    assert not (rows.active & rows.tail_truncated).any()
     assert (active.multiplier > 0).all() and (idle.multiplier == 0).all()
     np.testing.assert_allclose(sorted(active.multiplier), sorted(vicon.fuser.multipliers))
 

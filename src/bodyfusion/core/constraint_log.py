@@ -15,8 +15,9 @@ class ConstraintLog:
     keeps east and north for a horizontal constraint, :mod:`bodyfusion.core.constraints.model`),
     ``before`` at the estimates p̂, ``after`` at the corrected estimates (the solution p* when
     the correction projects, ``fuser.inequality: projection``; inside the limit by the truncated
-    density's mean with ``truncation``); the multiplier λ follows the solvers' sign convention
-    (0 when inactive)."""
+    density's mean with ``truncation``, also where the constraint held but the estimate's density
+    crossed its limit: ``tail_truncated``); the multiplier λ follows the solvers' sign
+    convention (0 when inactive)."""
 
     def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
         self.constraints = constraints
@@ -32,6 +33,7 @@ class ConstraintLog:
         self.after_m = np.empty((epochs, k))
         self.multiplier = np.empty((epochs, k))
         self.active = np.zeros((epochs, k), dtype=bool)
+        self.tail_truncated = np.zeros((epochs, k), dtype=bool)
         self.n = 0
 
     def separations(self, p: np.ndarray) -> np.ndarray:
@@ -40,20 +42,24 @@ class ConstraintLog:
         r = (pos[self._i] + self._lever[0] - pos[self._j] - self._lever[1]) * self._axes
         return np.sqrt(np.einsum("ki,ki->k", r, r))
 
-    def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution) -> None:
-        """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution."""
+    def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution,
+               tail_truncated: np.ndarray | None = None) -> None:
+        """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution,
+        the constraints truncated in their tails (K,) bool."""
         e = self.n
         self.t[e] = t
         self.before_m[e] = self.separations(p_hat)
         self.after_m[e] = self.before_m[e] if p_after is p_hat else self.separations(p_after)
         self.multiplier[e] = solution.multipliers
         self.active[e, solution.active] = True
+        if tail_truncated is not None:
+            self.tail_truncated[e] = tail_truncated
         self.n += 1
 
     def columns(self) -> dict[str, np.ndarray]:
         """Long form, one row per epoch and constraint: ``t`` (s), ``pair`` (``a-b``), ``system_a``,
         ``system_b``, ``kind``, ``limit_m``, ``distance_before_m``, ``distance_after_m``,
-        ``multiplier``, ``active``."""
+        ``multiplier``, ``active``, ``tail_truncated``."""
         n, k = self.n, len(self.constraints)
         pick = np.tile(np.arange(k), n)
         labels = np.array([f"{c.between[0]}-{c.between[1]}" for c in self.constraints], dtype=object)
@@ -63,4 +69,5 @@ class ConstraintLog:
                 "kind": np.array([c.kind for c in self.constraints], dtype=object)[pick],
                 "limit_m": np.array([c.distance_m for c in self.constraints])[pick],
                 "distance_before_m": self.before_m[:n].ravel(), "distance_after_m": self.after_m[:n].ravel(),
-                "multiplier": self.multiplier[:n].ravel(), "active": self.active[:n].ravel()}
+                "multiplier": self.multiplier[:n].ravel(), "active": self.active[:n].ravel(),
+                "tail_truncated": self.tail_truncated[:n].ravel()}

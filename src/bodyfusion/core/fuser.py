@@ -45,7 +45,7 @@ from scipy.special import log_ndtr
 
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
-                                SocpSolver)
+                                SocpSolver, linearised)
 from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
@@ -57,13 +57,16 @@ class FuserReport:
     """What the fuser did; becomes metrics.json ``constraints`` where constraints exist.
 
     epochs: sync epochs at which constraints were checked; activations: epochs where
-    at least one was active; multipliers: λ of every activation (m⁻² scale, see
+    at least one was active; tail_truncations: epochs where none was, but the estimate's
+    density crossed a limit and was truncated there (``inequality: truncation``,
+    :func:`truncation_rows`); multipliers: λ of every activation (m⁻² scale, see
     :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs.
     """
 
     method: str
     epochs: int = 0
     activations: int = 0
+    tail_truncations: int = 0
     solver_fallbacks: int = 0
     not_converged: int = 0
     max_violation_before_m: float = 0.0
@@ -126,6 +129,11 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
     return dx, 0.5 * (P_new + P_new.T)
 
 
+TAIL_BETA = 4.0
+"""An inactive inequality is truncated where its bound lies within this many σ of the
+estimate (beyond, the tail it cuts holds less than 3e-5 of the density)."""
+
+
 def truncated_moments(beta: float) -> tuple[float, float]:
     """Mean and variance of a standard normal truncated to X ≤ β: −φ(β)/Φ(β) and
     1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))² (in log space: stable far in either tail); below
@@ -136,12 +144,12 @@ def truncated_moments(beta: float) -> tuple[float, float]:
     return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
 
 
-def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, solution: ConstraintSolution,
+def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, bounds: np.ndarray,
                           equality: np.ndarray, positions_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Joint error-state correction dx and covariance P* by density truncation ([Simon2010]).
 
-    Each active constraint k, linearised at the solution p* (its row J_k of the solution's
-    Jacobian; g_k ≤ 0 feasible), bounds X = J_k p above by b = J_k p*. The estimate's X is
+    Each constraint k, linearised (``rows`` (K, 3n): J_k; :func:`truncation_rows`), bounds
+    X = J_k p above by ``bounds[k]`` (``equality[k]``: X = b). The estimate's X is
     N(m, s²), m = J_k p̂, s² = J_k Σ J_kᵀ; cut at b it has mean m + s μ_t and variance s² v_t
     (:func:`truncated_moments` at β = (b − m)/s). The state takes the Gaussian conditional
     on X averaged over the truncated X: with PH = P hᵀ (h: J_k in the joint state),
@@ -156,7 +164,7 @@ def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, sol
     P = P.copy()
     others = np.full(n, positions_only)  # the rows a positions-only correction leaves
     others[pos] = False
-    for row, k in zip(solution.jacobian, solution.active):
+    for row, b, fixed in zip(rows, bounds, equality):
         h = np.zeros(n)
         h[pos] = row
         PH = P @ h
@@ -165,8 +173,7 @@ def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, sol
             continue
         s = math.sqrt(s2)
         m = float(row @ (p_hat + dx[pos]))
-        b = float(row @ solution.p)
-        if equality[k]:
+        if fixed:
             shift, var = b - m, 0.0
         else:
             mean_t, var_t = truncated_moments((b - m) / s)
@@ -181,6 +188,29 @@ def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, sol
         IKH = np.eye(n) - np.outer(K, h)
         P = IKH @ P @ IKH.T + (var * s2 / (s2 - var)) * np.outer(K, K)
     return dx, 0.5 * (P + P.T)
+
+
+def truncation_rows(solution: ConstraintSolution, p_hat: np.ndarray, sigma: np.ndarray,
+                    constraints: list[DistanceConstraint]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The constraints a density truncation takes at one epoch: rows J_k (·, 3n), bounds b_k,
+    equality flags, and which constraints (K,) are taken in their tails. The active ones linearised at the solution p* (b = J_k p*); every other
+    inequality whose bound the estimate's density crosses (β = −g_k(p̂)/s_k < :data:`TAIL_BETA`,
+    s_k² = J_k Σ J_kᵀ; Σ (3n, 3n) the positions' covariance, m²) linearised at p̂
+    (b = J_k p̂ − g_k(p̂)): the limit holds although the estimate's tail says it might not, and
+    the truncation takes that information too, as [Simon2010] truncates wherever the density
+    crosses a bound."""
+    fixed = np.array([c.kind == "fixed" for c in constraints])
+    rows = [solution.jacobian]
+    bounds = [solution.jacobian @ solution.p]
+    flags = [fixed[solution.active]]
+    g, J = linearised(p_hat, constraints)
+    s2 = np.einsum("ki,ij,kj->k", J, sigma, J)
+    tail = ~fixed & (s2 > 0.0) & (-g < TAIL_BETA * np.sqrt(np.maximum(s2, 0.0)))
+    tail[solution.active] = False
+    rows.append(J[tail])
+    bounds.append(J[tail] @ p_hat - g[tail])
+    flags.append(np.zeros(int(tail.sum()), dtype=bool))
+    return np.concatenate(rows), np.concatenate(bounds), np.concatenate(flags), tail
 
 
 def scalar_update(P: np.ndarray, H: np.ndarray, y: float, r_var: float,
@@ -301,7 +331,7 @@ class Fuser:
             epochs = epoch_times(members, self.config)
             events += [(float(t), 1, 0, 0) for t in epochs]
             self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
-            self._equality = np.array([c.kind == "fixed" for c in self.constraints])
+            self._constraints = distance_constraints(self.constraints, order[:n_constrained])
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -362,14 +392,21 @@ class Fuser:
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
-        if not sol.active:
+        positions_only = self.config.correct == "positions"
+        if self.config.inequality == "truncation":
+            rows, bounds, fixed, tail = truncation_rows(sol, p_hat, P[np.ix_(pos, pos)], self._constraints)
+            if not rows.shape[0]:
+                rep.constraint_log.record(t, p_hat, p_hat, sol)
+                return
+            rep.tail_truncations += int(not sol.active)
+            dx, P_new = truncation_correction(P, pos, p_hat, rows, bounds, fixed, positions_only)
+        elif sol.active:
+            dx, P_new, tail = *spread_correction(P, pos, sol, positions_only), None
+        else:
             rep.constraint_log.record(t, p_hat, p_hat, sol)
             return
-        rep.activations += 1
-        rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
-        if self.config.inequality == "truncation":
-            dx, P_new = truncation_correction(P, pos, p_hat, sol, self._equality, self.config.correct == "positions")
-        else:
-            dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
+        if sol.active:
+            rep.activations += 1
+            rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
         joint.correct(dx, P_new, list(range(len(joint.systems) if joint.track else n)))
-        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol)
+        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, tail)

@@ -94,12 +94,14 @@ class FuserConfig(StrictModel):
     (the papers drop them). correct: spread the correction to ``all`` error states through
     their covariance with position (the papers), or correct ``positions`` only and keep the
     other states as Schmidt consider states (robust when those correlations are poorly known).
-    inequality: what an active ``max``/``min`` limit does to the estimate — ``truncation`` (the
+    inequality: what a ``max``/``min`` limit does to the estimate — ``truncation`` (the
     default) takes the mean and covariance of the estimate's density cut at the bound
     ([Simon2010]: a violation of a fraction of σ moves the estimate by less and keeps most of
-    its spread); ``projection`` puts it on the bound and shrinks its covariance as for an
-    equality ([KFSC2015] eqs. 58–60: no spread left across the bound). ``fixed`` limits are
-    equalities either way.
+    its spread), wherever the density crosses the bound, also where the mean keeps the limit
+    (within :data:`~bodyfusion.core.fuser.TAIL_BETA` σ of it); ``projection`` acts only on a
+    broken limit, puts the estimate on the bound and shrinks its covariance as for an equality
+    ([KFSC2015] eqs. 58–60: no spread left across the bound). ``fixed`` limits are equalities
+    either way.
     """
 
     method: Literal["none", "projection", "qp", "socp"] = "projection"

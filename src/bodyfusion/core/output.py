@@ -95,6 +95,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
         lam = np.asarray(rep.multipliers)
         doc["constraints"] = {
             "method": rep.method, "epochs": rep.epochs, "activations": rep.activations,
+            "tail_truncations": rep.tail_truncations,
             "solver_fallbacks": rep.solver_fallbacks, "not_converged": rep.not_converged,
             "max_violation_before_m": rep.max_violation_before_m,
             "max_violation_after_m": rep.max_violation_after_m,

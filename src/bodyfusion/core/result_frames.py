@@ -86,10 +86,11 @@ def innovations(result: RunResult) -> pd.DataFrame:
 def constraint_events(result: RunResult) -> pd.DataFrame:
     """One row per constraint per sync epoch: ``t`` (s), ``pair``, ``system_a``, ``system_b``,
     ``kind``, ``limit_m``, ``distance_before_m`` and ``distance_after_m`` (the constrained
-    separation at the estimates and after the solve), ``multiplier`` (λ) and ``active``."""
+    separation at the estimates and after the solve), ``multiplier`` (λ), ``active`` and
+    ``tail_truncated`` (held, but the estimate's density crossed the limit and was cut there)."""
     log = result.fuser.constraint_log
     columns = ["t", "pair", "system_a", "system_b", "kind", "limit_m", "distance_before_m", "distance_after_m",
-               "multiplier", "active"]
+               "multiplier", "active", "tail_truncated"]
     return pd.DataFrame(log.columns() if log is not None else {c: [] for c in columns}, columns=columns)
 
 

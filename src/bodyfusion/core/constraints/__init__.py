@@ -37,7 +37,7 @@ Modules, each importing only those above it:
 * :mod:`.kernels` — the numba kernels (one constraint's projection and
   certification, whitening, the SQP's linearisation), cached on disk;
 * :mod:`.model` — :class:`DistanceConstraint`, :class:`ConstraintSolution`, the
-  stacked layout, input checks, hint directions, :func:`violations`,
+  stacked layout, input checks, hint directions, :func:`violations`, :func:`linearised`,
   :func:`constrained_covariance`;
 * :mod:`.linearisation` — eqs. 58–60 on a linearised active set, certification of
   another solver's point;
@@ -46,7 +46,7 @@ Modules, each importing only those above it:
 """
 
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, constrained_covariance,
-                                               violations)
+                                               linearised, violations)
 from bodyfusion.core.constraints.projection import ProjectionSolver, solve_projection
 from bodyfusion.core.constraints.qp import QpSolver
 from bodyfusion.core.constraints.socp import SocpSolver
@@ -60,4 +60,5 @@ __all__ = [
     "QpSolver",
     "SocpSolver",
     "constrained_covariance",
+    "linearised",
 ]

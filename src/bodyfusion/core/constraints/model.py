@@ -33,7 +33,7 @@ object, else the one passed in ``hint_directions``, else east (+x).
 
 Here: :class:`DistanceConstraint`, :class:`ConstraintSolution`, the constraint
 set's index geometry (:class:`_Layout`, cached per set), the input checks, the hint
-directions, :func:`violations` and :func:`constrained_covariance`.
+directions, :func:`violations`, :func:`linearised` and :func:`constrained_covariance`.
 """
 
 from __future__ import annotations
@@ -323,6 +323,21 @@ def violations(p: Any, constraints: Sequence[DistanceConstraint]) -> np.ndarray:
     lay = _layout(p.shape[0] // 3, constraints)
     g, _ = lay.g_all(p.tolist())
     return np.array(lay.violation_values(g), dtype=float)
+
+
+def linearised(p: np.ndarray, constraints: Sequence[DistanceConstraint]) -> tuple[np.ndarray, np.ndarray]:
+    """Every constraint's g_k (m; ≤ 0 where it holds) and its gradient ∇g_k (K, 3n) at the
+    stacked positions p (3n,): the rows ±Eᵀu of the module docstring (zero where ‖r_k‖ = 0)."""
+    lay = _layout(p.shape[0] // 3, constraints)
+    pl = p.tolist()
+    g, rho = lay.g_all(pl)
+    J = np.zeros((lay.m, p.shape[0]))
+    for k in range(lay.m):
+        if rho[k] > 0.0:
+            u = np.asarray(lay.r(pl, k)) / (-rho[k] if lay.code[k] == 1 else rho[k])
+            J[k, lay.i3[k]:lay.i3[k] + lay.dims[k]] = u
+            J[k, lay.j3[k]:lay.j3[k] + lay.dims[k]] = -u
+    return np.asarray(g), J
 
 
 def constrained_covariance(sigma: Any, gain: Any) -> np.ndarray:

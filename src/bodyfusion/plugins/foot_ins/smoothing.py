@@ -67,15 +67,17 @@ covariance becomes the recorded one, and the smoothed track before it moves with
 relative correction — one the fuser derived from another system's estimate as well
 (:meth:`~bodyfusion.core.system.SensorSystem.apply_relative_correction`: a distance
 constraint, a measurement spread by the cross-covariances) — is kept as the filter made it:
-the smoother steps through it as a known input (the jump stays where the filter made it; its
-covariance is the recorded one). Smoothed as a measurement of this foot it would be counted
-in each foot's smoother against the other's *filtered* estimate, and an inequality
-constraint, recorded only where it was active, would be spread back over the samples where it
-held without the information that it held: on a simulated dual-foot walk (6 seeds) that made
-the smoothed feet 40–55 % worse than the constrained filter. The gap policy's inflation is
-process noise of the step across the gap. ``smoother.constrain_smoothed`` (by default wherever the fuser enforces them) has
-the core apply the constraints again to the smoothed tracks
-(:func:`bodyfusion.core.smoothing.constrain_trajectories`).
+a known input that holds no information for this foot's smoother. The whole-run RTS passes
+its adjoint through it unchanged (the jump stays where the filter made it, and before it the
+smoothed error is taken with the covariance the filter had before it); the segmented kinds
+step through it with the recorded covariance. Smoothed as a measurement of this foot it would
+be counted in each foot's smoother against the other's *filtered* estimate, and an
+inequality constraint, recorded only where it acted, would be spread back over the samples
+where it held without the information that it held: on a simulated dual-foot walk (6 seeds)
+that made the smoothed feet 40–55 % worse than the constrained filter. The gap policy's
+inflation is process noise of the step across the gap. ``smoother.constrain_smoothed`` (by
+default wherever the fuser enforces them) has the core apply the constraints again to the
+smoothed tracks (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
 
 Streaming. FB, FB-RTS and the segmented RTS run segment by segment in time order and need
 only the segment's samples and the filter's state and covariance at its start: a segment's
@@ -328,8 +330,10 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     for k in range(len(chunks) - 1, -1, -1):
         a, b = chunks[k]
         ns, ng = int(np.count_nonzero(plain[a + 1:b + 1])), int(np.count_nonzero(general[a + 1:b + 1]))
+        nk = int(np.count_nonzero((r.kept_idx > a) & (r.kept_idx <= b)))
         store = (np.empty((b - a + 1, 120)), np.empty((b - a + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
-                 np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)))
+                 np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
+                 np.empty((nk, 15, 15)))
         P_b, error = record_pass(r.hist_x[a], ckpt[k], r.memory(a), r.t, r.acc, r.gyro, r.stance, general, r.params,
                                  a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, *store)
         r.state_error = max(r.state_error, error)

@@ -220,7 +220,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
                 recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
                 kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray) -> tuple[np.ndarray, float]:
+                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray,
+                kept_P: np.ndarray) -> tuple[np.ndarray, float]:
     """The ekf over i0 < i ≤ i1 as
     :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass` (from the filter's
     state, covariance and mechanisation memory at i0, its corrections outside the loop and its
@@ -233,8 +234,11 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
       (m/s) and the heading reset's a (``yaw_reset`` of ``filter_pass``), ``st_P`` (·, 15, 4)
       the prior covariance's columns at ZUPT_COLUMNS;
     * per sample with a ``general`` update (in order): ``gen_P`` (·, 15, 15) the prior
-      covariance, ``gen_dx`` (·, 15) the correction injected (posterior ⊖ prior nominal),
-      ``gen_a`` (·, 2) the heading reset's a.
+      covariance, ``gen_dx`` (·, 15) the correction injected (posterior ⊖ prior nominal; up to
+      the state before a kept correction, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.replay_corrections`),
+      ``gen_a`` (·, 2) the heading reset's a, ``gen_kept`` (·,) whether a kept correction was made
+      there;
+    * per kept correction (in order): ``kept_P`` (·, 15, 15) the covariance before it.
 
     Returns the covariance at i1 and the largest |replayed − recorded| nominal state element."""
     q_diag = process_noise_diag(params)
@@ -251,7 +255,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     kptr = np.searchsorted(kept_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
     moved = np.empty(3)
-    ns = ng = 0
+    ns = ng = nk = 0
     error = 0.0
     for q in range(120):
         Pu[0, q] = P[PACKED[q, 0], PACKED[q, 1]]
@@ -269,6 +273,12 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         stanced = nis != NO_STANCE
         a0 = -(x[4] - x_prior[4]) if stanced else 0.0
         a1 = (x[3] - x_prior[3]) if stanced else 0.0
+        kept = kptr < kept_idx.shape[0] and kept_idx[kptr] == i
+        if kept:
+            for r in range(15):
+                for c in range(15):
+                    kept_P[nk, r, c] = P[r, c]
+            nk += 1
         ptr, kptr = replay_corrections(i, x, P, x_prior, recorded_x, ov_idx, ov_P, kept_idx, kept_x, ptr, kptr,
                                        general[i], scratch, moved)
         for k in range(16):
@@ -285,6 +295,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 gen_dx[ng, k] = scratch[k]
             gen_a[ng, 0] = a0
             gen_a[ng, 1] = a1
+            gen_kept[ng] = kept
             ng += 1
         elif stanced:
             for k in range(3):
@@ -301,7 +312,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
 @numba.njit(cache=True)
 def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray,
               i0: int, L: int, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-              gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
+              gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
+              lam: np.ndarray, Lam: np.ndarray,
               out_x: np.ndarray, out_var: np.ndarray) -> int:
     """The fixed-interval (RTS) smoother over samples i0 … i0 + L of a run, from what
     :func:`record_pass` stored, in the modified Bryson–Frazier form (G. J. Bierman,
@@ -312,7 +324,9 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
         dxs_i = −P⁺_i lam_i,   Ps_i = P⁺_i − P⁺_i Lam_i P⁺_i,
 
     and steps back through the updates (:func:`_zupt_adjoint`; :func:`_general_adjoint` where
-    ``general[i]``) and the transitions (lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ, Φ of
+    ``general[i]``; a kept correction is a known input that holds no information, so the
+    adjoint passes through it unchanged: the smoothed error before it is −P lam with the
+    covariance ``kept_P`` the filter had before it) and the transitions (lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ, Φ of
     :func:`~bodyfusion.plugins.foot_ins.kernels.transition` from the recorded state ``hist_x``
     before the step and the stored specific force): no inverse of a covariance and no process
     noise (in exact arithmetic the textbook sweep of ``rts_block``, a third of its
@@ -335,7 +349,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     Hc = np.empty((3, 4))
     K = np.empty((15, 3))
     W4 = np.empty((15, 4))
-    ns, ng = st_v.shape[0], gen_P.shape[0]
+    ns, ng, nk = st_v.shape[0], gen_P.shape[0], kept_P.shape[0]
     failed = 0
     for j in range(L, -1, -1):
         i = i0 + j
@@ -374,6 +388,14 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
             break
         if general[i]:
             ng -= 1
+            if gen_kept[ng]:  # a known input, no information: the adjoint passes through it
+                nk -= 1
+                for r in range(15):
+                    dr = 0.0
+                    for k in range(15):
+                        P[r, k] = kept_P[nk, r, k]
+                        dr -= P[r, k] * lam[k]
+                    d[r] = dr
             if not _general_adjoint(P, gen_P[ng], d, gen_dx[ng], gen_a[ng, 0], gen_a[ng, 1], lam, Lam):
                 failed += 1
                 for r in range(15):
