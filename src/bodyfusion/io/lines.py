@@ -13,7 +13,7 @@ from typing import BinaryIO
 
 from bodyfusion.base.errors import InputError
 
-CHUNK_BYTES = 1 << 22
+CHUNK_BYTES = 1 << 20
 """A file is read and parsed this many bytes (whole lines) at a time: reading it holds the numbers
 (in arrays sized once from its line count) and one chunk's text, never all its lines at once."""
 
