@@ -213,7 +213,11 @@ def innovation_covariance(P: np.ndarray, cols: np.ndarray, Hc: np.ndarray, r_var
 def nis_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float) -> float:
     """Normalised innovation squared yᵀ S⁻¹ y of a 3-D measurement selecting states
     first:first+3, S = P_sel + r_var I (the chi-square test statistic, 3 degrees of freedom)."""
-    return quadratic_inverse(innovation_covariance(P, np.arange(first, first + 3), np.eye(3), r_var), y)
+    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
+    for k in range(3):  # the selection H = [0 I 0] (not np.arange, np.eye: two more numba compilations)
+        cols[k] = first + k
+        Hc[k, k] = 1.0
+    return quadratic_inverse(innovation_covariance(P, cols, Hc, r_var), y)
 
 
 @numba.njit(cache=True)
@@ -272,7 +276,11 @@ def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: 
                     phi: np.ndarray) -> float:
     """:func:`update_columns` for a 3-D measurement that selects states first:first+3
     (H = [0 I 0])."""
-    return update_columns(P, np.arange(first, first + 3), np.eye(3), y, r_var, dx, phi)
+    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
+    for k in range(3):  # not np.arange, np.eye: two more numba compilations (~0.5 s at a cold start)
+        cols[k] = first + k
+        Hc[k, k] = 1.0
+    return update_columns(P, cols, Hc, y, r_var, dx, phi)
 
 
 @numba.njit(cache=True)

@@ -78,8 +78,11 @@ def gate_noise_variance(S0: np.ndarray, y: np.ndarray, r_var: float, gate: float
 @numba.njit(cache=True)
 def gated_noise_variance(P: np.ndarray, first: int, y: np.ndarray, r_var: float, gate: float) -> float:
     """:func:`gate_noise_variance` of a 3-D measurement selecting states first:first+3."""
-    return gate_noise_variance(innovation_covariance(P, np.arange(first, first + 3), np.eye(3), 0.0), y, r_var,
-                               gate)
+    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
+    for k in range(3):  # the selection H = [0 I 0], as update_selected writes it
+        cols[k] = first + k
+        Hc[k, k] = 1.0
+    return gate_noise_variance(innovation_covariance(P, cols, Hc, 0.0), y, r_var, gate)
 
 
 @numba.njit(cache=True)
@@ -110,7 +113,7 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: flo
     unobservable_yaw_column(Hc[:, 0:3], x[3:6], yaw)
     for k in range(3):  # not Hc[:, 3] = yaw: a slice assignment compiles numba's shape-error message (~2 s)
         Hc[k, 3] = yaw[k]
-    cols = ZUPT_COLUMNS.copy()  # writable like update_selected's np.arange: one signature of each kernel
+    cols = ZUPT_COLUMNS.copy()  # writable like update_selected's: one signature of each kernel
     S0 = innovation_covariance(P, cols, Hc, 0.0)
     r_var = sigma_v * sigma_v
     nis = _nis_with_noise(S0, y, r_var)
