@@ -6,10 +6,12 @@ with cross-covariances) for ``--hours`` (default 1), simulated once, then run as
 ``fusion run config.yaml --set smoother.kind=rts``:
 
 1. in a fresh process: wall time and peak resident memory (``wait4`` rusage);
-2. in a second, instrumented, process: the resident memory (``VmRSS``, and the high-water mark
-   ``VmHWM``) and numpy/Python allocations (``tracemalloc``: held at the end of the phase and
-   the phase's own peak) after each phase — systems built (inputs read), truth read, headings
-   aligned, navigation and fusion, smoothing, scoring, outputs written — the ten largest allocation sites held before the outputs are
+2. in a second process, the resident memory (``VmRSS``, and the high-water mark ``VmHWM``)
+   after each phase — systems built (inputs read), truth read, headings aligned, navigation
+   and fusion, smoothing, scoring, outputs written;
+3. in a third, instrumented, process the same and the numpy/Python allocations
+   (``tracemalloc``: held at the end of the phase and the phase's own peak; tracing adds to
+   the resident memory), the ten largest allocation sites held before the outputs are
    written, and the arrays each system holds, by attribute (``nbytes``).
 
 Prints the figures; last line ``peak_rss_mb=<MB> wall_s=<s> samples=<n>`` (of the plain run).
@@ -81,11 +83,13 @@ def held_arrays(obj: object, prefix: str, out: dict[str, int], depth: int = 3, s
                     seen)
 
 
-def child(config: Path, out: Path, report: Path) -> None:
-    """Run the layout with the phases instrumented; the figures into ``report`` (JSON)."""
+def child(config: Path, out: Path, report: Path, trace: bool = True) -> None:
+    """Run the layout with the phases marked (``trace``: and the allocations traced); the
+    figures into ``report`` (JSON)."""
     from bodyfusion.core import run as core_run
 
-    tracemalloc.start(1)  # numpy's allocations are charged to the project line that made them
+    if trace:
+        tracemalloc.start(1)  # numpy's allocations are charged to the project line that made them
 
     phases: list[dict] = []
 
@@ -130,7 +134,8 @@ def child(config: Path, out: Path, report: Path) -> None:
         return result
 
     def write_marked(result, *args, **kwargs):
-        top_sites()
+        if trace:
+            top_sites()
         for name, system in result.systems.items():
             held_arrays(system, name, systems_held)
         mark("scoring")
@@ -160,9 +165,10 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=1.0, help="walk duration, hours")
     ap.add_argument("--keep", type=Path, help="folder for the files (default: a temporary one, removed)")
     ap.add_argument("--child", nargs=3, type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--no-trace", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
-        child(*args.child)
+        child(*args.child, trace=not args.no_trace)
         return
     folder = args.keep or Path(tempfile.mkdtemp(prefix="memory_"))
     folder.mkdir(parents=True, exist_ok=True)
@@ -176,19 +182,22 @@ def main() -> None:
         wall, peak = measured([*fusion, "run", str(config), "--out", str(folder / "out"), "--set",
                                "smoother.kind=rts"])
         samples = json.loads((folder / "out" / "metrics.json").read_text())["runtime"]["samples"]
-        report = folder / "memory.json"
+        plain_report, report = folder / "phases.json", folder / "memory.json"
+        measured([sys.executable, __file__, "--child", str(config), str(folder / "out_phases"), str(plain_report),
+                  "--no-trace"])
         measured([sys.executable, __file__, "--child", str(config), str(folder / "out_instrumented"), str(report)])
-        doc = json.loads(report.read_text())
+        plain, doc = json.loads(plain_report.read_text()), json.loads(report.read_text())
     finally:
         if args.keep is None:
             shutil.rmtree(folder, ignore_errors=True)
     print(f"{args.hours:g} h dual-foot + hand, constraints, smoother.kind=rts: {samples} samples")
     print(f"fusion run: wall {wall:.1f} s, peak RSS {peak:.0f} MB")
-    print(f"instrumented run ({doc['wall_s']:.1f} s with tracemalloc), after each phase: RSS / high-water mark / "
-          "numpy+Python allocations held / their peak within the phase, MB")
-    for p in doc["phases"]:
-        print(f"  {p['phase']:28s} {p['rss_mb']:7.0f} {p['hwm_mb']:7.0f} {p['traced_mb']:7.0f} "
-              f"{p['traced_peak_mb']:7.0f}")
+    print(f"after each phase: RSS / high-water mark of a run ({plain['wall_s']:.1f} s); of a run with tracemalloc "
+          f"({doc['wall_s']:.1f} s): RSS / high-water mark / numpy+Python allocations held / their peak within the "
+          "phase, MB")
+    for q, p in zip(plain["phases"], doc["phases"]):
+        print(f"  {p['phase']:28s} {q['rss_mb']:7.0f} {q['hwm_mb']:7.0f}   {p['rss_mb']:7.0f} {p['hwm_mb']:7.0f} "
+              f"{p['traced_mb']:7.0f} {p['traced_peak_mb']:7.0f}")
     print("largest allocation sites held before the outputs are written, MB:")
     for where, size in doc["sites"]:
         print(f"  {size:7.1f}  {where}")

@@ -29,7 +29,7 @@ import numpy as np
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
-from bodyfusion.io.lines import line_chunks, read_lines, scan_lines  # noqa: F401 (read_lines: other readers take it from here)
+from bodyfusion.io.lines import line_chunks, read_lines, scan_lines  # noqa: F401 (other readers take read_lines)
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
 
@@ -192,8 +192,8 @@ def read_table(
     empty cell or NaN is accepted and returned as NaN (motion-capture drop-outs);
     infinity is an error in every column.
 
-    The file is read a chunk of lines at a time (:data:`CHUNK_BYTES`) into arrays sized
-    once; an error is the one the whole file's first bad line gives.
+    The file is read a chunk of lines at a time (:data:`~bodyfusion.io.lines.CHUNK_BYTES`)
+    into arrays sized once; an error is the one the whole file's first bad line gives.
     """
     arrays, line_no, _ = read_labelled_table(path, columns, None, skip_rows=skip_rows, delimiter=delimiter,
                                              allow_missing=allow_missing)
