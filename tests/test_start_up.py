@@ -1,0 +1,75 @@
+"""What ``fusion run`` imports: the main command starts without the libraries only some runs
+need (scipy.stats and scipy.signal take over a second to import, pandas 0.3 s), and the
+trajectory files are written without pandas (``pa.array`` would import it)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+NOT_AT_START = ("scipy.stats", "scipy.signal", "scipy.ndimage", "pandas", "matplotlib", "plotly")
+
+
+def _modules_after(code: str) -> set[str]:
+    """The heavy modules a fresh interpreter has imported after running ``code``."""
+    probe = f"{code}\nimport sys\nprint(' '.join(m for m in {NOT_AT_START!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    return set(out.stdout.split())
+
+
+def test_the_run_imports_no_library_it_does_not_use():
+    loaded = _modules_after(
+        "import bodyfusion.cli, bodyfusion.core.run, bodyfusion.core.output, bodyfusion.api\n"
+        "from bodyfusion.core.registry import get_registry\n"
+        "get_registry()  # every installed plugin imported\n"
+        "from bodyfusion.evaluation.consistency import chi2_band\n"
+        "from bodyfusion.nav.measurements import chi2_gate\n"
+        "chi2_band(2), chi2_gate(0.99, 3)")
+    assert not loaded
+
+
+def test_trajectory_files_are_written_without_pandas(tmp_path):
+    loaded = _modules_after(
+        "import numpy as np\n"
+        "from pathlib import Path\n"
+        "from bodyfusion.base.types import Trajectory\n"
+        "from bodyfusion.core.exports import write_trajectories_parquet, write_tum\n"
+        "t = np.arange(5.0)\n"
+        "tr = {'a': Trajectory(t, np.ones((5, 3)), np.ones((5, 3)), np.zeros(5)),\n"
+        "      'b': Trajectory(t, np.ones((5, 3)), np.ones((5, 3)))}\n"
+        f"out = Path({str(tmp_path)!r})\n"
+        "write_trajectories_parquet(out / 'x.parquet', tr, config_sha256='0', geodetic_origin=None)\n"
+        "write_tum(out / 'tum', tr, {}, 1)")
+    assert not loaded
+    assert (tmp_path / "x.parquet").is_file()
+
+
+@pytest.mark.parametrize("probability, dof", [(0.025, 2), (0.975, 2), (0.99, 3), (0.025, 40), (0.975, 40)])
+def test_chi2_quantiles_are_those_of_scipy_stats(probability, dof):
+    from scipy.stats import chi2
+
+    from bodyfusion.evaluation.consistency import chi2_quantile
+    from bodyfusion.nav.measurements import chi2_gate
+
+    assert chi2_quantile(probability, dof) == float(chi2.ppf(probability, dof))
+    assert chi2_gate(probability, dof) == float(chi2.ppf(probability, dof))
+
+
+def test_arrow_arrays_are_those_pa_array_makes():
+    import numpy as np
+    import pyarrow as pa
+
+    from bodyfusion.core.exports import _numbers, _strings
+
+    values = np.array([0.5, -1.25, 3.0, 1e300, 7.0])
+    mask = np.array([False, True, False, False, True])
+    assert _numbers(values).equals(pa.array(values, pa.float64()))
+    assert _numbers(values, mask=mask).equals(pa.array(values, pa.float64(), mask=mask))
+    assert _numbers(values, mask=mask).null_count == 2
+    assert _numbers(values[::2]).equals(pa.array(values[::2], pa.float64()))
+    codes = np.array([0, 1, 1, 0], dtype=np.int32)
+    assert _numbers(codes).equals(pa.array(codes))
+    names = ["left_foot", "hand", "füße"]
+    assert _strings(names).equals(pa.array(names, pa.string()))
