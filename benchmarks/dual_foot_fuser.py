@@ -7,7 +7,7 @@ alignment + fuser loop) and samples/s per stream. Last line:
 
     projection_samples_per_s=<per stream> qp_samples_per_s=<...> socp_samples_per_s=<...>
 
-Usage: python benchmarks/dual_foot_fuser.py [--repeats 5] [--epochs events|interval|sample]
+Usage: python benchmarks/dual_foot_fuser.py [--repeats 9] [--epochs events|interval|sample]
 """
 
 from __future__ import annotations
@@ -26,19 +26,20 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--epochs", default="events", choices=["events", "interval", "sample"])
     args = parser.parse_args()
     summary = []
     for method in ("none", "projection", "qp", "socp"):
         loaded = load_layout(CONFIG, [f"fuser.method={method}", f"fuser.epochs={args.epochs}"])
         run_layout(loaded)  # warm-up: kernels compiled or loaded from the cache, solver set up
-        times = []
+        times, navs = [], []
         for _ in range(args.repeats):
             t0 = time.perf_counter()
             result = run_layout(loaded)
             times.append(time.perf_counter() - t0)
-        nav = float(np.median([result.timings_s["navigation_s"]]))
+            navs.append(result.timings_s["navigation_s"])
+        nav = float(np.median(navs))
         wall = float(np.median(times))
         per_stream = max(s.samples for s in result.systems.values()) / nav
         print(f"{method:<11} epochs={result.fuser.epochs:5d} activations={result.fuser.activations:4d} "

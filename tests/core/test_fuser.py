@@ -13,7 +13,8 @@ from bodyfusion.core.constraints import (
     constrained_covariance,
     solve_projection,
 )
-from bodyfusion.core.fuser import spread_correction, truncated_moments, truncation_correction, truncation_rows
+from bodyfusion.core.constraints.truncation import DensityTruncation, truncated_moments
+from bodyfusion.core.fuser import spread_correction
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run, run_layout
 from bodyfusion.sim import simulate
@@ -203,7 +204,7 @@ def test_truncation_gives_the_moments_of_the_density_cut_at_the_bound(violation_
     cons = [DistanceConstraint(0, 1, "max", limit)]
     sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
     assert bool(sol.active) == (violation_sd > 0)
-    dx, P = truncation_correction(Sigma, np.arange(6), p_hat, *truncation_rows(sol, p_hat, Sigma, cons)[:3])
+    dx, P, _ = DensityTruncation(cons, 2).correct(Sigma, np.arange(6), p_hat, sol)
     draws = rng.multivariate_normal(p_hat, Sigma, size=1_000_000)
     kept = draws[np.linalg.norm(draws[:, 3:5] - draws[:, 0:2], axis=1) <= limit]
     assert kept.shape[0] > 5000
@@ -215,13 +216,45 @@ def test_truncation_gives_the_moments_of_the_density_cut_at_the_bound(violation_
         assert np.abs(p_hat + dx_projected - kept.mean(axis=0)).max() > 0.1
 
 
+def test_a_positions_only_truncation_is_the_joseph_update_of_the_masked_gain():
+    """Two 6-state systems (position, velocity), a ``max`` limit broken by 1 σ: with
+    ``positions_only`` the velocities keep their estimate and covariance, and P* is the
+    Joseph form (I − K h) P (I − K h)ᵀ + R K Kᵀ of the gain with its velocity rows zeroed."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(12, 12))
+    P = 0.02 * A @ A.T + 0.01 * np.eye(12)
+    pos = np.array([0, 1, 2, 6, 7, 8])
+    p_hat = np.array([0.0, 0.0, 0.0, 1.0, 0.2, 0.0])
+    h_p = np.concatenate([-p_hat[3:] / np.linalg.norm(p_hat[3:]), p_hat[3:] / np.linalg.norm(p_hat[3:])])
+    s2 = h_p @ P[np.ix_(pos, pos)] @ h_p
+    cons = [DistanceConstraint(0, 1, "max", float(np.linalg.norm(p_hat[3:]) - np.sqrt(s2)))]
+    sol = ProjectionSolver(2, cons).solve(p_hat, P[np.ix_(pos, pos)])
+    assert sol.active
+    dx, P_new, _ = DensityTruncation(cons, 2, positions_only=True).correct(P, pos, p_hat, sol)
+    others = np.setdiff1d(np.arange(12), pos)
+    assert not dx[others].any()
+    np.testing.assert_allclose(P_new[np.ix_(others, others)], P[np.ix_(others, others)], atol=1e-15)
+    h = np.zeros(12)
+    h[pos] = sol.jacobian[0]
+    s2 = h @ P @ h
+    beta = (h[pos] @ (sol.p - p_hat)) / np.sqrt(s2)
+    _, var_t = truncated_moments(beta)
+    V = s2 * var_t
+    K = P @ h * (s2 - V) / s2**2
+    K[others] = 0.0
+    IKH = np.eye(12) - np.outer(K, h)
+    np.testing.assert_allclose(P_new, IKH @ P @ IKH.T + V * s2 / (s2 - V) * np.outer(K, K), atol=1e-13)
+    assert np.linalg.eigvalsh(P_new).min() > 0
+
+
 def test_a_limit_far_beyond_the_estimates_density_is_not_truncated():
     Sigma = 0.001 * np.eye(6)
     p_hat = np.array([0.0, 0.0, 0.0, 0.5, 0.0, 0.0])
     cons = [DistanceConstraint(0, 1, "max", 1.0), DistanceConstraint(0, 1, "min", 0.05)]
     sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
-    rows, _, _, tail = truncation_rows(sol, p_hat, Sigma, cons)
-    assert not sol.active and rows.shape == (0, 6) and not tail.any()  # 0.45 m and more from either limit, σ 0.045 m: β ≥ 10
+    dx, P, tail = DensityTruncation(cons, 2).correct(Sigma, np.arange(6), p_hat, sol)
+    assert not sol.active and not tail.any() and not dx.any()
+    np.testing.assert_array_equal(P, Sigma)  # 0.45 m and more from either limit, σ 0.045 m: β ≥ 10
 
 
 def test_truncated_moments_are_stable_in_both_tails():
@@ -242,7 +275,7 @@ def test_an_equality_is_the_projection_under_truncation_too():
     p_hat = np.array([0.0, 0.0, 0.0, 1.2, 0.3, 0.0])
     cons = [DistanceConstraint(0, 1, "fixed", 1.0)]
     sol = ProjectionSolver(2, cons).solve(p_hat, Sigma)
-    dx_t, P_t = truncation_correction(Sigma, np.arange(6), p_hat, *truncation_rows(sol, p_hat, Sigma, cons)[:3])
+    dx_t, P_t, _ = DensityTruncation(cons, 2).correct(Sigma, np.arange(6), p_hat, sol)
     dx_p, P_p = spread_correction(Sigma, np.arange(6), sol)
     np.testing.assert_allclose(dx_t, dx_p, atol=1e-9)
     np.testing.assert_allclose(P_t, P_p, atol=1e-9)

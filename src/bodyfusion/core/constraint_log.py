@@ -17,7 +17,9 @@ class ConstraintLog:
     the correction projects, ``fuser.inequality: projection``; inside the limit by the truncated
     density's mean with ``truncation``, also where the constraint held but the estimate's density
     crossed its limit: ``tail_truncated``); the multiplier λ follows the solvers' sign
-    convention (0 when inactive)."""
+    convention (0 when inactive). The stacked positions before and after (``p_before``,
+    ``p_after``, (epochs, 3n), ENU m) are kept; the separations are computed from them when
+    asked (``before_m``, ``after_m``)."""
 
     def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
         self.constraints = constraints
@@ -29,18 +31,28 @@ class ConstraintLog:
                                dtype=float).reshape(2, k, 3)
         self._axes = np.array([[1.0, 1.0, 0.0 if c.horizontal else 1.0] for c in constraints]).reshape(k, 3)
         self.t = np.empty(epochs)
-        self.before_m = np.empty((epochs, k))
-        self.after_m = np.empty((epochs, k))
+        self.p_before = np.empty((epochs, 3 * len(order)))
+        self.p_after = np.empty((epochs, 3 * len(order)))
         self.multiplier = np.empty((epochs, k))
         self.active = np.zeros((epochs, k), dtype=bool)
         self.tail_truncated = np.zeros((epochs, k), dtype=bool)
         self.n = 0
 
     def separations(self, p: np.ndarray) -> np.ndarray:
-        """(K,) separation (m) of every constraint at the stacked positions p (3n,)."""
-        pos = p.reshape(-1, 3)
-        r = (pos[self._i] + self._lever[0] - pos[self._j] - self._lever[1]) * self._axes
-        return np.sqrt(np.einsum("ki,ki->k", r, r))
+        """(..., K) separation (m) of every constraint at stacked positions p (..., 3n)."""
+        pos = p.reshape(*p.shape[:-1], -1, 3)
+        r = (pos[..., self._i, :] + self._lever[0] - pos[..., self._j, :] - self._lever[1]) * self._axes
+        return np.sqrt(np.einsum("...ki,...ki->...k", r, r))
+
+    @property
+    def before_m(self) -> np.ndarray:
+        """(epochs, K) separations (m) at the estimates."""
+        return self.separations(self.p_before[:self.n])
+
+    @property
+    def after_m(self) -> np.ndarray:
+        """(epochs, K) separations (m) at the corrected estimates."""
+        return self.separations(self.p_after[:self.n])
 
     def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution,
                tail_truncated: np.ndarray | None = None) -> None:
@@ -48,8 +60,8 @@ class ConstraintLog:
         the constraints truncated in their tails (K,) bool."""
         e = self.n
         self.t[e] = t
-        self.before_m[e] = self.separations(p_hat)
-        self.after_m[e] = self.before_m[e] if p_after is p_hat else self.separations(p_after)
+        self.p_before[e] = p_hat
+        self.p_after[e] = p_after
         self.multiplier[e] = solution.multipliers
         self.active[e, solution.active] = True
         if tail_truncated is not None:
@@ -68,6 +80,6 @@ class ConstraintLog:
         return {"t": np.repeat(self.t[:n], k), "pair": labels[pick], "system_a": a[pick], "system_b": b[pick],
                 "kind": np.array([c.kind for c in self.constraints], dtype=object)[pick],
                 "limit_m": np.array([c.distance_m for c in self.constraints])[pick],
-                "distance_before_m": self.before_m[:n].ravel(), "distance_after_m": self.after_m[:n].ravel(),
+                "distance_before_m": self.before_m.ravel(), "distance_after_m": self.after_m.ravel(),
                 "multiplier": self.multiplier[:n].ravel(), "active": self.active[:n].ravel(),
                 "tail_truncated": self.tail_truncated[:n].ravel()}

@@ -35,17 +35,16 @@ systems' blocks alone and the correlation it creates is dropped, as for constrai
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Mapping, Set
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import log_ndtr
 
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
-                                SocpSolver, linearised)
+                                         SocpSolver)
+from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
@@ -59,7 +58,7 @@ class FuserReport:
     epochs: sync epochs at which constraints were checked; activations: epochs where
     at least one was active; tail_truncations: epochs where none was, but the estimate's
     density crossed a limit and was truncated there (``inequality: truncation``,
-    :func:`truncation_rows`); multipliers: λ of every activation (m⁻² scale, see
+    :mod:`bodyfusion.core.constraints.truncation`); multipliers: λ of every activation (m⁻² scale, see
     :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs.
     """
 
@@ -127,90 +126,6 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
     IM = np.eye(P.shape[0]) - M
     P_new = IM @ P @ IM.T
     return dx, 0.5 * (P_new + P_new.T)
-
-
-TAIL_BETA = 4.0
-"""An inactive inequality is truncated where its bound lies within this many σ of the
-estimate (beyond, the tail it cuts holds less than 3e-5 of the density)."""
-
-
-def truncated_moments(beta: float) -> tuple[float, float]:
-    """Mean and variance of a standard normal truncated to X ≤ β: −φ(β)/Φ(β) and
-    1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))² (in log space: stable far in either tail); below
-    β = −30 their asymptotic forms β + 1/β and 1/β² (Mills' ratio), free of cancellation."""
-    if beta < -30.0:
-        return beta + 1.0 / beta, 1.0 / (beta * beta)
-    ratio = math.exp(-0.5 * beta * beta - 0.5 * math.log(2.0 * math.pi) - float(log_ndtr(beta)))
-    return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
-
-
-def truncation_correction(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, bounds: np.ndarray,
-                          equality: np.ndarray, positions_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Joint error-state correction dx and covariance P* by density truncation ([Simon2010]).
-
-    Each constraint k, linearised (``rows`` (K, 3n): J_k; :func:`truncation_rows`), bounds
-    X = J_k p above by ``bounds[k]`` (``equality[k]``: X = b). The estimate's X is
-    N(m, s²), m = J_k p̂, s² = J_k Σ J_kᵀ; cut at b it has mean m + s μ_t and variance s² v_t
-    (:func:`truncated_moments` at β = (b − m)/s). The state takes the Gaussian conditional
-    on X averaged over the truncated X: with PH = P hᵀ (h: J_k in the joint state),
-    dx = PH (m_t − m)/s², P* = P − c PH PHᵀ, c = (s² − V)/s⁴ — written as the Joseph update
-    of a scalar measurement of noise R = V s²/(s² − V), so that ``positions_only`` (Schmidt
-    rows of the gain zero) keeps P* exact. An equality (``fixed``) or a bound far below the
-    estimate gives V → 0: the projection of [KFSC2015]. Constraints are taken one after
-    the other, each on the state the previous one left.
-    """
-    n = P.shape[0]
-    dx = np.zeros(n)
-    P = P.copy()
-    others = np.full(n, positions_only)  # the rows a positions-only correction leaves
-    others[pos] = False
-    for row, b, fixed in zip(rows, bounds, equality):
-        h = np.zeros(n)
-        h[pos] = row
-        PH = P @ h
-        s2 = float(h @ PH)
-        if not s2 > 0.0:
-            continue
-        s = math.sqrt(s2)
-        m = float(row @ (p_hat + dx[pos]))
-        if fixed:
-            shift, var = b - m, 0.0
-        else:
-            mean_t, var_t = truncated_moments((b - m) / s)
-            shift, var = s * mean_t, s2 * var_t
-        if var >= s2:
-            continue
-        gain = PH / s2
-        gain[others] = 0.0
-        dx += gain * shift
-        K = PH * ((s2 - var) / (s2 * s2))
-        K[others] = 0.0
-        IKH = np.eye(n) - np.outer(K, h)
-        P = IKH @ P @ IKH.T + (var * s2 / (s2 - var)) * np.outer(K, K)
-    return dx, 0.5 * (P + P.T)
-
-
-def truncation_rows(solution: ConstraintSolution, p_hat: np.ndarray, sigma: np.ndarray,
-                    constraints: list[DistanceConstraint]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The constraints a density truncation takes at one epoch: rows J_k (·, 3n), bounds b_k,
-    equality flags, and which constraints (K,) are taken in their tails. The active ones linearised at the solution p* (b = J_k p*); every other
-    inequality whose bound the estimate's density crosses (β = −g_k(p̂)/s_k < :data:`TAIL_BETA`,
-    s_k² = J_k Σ J_kᵀ; Σ (3n, 3n) the positions' covariance, m²) linearised at p̂
-    (b = J_k p̂ − g_k(p̂)): the limit holds although the estimate's tail says it might not, and
-    the truncation takes that information too, as [Simon2010] truncates wherever the density
-    crosses a bound."""
-    fixed = np.array([c.kind == "fixed" for c in constraints])
-    rows = [solution.jacobian]
-    bounds = [solution.jacobian @ solution.p]
-    flags = [fixed[solution.active]]
-    g, J = linearised(p_hat, constraints)
-    s2 = np.einsum("ki,ij,kj->k", J, sigma, J)
-    tail = ~fixed & (s2 > 0.0) & (-g < TAIL_BETA * np.sqrt(np.maximum(s2, 0.0)))
-    tail[solution.active] = False
-    rows.append(J[tail])
-    bounds.append(J[tail] @ p_hat - g[tail])
-    flags.append(np.zeros(int(tail.sum()), dtype=bool))
-    return np.concatenate(rows), np.concatenate(bounds), np.concatenate(flags), tail
 
 
 def scalar_update(P: np.ndarray, H: np.ndarray, y: float, r_var: float,
@@ -325,13 +240,15 @@ class Fuser:
         events: list[tuple[float, int, int, int]] = []
         if constrained:
             members = self.joint.systems[:n_constrained]
-            self._solver = SOLVERS[self.config.method](
-                n_constrained, distance_constraints(self.constraints, order[:n_constrained]),
-                tol_m=self.config.tolerance_m, max_iter=self.config.max_iterations)
+            limits = distance_constraints(self.constraints, order[:n_constrained])
+            self._solver = SOLVERS[self.config.method](n_constrained, limits, tol_m=self.config.tolerance_m,
+                                                       max_iter=self.config.max_iterations)
             epochs = epoch_times(members, self.config)
             events += [(float(t), 1, 0, 0) for t in epochs]
             self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
-            self._constraints = distance_constraints(self.constraints, order[:n_constrained])
+            self._truncation = DensityTruncation(limits, n_constrained, self.config.correct == "positions")
+            self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
+            self._sigma_ix = np.ix_(self._pos, self._pos)
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -379,29 +296,27 @@ class Fuser:
     def _constraint_epoch(self, t: float, n: int) -> None:
         """Solve the active constraints among the first n joint systems at time t and
         spread the correction (to every joint system when cross-covariances are tracked)."""
-        joint, rep = self.joint, self.report
+        joint, rep, pos = self.joint, self.report, self._pos
         joint.advance(t)
         P = joint.covariance()
-        pos = joint.pos[:3 * n]
         p_hat = np.concatenate([s.position_n() for s in joint.systems[:n]])
         t0 = time.perf_counter_ns()
-        sol = self._solver.solve(p_hat, P[np.ix_(pos, pos)])
+        sol = self._solver.solve(p_hat, P[self._sigma_ix])
         rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
         rep.epochs += 1
         rep.solver_fallbacks += int(sol.fallback)
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
-        positions_only = self.config.correct == "positions"
         if self.config.inequality == "truncation":
-            rows, bounds, fixed, tail = truncation_rows(sol, p_hat, P[np.ix_(pos, pos)], self._constraints)
-            if not rows.shape[0]:
+            dx, P_new, tail = self._truncation.correct(P, pos, p_hat, sol)
+            if not sol.active and not tail.any():
                 rep.constraint_log.record(t, p_hat, p_hat, sol)
                 return
             rep.tail_truncations += int(not sol.active)
-            dx, P_new = truncation_correction(P, pos, p_hat, rows, bounds, fixed, positions_only)
         elif sol.active:
-            dx, P_new, tail = *spread_correction(P, pos, sol, positions_only), None
+            dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
+            tail = None
         else:
             rep.constraint_log.record(t, p_hat, p_hat, sol)
             return

@@ -98,7 +98,7 @@ class FuserConfig(StrictModel):
     default) takes the mean and covariance of the estimate's density cut at the bound
     ([Simon2010]: a violation of a fraction of σ moves the estimate by less and keeps most of
     its spread), wherever the density crosses the bound, also where the mean keeps the limit
-    (within :data:`~bodyfusion.core.fuser.TAIL_BETA` σ of it); ``projection`` acts only on a
+    (within :data:`~bodyfusion.core.constraints.truncation.TAIL_BETA` σ of it); ``projection`` acts only on a
     broken limit, puts the estimate on the bound and shrinks its covariance as for an equality
     ([KFSC2015] eqs. 58–60: no spread left across the bound). ``fixed`` limits are equalities
     either way.

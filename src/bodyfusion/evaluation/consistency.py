@@ -69,9 +69,13 @@ def covariance_defects(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     scale = np.sqrt(np.where(var > 0.0, var, 1.0))
     outer = scale[..., :, None] * scale[..., None, :]
     lam_min = np.linalg.eigvalsh(sym)[..., 0]
-    lam_corr = np.linalg.eigvalsh(sym / outer)[..., 0]
-    bad = (~finite | np.any(var < 0.0, axis=-1) | (np.max(diff / outer, axis=(-2, -1)) > RTOL)
-           | (lam_corr < -RTOL))
+    # the correlation form D⁻¹ sym D⁻¹ has the inertia of sym (Sylvester): only a covariance
+    # with a negative eigenvalue can fail its test, and only those are decomposed again
+    negative = lam_min < 0.0
+    indefinite = np.zeros_like(negative)
+    if negative.any():
+        indefinite[negative] = np.linalg.eigvalsh((sym / outer)[negative])[..., 0] < -RTOL
+    bad = (~finite | np.any(var < 0.0, axis=-1) | (np.max(diff / outer, axis=(-2, -1)) > RTOL) | indefinite)
     return np.max(diff, axis=(-2, -1)), lam_min, bad
 
 

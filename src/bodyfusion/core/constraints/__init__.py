@@ -43,6 +43,8 @@ Modules, each importing only those above it:
   another solver's point;
 * :mod:`.sqp` — whitening and the sequential QP with a pluggable QP solver;
 * :mod:`.projection`, :mod:`.qp`, :mod:`.socp` — the three methods.
+* :mod:`.truncation` — the fuser's density truncation of the joint error state at the
+  limits, compiled ([Simon2010]).
 """
 
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, constrained_covariance,

@@ -1,0 +1,179 @@
+"""Density truncation of a joint error state at the distance limits ([Simon2010]), compiled.
+
+The fuser's ``inequality: truncation`` (:mod:`bodyfusion.core.fuser`). Each limit k taken,
+linearised (row J_k (3n,) over the stacked positions), bounds X = J_k p above by b_k (an
+equality: X = b_k). The estimate's X is N(m, s²), m = J_k p̂, s² = J_k Σ J_kᵀ; cut at b_k it
+has mean m + s μ_t and variance s² v_t (:func:`truncated_moments` at β = (b_k − m)/s). The
+joint state takes the Gaussian conditional on X averaged over the cut X: with PH = P hᵀ
+(h: J_k placed at the positions of the joint state),
+
+    δx += PH (m_t − m)/s²,   P* = P − c PH PHᵀ,  c = (s² − V)/s⁴,
+
+written as the Joseph update of a scalar measurement of noise R = V s²/(s² − V) with gain
+K = PH (s² − V)/s⁴, expanded to its rank-two form
+P* = P − K PHᵀ − PH Kᵀ + (s² + R) K Kᵀ (O(n²), exact for any K): a ``positions_only``
+correction (Schmidt consider states: their rows of K and of the mean's gain zero) keeps
+P* the exact covariance of that sub-optimal update. An equality, or a bound far below the
+estimate, gives V → 0: the projection of [KFSC2015]. The limits are taken one after the
+other, each on the state the previous one left.
+
+Which limits: the solver's active ones, linearised at its solution p* (b_k = J_k p*), then
+every other inequality whose bound the estimate's density crosses within :data:`TAIL_BETA`
+σ (β = −g_k(p̂)/s_k), linearised at p̂ (b_k = J_k p̂ − g_k(p̂)): the limit holds although the
+estimate's tail says it might not, and the truncation takes that information too, as
+[Simon2010] truncates wherever the density crosses a bound.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bodyfusion.core.constraints.kernels import _DEGENERATE_M, _kernel, _separation
+from bodyfusion.core.constraints.model import ConstraintSolution, DistanceConstraint, _layout
+
+TAIL_BETA = 4.0
+"""An inactive inequality is truncated where its bound lies within this many σ of the
+estimate (beyond, the tail it cuts holds less than 3e-5 of the density)."""
+
+_SQRT_2PI = math.sqrt(2.0 * math.pi)
+
+
+@_kernel
+def truncated_moments(beta: float) -> tuple[float, float]:
+    """Mean and variance of a standard normal truncated to X ≤ β: −φ(β)/Φ(β) and
+    1 − β φ(β)/Φ(β) − (φ(β)/Φ(β))², Φ(β) = erfc(−β/√2)/2 (accurate in the lower tail, where
+    both φ and Φ stay normal numbers down to β = −30); below β = −30 their asymptotic forms
+    β + 1/β and 1/β² (Mills' ratio), free of cancellation."""
+    if beta < -30.0:
+        return beta + 1.0 / beta, 1.0 / (beta * beta)
+    ratio = math.exp(-0.5 * beta * beta) / _SQRT_2PI / (0.5 * math.erfc(-beta / math.sqrt(2.0)))
+    return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
+
+
+@_kernel
+def _cut(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, row: np.ndarray, bound: float, fixed: bool,
+         others: np.ndarray, dx: np.ndarray, PH: np.ndarray, K: np.ndarray) -> bool:
+    """One limit X = row·p ≤ bound (= when ``fixed``) taken into δx (n,) and P (n, n), in place
+    (module docstring). ``others`` (n,): rows kept out of the correction. False when it cuts
+    nothing (s² = 0, or V ≥ s²)."""
+    n = P.shape[0]
+    n3 = pos.shape[0]
+    s2 = 0.0
+    m = 0.0
+    for a in range(n):
+        acc = 0.0
+        for c in range(n3):
+            if row[c] != 0.0:
+                acc += P[a, pos[c]] * row[c]
+        PH[a] = acc
+    for c in range(n3):
+        s2 += row[c] * PH[pos[c]]
+        m += row[c] * (p_hat[c] + dx[pos[c]])
+    if not s2 > 0.0:
+        return False
+    s = math.sqrt(s2)
+    if fixed:
+        shift, var = bound - m, 0.0
+    else:
+        mean_t, var_t = truncated_moments((bound - m) / s)
+        shift, var = s * mean_t, s2 * var_t
+    if var >= s2:
+        return False
+    scale = (s2 - var) / (s2 * s2)
+    for a in range(n):
+        if others[a]:
+            K[a] = 0.0
+        else:
+            dx[a] += PH[a] / s2 * shift
+            K[a] = PH[a] * scale
+    w = s2 + var * s2 / (s2 - var)
+    for a in range(n):
+        for b in range(n):
+            P[a, b] += -K[a] * PH[b] - PH[a] * K[b] + w * K[a] * K[b]
+    return True
+
+
+@_kernel
+def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, bounds: np.ndarray,
+              fixed: np.ndarray, idx: np.ndarray, geo: np.ndarray, active: np.ndarray, tail_beta: float,
+              others: np.ndarray, dx: np.ndarray, tail: np.ndarray) -> int:
+    """Every limit the truncation takes at one epoch, into δx (n,) and P (n, n) in place:
+    the active ones' ``rows`` (A, 3n) with ``bounds`` and ``fixed`` flags, then the inactive
+    inequalities within ``tail_beta`` σ of p̂ (flagged in ``tail`` (K,)). Geometry ``idx``,
+    ``geo`` as in :mod:`bodyfusion.core.constraints.kernels`. Returns the limits that cut."""
+    n = P.shape[0]
+    n3 = pos.shape[0]
+    PH = np.empty(n)
+    K = np.empty(n)
+    r = np.empty(3)
+    tail_rows = np.zeros((idx.shape[0], n3))
+    tail_bounds = np.empty(idx.shape[0])
+    for k in range(idx.shape[0]):  # the tails, tested on the estimate before any cut
+        tail[k] = False
+        code = idx[k, 3]
+        if active[k] or code == 2:
+            continue
+        rho = _separation(p_hat, idx, geo, k, r)
+        if not rho > _DEGENERATE_M:
+            continue
+        i3, j3, D = idx[k, 0], idx[k, 1], idx[k, 2]
+        sign = -1.0 if code == 1 else 1.0
+        g = sign * (rho - geo[k, 0])
+        s2 = 0.0
+        lin = 0.0
+        for t in range(D):
+            tail_rows[k, i3 + t] = sign * r[t] / rho
+            tail_rows[k, j3 + t] = -sign * r[t] / rho
+        for c in range(n3):
+            lin += tail_rows[k, c] * p_hat[c]
+            for e in range(n3):
+                s2 += tail_rows[k, c] * P[pos[c], pos[e]] * tail_rows[k, e]
+        if s2 > 0.0 and -g < tail_beta * math.sqrt(s2):
+            tail[k] = True
+            tail_bounds[k] = lin - g
+    taken = 0
+    for q in range(rows.shape[0]):
+        taken += _cut(P, pos, p_hat, rows[q], bounds[q], fixed[q], others, dx, PH, K)
+    for k in range(idx.shape[0]):
+        if tail[k]:
+            taken += _cut(P, pos, p_hat, tail_rows[k], tail_bounds[k], False, others, dx, PH, K)
+    for a in range(n):
+        for b in range(a):
+            P[a, b] = P[b, a] = 0.5 * (P[a, b] + P[b, a])
+    return taken
+
+
+class DensityTruncation:
+    """The truncation of one constraint set over the stacked positions of ``n_systems``
+    systems; ``positions_only`` keeps every state but the positions out of the correction.
+    :meth:`correct` at each epoch."""
+
+    def __init__(self, constraints: list[DistanceConstraint], n_systems: int, positions_only: bool = False) -> None:
+        lay = _layout(n_systems, constraints)
+        self._idx, self._geo = lay.idx, lay.geo
+        self._fixed = lay.idx[:, 3] == 2
+        self.positions_only = positions_only
+
+    def correct(self, P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray,
+                solution: ConstraintSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joint error-state correction δx (n,) and covariance P* (n, n) at the solver's
+        active limits and the inactive ones whose tails the estimate crosses (module
+        docstring), and which constraints (K,) were taken in their tails.
+
+        P: (n, n) joint error-state covariance (m², rad², ...); pos: (3n_sys,) int64 indices
+        of the stacked positions in it, in the order of p̂ (ENU, m) and of the solution's
+        Jacobian rows."""
+        n = P.shape[0]
+        P_new = np.array(P, dtype=float, order="C")
+        dx = np.zeros(n)
+        tail = np.zeros(self._idx.shape[0], dtype=bool)
+        active = np.zeros(self._idx.shape[0], dtype=bool)
+        active[solution.active] = True
+        others = np.full(n, self.positions_only)
+        others[pos] = False
+        rows = np.ascontiguousarray(solution.jacobian, dtype=float).reshape(len(solution.active), p_hat.shape[0])
+        _truncate(P_new, np.asarray(pos, dtype=np.int64), np.ascontiguousarray(p_hat, dtype=float), rows, rows @ solution.p, self._fixed[solution.active], self._idx, self._geo,
+                  active, TAIL_BETA, others, dx, tail)
+        return dx, P_new, tail
