@@ -20,10 +20,10 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, congruence_by_yaw_reset, inject, inv3_sym,
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inv3_sym,
                                        process_noise_diag)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
-from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, transition
+from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
 
 PACKED = np.array([(r, c) for r in range(15) for c in range(r, 15)], dtype=np.int64)
@@ -31,41 +31,62 @@ PACKED = np.array([(r, c) for r in range(15) for c in range(r, 15)], dtype=np.in
 triangle by rows."""
 
 
+@numba.njit(inline="always")
+def _transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
+                     lower: bool) -> None:
+    """M ← Φᵀ M in place (M (15, m)) for the transition Φ = I + E of
+    :func:`~bodyfusion.plugins.foot_ins.kernels.transition`, written from its non-zero entries
+    (C_nb (3, 3), the step's specific force f_n (3,) m/s² in the navigation frame, dt s):
+    E[r, 3+r] = dt (δp ← δv), E[3:6, 6:9] = −[f_n×] dt (δv ← δθ), E[3:6, 9:12] = −C_nb dt
+    (δv ← δb_a), E[6:9, 12:15] = −C_nb dt (δθ ← δb_g), E[9+k, 9+k] = da and
+    E[12+k, 12+k] = dg (the bias decay, (1 − β dt) − 1). Row c of Φᵀ M is
+    M[c] + Σ_k E[k, c] M[k] over k < c (then k = c) in increasing k, the order of a dense
+    product; rows are done from the last, so each reads rows not yet changed. With ``lower``
+    only M[c, :c + 1] of each row changes."""
+    m = M.shape[1]
+    for k in range(2, -1, -1):  # gyro bias rows 12 + k: from δθ (rows 6:9)
+        c = 12 + k
+        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
+        for q in range(c + 1 if lower else m):
+            M[c, q] = M[c, q] + e0 * M[6, q] + e1 * M[7, q] + e2 * M[8, q] + dg * M[c, q]
+    for k in range(2, -1, -1):  # accelerometer bias rows 9 + k: from δv (rows 3:6)
+        c = 9 + k
+        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
+        for q in range(c + 1 if lower else m):
+            M[c, q] = M[c, q] + e0 * M[3, q] + e1 * M[4, q] + e2 * M[5, q] + da * M[c, q]
+    f0, f1, f2 = dt * f_n[0], dt * f_n[1], dt * f_n[2]  # attitude rows: −[f×] dt from δv
+    for q in range(9 if lower else m):
+        M[8, q] = M[8, q] - f1 * M[3, q] + f0 * M[4, q]
+    for q in range(8 if lower else m):
+        M[7, q] = M[7, q] + f2 * M[3, q] - f0 * M[5, q]
+    for q in range(7 if lower else m):
+        M[6, q] = M[6, q] - f2 * M[4, q] + f1 * M[5, q]
+    for r in range(2, -1, -1):  # velocity rows: from δp
+        for q in range(4 + r if lower else m):
+            M[3 + r, q] = M[3 + r, q] + dt * M[r, q]
+
+
 @numba.njit(cache=True)
-def _transition_adjoint(Phi: np.ndarray, lam: np.ndarray, Lam: np.ndarray, ek: np.ndarray, ev: np.ndarray,
-                        V: np.ndarray, lam_out: np.ndarray, Lam_out: np.ndarray) -> None:
-    """lam_out = Φᵀ lam, Lam_out = Φᵀ Lam Φ (Lam symmetric; the result's upper triangle
-    mirrored) with Φ = I + E over the non-zero entries of E (a first-order transition: a few
-    dozen of 225). ``ek`` (225, 2) int and ``ev`` (225,) hold them; ``V`` (15, 15) scratch:
-    V = Φᵀ Lam = Lam + Eᵀ Lam (Lam symmetric: its row k is its column k), Lam_out = V + V E."""
-    n = 0
-    for k in range(15):
-        for c in range(15):
-            e = Phi[k, c] - (1.0 if k == c else 0.0)
-            if e != 0.0:
-                ek[n, 0] = k
-                ek[n, 1] = c
-                ev[n] = e
-                n += 1
-    for r in range(15):
-        lam_out[r] = lam[r]
-        for c in range(15):
-            V[r, c] = Lam[r, c]
-    for q in range(n):
-        k, c, e = ek[q, 0], ek[q, 1], ev[q]
-        lam_out[c] += e * lam[k]
-        for m in range(15):
-            V[c, m] += e * Lam[k, m]
-    for r in range(15):
-        for c in range(15):
-            Lam_out[r, c] = V[r, c]
-    for q in range(n):
-        k, c, e = ek[q, 0], ek[q, 1], ev[q]
-        for r in range(15):
-            Lam_out[r, c] += V[r, k] * e
+def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, lam: np.ndarray,
+                        Lam: np.ndarray) -> None:
+    """lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ in place (Lam (15, 15) symmetric; the result's lower
+    triangle mirrored) for the transition of one step (C_nb, f_n m/s², dt s and the bias decay
+    of the process model ``q_diag``: :func:`~bodyfusion.plugins.foot_ins.kernels.transition`),
+    from its non-zero entries (:func:`_transition_left`) rather than a dense Φ: V = Φᵀ Lam,
+    then Φᵀ Vᵀ = (V Φ)ᵀ, whose lower triangle is that of Φᵀ Lam Φ."""
+    da = (1.0 - dt * q_diag[Q_DECAY]) - 1.0
+    dg = (1.0 - dt * q_diag[Q_DECAY + 1]) - 1.0
+    _transition_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, False)
+    _transition_left(Lam, C, f_n, dt, da, dg, False)
     for r in range(15):
         for c in range(r + 1, 15):
-            Lam_out[c, r] = Lam_out[r, c]
+            v = Lam[r, c]
+            Lam[r, c] = Lam[c, r]
+            Lam[c, r] = v
+    _transition_left(Lam, C, f_n, dt, da, dg, True)
+    for r in range(15):
+        for c in range(r + 1, 15):
+            Lam[r, c] = Lam[c, r]
 
 
 @numba.njit(cache=True)
@@ -128,16 +149,19 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
         for c in range(3):
             K[r, c] = m0 * Si[0, c] + m1 * Si[1, c] + m2 * Si[2, c]
             u[c] += K[r, c] * lam[r]
-    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S)
+    # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S); W a row of
+    # Lam (symmetric) at a time, each element summed over k in the order of a row times a column
     for r in range(15):
-        w0 = w1 = w2 = 0.0
-        for k in range(15):
-            lrk = Lam[r, k]
-            w0 += lrk * K[k, 0]
-            w1 += lrk * K[k, 1]
-            w2 += lrk * K[k, 2]
-        W[r, 0], W[r, 1], W[r, 2] = w0, w1, w2
-        W[r, 3] = w0 * Hc[0, 3] + w1 * Hc[1, 3]
+        W[r, 0] = W[r, 1] = W[r, 2] = 0.0
+    for k in range(15):
+        k0, k1, k2 = K[k, 0], K[k, 1], K[k, 2]
+        for r in range(15):
+            lrk = Lam[k, r]
+            W[r, 0] += lrk * k0
+            W[r, 1] += lrk * k1
+            W[r, 2] += lrk * k2
+    for r in range(15):
+        W[r, 3] = W[r, 0] * Hc[0, 3] + W[r, 1] * Hc[1, 3]
     Z = S
     for r in range(3):
         for c in range(3):
@@ -336,15 +360,9 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     undone (general updates with a non-positive-definite prior; the sweep restarts from zero
     adjoints there, as ``rts_block`` from the filter)."""
     q_diag = process_noise_diag(params)
-    work = np.empty((15, 15))
-    Phi = np.empty((15, 15))
     P = np.empty((15, 15))
-    lam2 = np.empty(15)
-    Lam2 = np.empty((15, 15))
-    V = np.empty((15, 15))
-    ek = np.empty((225, 2), dtype=np.int64)
-    ev = np.empty(225)
     d = np.empty(15)
+    T = np.empty((3, 15))
     y = np.empty(16)
     Hc = np.empty((3, 4))
     K = np.empty((15, 3))
@@ -353,33 +371,41 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     failed = 0
     for j in range(L, -1, -1):
         i = i0 + j
-        for q in range(120):
-            v = Pu[j, q]
-            P[PACKED[q, 0], PACKED[q, 1]] = v
-            P[PACKED[q, 1], PACKED[q, 0]] = v
+        q = 0
         for r in range(15):
-            s = 0.0
-            for k in range(15):
-                s += P[r, k] * lam[k]
-            d[r] = -s
+            for c in range(r, 15):
+                v = Pu[j, q]
+                P[r, c] = v
+                P[c, r] = v
+                q += 1
+        # d = −P lam and T = (Lam P[:, 0:3])ᵀ a row of P (of Lam) at a time: P and Lam are
+        # symmetric, so each element sums over k in the order of the row-times-column product
+        for r in range(15):
+            d[r] = 0.0
+            T[0, r] = T[1, r] = T[2, r] = 0.0
+        for k in range(15):
+            lk, p0, p1, p2 = lam[k], P[k, 0], P[k, 1], P[k, 2]
+            for r in range(15):
+                d[r] += P[k, r] * lk
+            for r in range(15):
+                lkr = Lam[k, r]
+                T[0, r] += lkr * p0
+                T[1, r] += lkr * p1
+                T[2, r] += lkr * p2
+        for r in range(15):
+            d[r] = -d[r]
         for k in range(16):
             y[k] = hist_x[i, k]
         inject(y, d)
         for k in range(16):
             out_x[i, k] = y[k]
-        # position block of P Lam P: T = Lam P[:, 0:3], then P[0:3, :] T
+        # position block of P Lam P: P[0:3, :] T
         q00 = q11 = q22 = q01 = 0.0
         for k in range(15):
-            t0 = t1 = t2 = 0.0
-            for m in range(15):
-                lkm = Lam[k, m]
-                t0 += lkm * P[m, 0]
-                t1 += lkm * P[m, 1]
-                t2 += lkm * P[m, 2]
-            q00 += P[0, k] * t0
-            q11 += P[1, k] * t1
-            q22 += P[2, k] * t2
-            q01 += P[0, k] * t1
+            q00 += P[0, k] * T[0, k]
+            q11 += P[1, k] * T[1, k]
+            q22 += P[2, k] * T[2, k]
+            q01 += P[0, k] * T[1, k]
         out_var[i, 0] = P[0, 0] - q00
         out_var[i, 1] = P[1, 1] - q11
         out_var[i, 2] = P[2, 2] - q22
@@ -405,10 +431,5 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
         elif stance[i]:
             ns -= 1
             _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
-        transition(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, Phi, work)
-        _transition_adjoint(Phi, lam, Lam, ek, ev, V, lam2, Lam2)
-        for r in range(15):
-            lam[r] = lam2[r]
-            for c in range(15):
-                Lam[r, c] = Lam2[r, c]
+        _transition_adjoint(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
     return failed
