@@ -77,11 +77,19 @@ def line_chunks(path: Path) -> Iterator[tuple[int, list[str]]]:
 def scan_lines(path: Path) -> int:
     """The number of lines of the file as :func:`read_lines` splits it (line ends + 1), checking
     on the way that it is UTF-8 text (an error names the first line that is not)."""
+    return scan_text(path)[0]
+
+
+def scan_text(path: Path) -> tuple[int, bool]:
+    """:func:`scan_lines`, and whether every line end is a plain ``\n`` or ``\r\n`` (no
+    carriage return elsewhere, which other CSV readers take for a line end too)."""
     ends = 0
+    plain = True
     for k, block in enumerate(_blocks(path)):
         _decoded(path, block, k == 0, ends + 1)
         ends += block.count(b"\n")
-    return ends + 1
+        plain = plain and block.count(b"\r") == block.count(b"\r\n")
+    return ends + 1, plain
 
 
 def read_lines(path: Path) -> list[str]:
