@@ -178,3 +178,26 @@ def test_geojson_gives_surveyed_truth_as_timed_points_and_2d_positions_without_h
     lon, lat = points[1]["geometry"]["coordinates"]
     e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *ORIGIN)
     assert abs(e - 10.0) < 1e-3 and abs(n) < 1e-3
+
+
+def test_the_csv_prints_each_number_rounded_to_its_unit_and_quotes_names_only_where_csv_needs_it(tmp_path):
+    """µs and 10 µm, each the shortest decimal of the rounded number (what ``%.6f``/``%.5f``
+    print, without their trailing zeros); names bare, all quoted when one holds a comma."""
+    rng = np.random.default_rng(8)
+    t = np.cumsum(rng.uniform(0.001, 0.02, 500))
+    pos = rng.normal(scale=50.0, size=(500, 3))
+    sd = rng.uniform(0.0, 2.0, size=(500, 3))
+    trajs = {"foot": Trajectory(t, pos, sd), "hand, left": Trajectory(t, pos[::-1], sd[::-1])}
+    write_trajectories_csv(tmp_path / "t.csv", trajs)
+    rows = list(csv.reader((tmp_path / "t.csv").open()))
+    assert rows[0] == ["system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m"]
+    lines = (tmp_path / "t.csv").read_text().splitlines()
+    assert lines[1].startswith('"foot",') and lines[501].startswith('"hand, left",')
+    write_trajectories_csv(tmp_path / "bare.csv", {"foot": trajs["foot"]})
+    assert (tmp_path / "bare.csv").read_text().splitlines()[1].startswith("foot,")
+    for k, (name, tr) in enumerate(trajs.items()):
+        body = rows[1 + 500 * k:1 + 500 * (k + 1)]
+        assert {r[0] for r in body} == {name}
+        printed = [[float(f"{v:.6f}")] + [float(f"{x:.5f}") for x in (*p, *s)] for v, p, s in zip(tr.t, tr.pos_n, tr.pos_sd)]
+        assert [[float(c) for c in r[1:]] for r in body] == printed
+        assert all(len(c.partition(".")[2]) <= (6 if j == 1 else 5) for r in body for j, c in enumerate(r) if j)

@@ -77,19 +77,20 @@ def _pieces(n: int, decimate: int) -> Iterator[slice]:
         yield slice(a, min(a + step, n), decimate)
 
 
-def _rows(traj: Trajectory, epochs: slice) -> np.ndarray:
-    """(n, 7) t, position, σ of the ``epochs``."""
-    return np.column_stack([traj.t[epochs], traj.pos_n[epochs], traj.pos_sd[epochs]])
-
-
 def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], decimate: int = 1) -> None:
-    """``trajectories.csv``: long format, times s (µs printed), positions and σ m (10 µm printed);
-    written :data:`ROWS` rows at a time."""
-    with path.open("w") as fh:
-        fh.write(TRAJECTORY_HEADER + "\n")
-        for name, traj in trajectories.items():
-            for epochs in _pieces(len(traj.t), decimate):
-                np.savetxt(fh, _rows(traj, epochs), fmt=name + ",%.6f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f")
+    """``trajectories.csv``: long format, times s rounded to the µs, positions and σ m rounded to
+    10 µm, each printed as the shortest decimal that reads back as that rounded number (``0.5``,
+    not ``0.50000``); written :data:`ROWS` rows at a time by Arrow's CSV writer."""
+    with path.open("wb") as fh:
+        fh.write((TRAJECTORY_HEADER + "\n").encode())
+        schema = pa.schema([(c, pa.string() if c == "system" else pa.float64()) for c in TRAJECTORY_COLUMNS])
+        plain = not any(set(name) & set(',"\r\n') for name in trajectories)  # else quoted, as CSV needs
+        options = pacsv.WriteOptions(include_header=False, quoting_style="none" if plain else "needed")
+        with pacsv.CSVWriter(fh, schema, write_options=options) as writer:
+            for piece in _trajectory_pieces(trajectories, decimate):
+                system, t, *numbers = piece[:len(TRAJECTORY_COLUMNS)]
+                writer.write_batch(pa.RecordBatch.from_arrays(
+                    [system.dictionary_decode(), pc.round(t, 6), *(pc.round(v, 5) for v in numbers)], schema=schema))
 
 
 def frame_metadata(geodetic_origin: tuple[float, float, float] | None) -> dict:
