@@ -6,7 +6,9 @@ lap) goes, in this one process, through
 
 * the project's foot INS at its defaults (15-state error-state EKF with gated ZUPTs): the
   forward filter (``restart`` + ``advance`` over the whole stream), forward + RTS
-  (``smoother.kind=rts``, the whole-run fixed-interval smoother) and forward + FB-RTS;
+  (``smoother.kind=rts``, the whole-run fixed-interval smoother) and forward + FB-RTS, each
+  run as a layout with that smoother runs it (``FootIns.plan_smoothing`` first: with RTS the
+  filter records what the smoother's sweep needs as it runs);
 * gaitmap's ``RtsKalman().estimate`` at its defaults (9-state error-state filter, its own ZUPT
   detector, forward pass and RTS), when gaitmap is installed (``pip install -e ".[bench]"``;
   gaitmap 2.6 pins numpy < 2.1 and pandas < 2.4, so give it its own virtual environment),
@@ -79,15 +81,20 @@ def walked_m(pos: np.ndarray) -> float:
 def project_jobs(foot: FootIns) -> dict[str, Callable[[], np.ndarray]]:
     """The project's jobs on ``foot``; each returns the positions it estimated (n, 3)."""
 
-    def forward() -> np.ndarray:
+    def run(cfg: SmootherConfig) -> np.ndarray:
+        foot.plan_smoothing(cfg)  # as a run of a layout with this smoother
         foot.restart()
         foot.advance(foot.t_end)
         return foot.hist_x[:, 0:3]
 
+    def forward() -> np.ndarray:
+        return run(SmootherConfig(kind="none"))
+
     def smoothed(kind: str) -> Callable[[], np.ndarray]:
         def job() -> np.ndarray:
-            forward()
-            smooth_system(foot, SmootherConfig(kind=kind))
+            cfg = SmootherConfig(kind=kind)
+            run(cfg)
+            smooth_system(foot, cfg)
             return foot.trajectory().pos_n
 
         return job

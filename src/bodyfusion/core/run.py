@@ -18,7 +18,11 @@ from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.output import write_outputs
 from bodyfusion.core.progress import FusionProgress
 from bodyfusion.core.result import RunResult
-from bodyfusion.core.smoothing import constrain_trajectories, smooth_systems
+from bodyfusion.core.smoothing import (
+    constrain_trajectories,
+    plan_smoothing,
+    smooth_systems,
+)
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
 from bodyfusion.core.truth import read_truth
 from bodyfusion.evaluation.consistency import horizontal_nees
@@ -89,6 +93,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     built = build_systems(loaded, context)
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}
     systems = {name: s for name, s in built.items() if name not in aiding}
+    plan_smoothing(systems, loaded.layout.smoother)
     origin = geodetic_origin(loaded, systems)
     truths = load_truth(loaded, origin)
     timings["load_s"] = time.perf_counter() - t0

@@ -21,6 +21,15 @@ from bodyfusion.core.system import SensorSystem
 from bodyfusion.base.types import LOG, Trajectory
 
 
+def plan_smoothing(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> None:
+    """Before the run, tell every system that asks (a ``plan_smoothing(cfg)`` method: the foot
+    INS, which then records what its smoother needs as it runs) the layout's smoother."""
+    for system in systems.values():
+        plan = getattr(system, "plan_smoothing", None)
+        if plan is not None:
+            plan(cfg)
+
+
 def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:
     """Smooth every system that smooths; returns {system: its smoothing diagnostics}."""
     out = {}

@@ -24,8 +24,8 @@ from bodyfusion.plugins.foot_ins.coloured import (
     coloured_zero_velocity_update,
     velocity_rows_of_inverse_transition,
 )
-from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE, run_foot_ins,
-                                                 run_foot_ins_coloured)
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE, no_record,
+                                                 run_foot_ins, run_foot_ins_coloured)
 from bodyfusion.testing import check_system, default_context, random_nominal_state, with_value
 from tests.paths import ROOT
 
@@ -154,7 +154,7 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
                    hist_nis, counters, post_idx, post_P)
             return x, P, counters, post_idx, post_P
         kernel(x, P, t, acc, gyro, stance, 1, 2, filter_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
-               hist_cov, hist_nis, counters)
+               hist_cov, hist_nis, counters, *no_record())
         return x, P
 
     x, P, counters, post_idx, post_P = run(run_foot_ins_coloured)

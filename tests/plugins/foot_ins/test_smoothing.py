@@ -7,7 +7,7 @@ import pytest
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.core.run import build_systems, layout_context, run_layout
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, backward_prior, segment_bounds, smooth_record
 from bodyfusion.plugins.foot_ins.smoothing_kernels import fuse_block, rts_block
@@ -156,16 +156,23 @@ def test_the_smoothers_replay_is_the_filter_bit_for_bit(walk):
         assert d["state_rebuild_max_abs_error"] == 0.0 and d["covariance_rebuild_rel_error"] == 0.0, kind
 
 
-def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(tmp_path):
+@pytest.fixture(scope="module")
+def vicon_cut(tmp_path_factory):
     """The first 30 s of the Vicon walk, both feet within 0.6 m (the fuser corrects both),
-    the left IMU with 0.5 s of samples cut out (the gap policy inflates its covariance)."""
+    the left IMU with 0.5 s of samples cut out (the gap policy inflates its covariance),
+    smoothed by the whole-run RTS."""
+    tmp_path = tmp_path_factory.mktemp("vicon_cut")
     left = (VICON_DATA / "imuMeasLeft.csv").read_text().splitlines()
     right = (VICON_DATA / "imuMeasRight.csv").read_text().splitlines()
     (tmp_path / "left.csv").write_text("\n".join(left[:901] + left[931:1801]) + "\n")
     (tmp_path / "right.csv").write_text("\n".join(right[:1801]) + "\n")
-    res = run_layout(load_layout(VICON_CFG, [f"systems.left_foot.data.path={tmp_path / 'left.csv'}",
-                                             f"systems.right_foot.data.path={tmp_path / 'right.csv'}",
-                                             "smoother.kind=rts"]))
+    return run_layout(load_layout(VICON_CFG, [f"systems.left_foot.data.path={tmp_path / 'left.csv'}",
+                                              f"systems.right_foot.data.path={tmp_path / 'right.csv'}",
+                                              "smoother.kind=rts"]))
+
+
+def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(vicon_cut):
+    res = vicon_cut
     for foot in ("left_foot", "right_foot"):
         rec = res.systems[foot].smoothing_record()
         assert rec["override_idx"].size > 5
@@ -178,6 +185,30 @@ def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(tm
     buf, _ = _replay(rec)
     # the inflation is process noise of the step across the gap, not uncertainty before it
     assert buf.Ppost[g - 1, 0, 0] < 0.5 * dP[0, 0] < buf.Pprior[g, 0, 0]
+
+
+def test_the_filters_own_record_smooths_as_its_replay(vicon_cut):
+    """Planned for the whole-run RTS, the ekf records what the sweep needs as it runs
+    (ForwardRecord, completed at the fuser's corrections): the smoothed states and covariances
+    equal those smoothed from the replay of the filter, which is not run."""
+    for foot in ("left_foot", "right_foot"):
+        rec = vicon_cut.systems[foot].smoothing_record()
+        assert rec["forward_record"].active and rec["kept_idx"].size > 5, foot
+        own = smooth_record(rec, KINDS["rts"])
+        replayed = smooth_record({**rec, "forward_record": None}, KINDS["rts"])
+        assert np.array_equal(own.x, replayed.x) and np.array_equal(own.pos_var, replayed.pos_var), foot
+        assert own.diagnostics["rts_gain_failures"] == replayed.diagnostics["rts_gain_failures"] == 0
+
+
+def test_only_the_whole_run_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):
+    for overrides, cfg, records in (([], KINDS["rts"], True), ([], KINDS["rts-segment"], False),
+                                    ([], KINDS["fb-rts"], False), ([], SmootherConfig(kind="none"), False),
+                                    (["systems.foot.filter.kind=ckf"], KINDS["rts"], False),
+                                    (["systems.foot.filter.zaru_sigma_radps=0.01"], KINDS["rts"], False)):
+        loaded = load_layout(walk[0].config_path, overrides)
+        foot = build_systems(loaded, layout_context(loaded))["foot"]
+        foot.plan_smoothing(cfg)
+        assert foot.smoothing_record()["forward_record"].active == records, (overrides, cfg)
 
 
 # --------------------------------------------------------------------------- backward navigation

@@ -28,7 +28,7 @@ from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
 from bodyfusion.plugins.foot_ins.ensemble import Ensemble
-from bodyfusion.plugins.foot_ins.kernels import C_CALL_RECORDS, run_foot_ins, run_foot_ins_coloured
+from bodyfusion.plugins.foot_ins.kernels import C_CALL_RECORDS, no_record, run_foot_ins, run_foot_ins_coloured
 
 
 @dataclass
@@ -41,7 +41,9 @@ class RunData:
     no NIS), the counters, the covariances it leaves
     outside the plain EKF recursion (sample index, covariance) for the smoothers, and the
     kept corrections (sample index, nominal state before the correction): those derived from
-    other systems' estimates, which the smoothers keep as the filter made them."""
+    other systems' estimates, which the smoothers keep as the filter made them; ``record``: the
+    arrays the ekf records the whole-run RTS's sweep into as it runs
+    (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`; :func:`~bodyfusion.plugins.foot_ins.kernels.no_record`: none)."""
 
     t: np.ndarray
     acc_b: np.ndarray
@@ -56,6 +58,7 @@ class RunData:
     override_P: list[np.ndarray] = field(default_factory=list)
     kept_idx: list[int] = field(default_factory=list)
     kept_x: list[np.ndarray] = field(default_factory=list)
+    record: tuple[np.ndarray, ...] = field(default_factory=no_record)
 
 
 class Estimator:
@@ -75,7 +78,7 @@ class Estimator:
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1; ``phi`` accumulates the transition ((0, 0): off)."""
         run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters)
+                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters, *data.record)
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset: inject dx (n,) into the nominal state, take P (n, n)."""

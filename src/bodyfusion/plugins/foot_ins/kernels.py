@@ -13,6 +13,11 @@ the filter (:func:`run_foot_ins`) and the smoothers' passes
 navigation) all call it, so a change to the propagation or to the zero-velocity update
 changes them all.
 
+For the whole-run RTS the ekf can record, as it runs, what the backward sweep of
+:mod:`bodyfusion.plugins.foot_ins.smoothing_mbf` needs (:func:`record_posterior`,
+:func:`record_stance`; the arrays of :func:`no_record` when it records nothing): the sweep then
+needs no replay of the filter.
+
 Every stance update is chi-square gated with bounded influence (``params[P_ZUPT_GATE]``,
 0: off; :mod:`bodyfusion.nav.zupt`): a stance sample whose NIS exceeds the gate is counted and
 de-weighted, and gets no ZARU (the foot is not at rest there).
@@ -27,14 +32,16 @@ from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_
                                        accumulate_propagation, decay_bias_rows, decay_biases, process_noise_diag,
                                        propagate_covariance)
 from bodyfusion.nav.strapdown import mechanise
-from bodyfusion.nav.zupt import stance_update, zero_angular_rate_update
+from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
 
 # Layout of the ``counters`` vector: updates, NIS sum (before gating), the
-# gated (de-weighted) stance samples, the coloured updates, and the ckf's stance updates
-# recorded by this call.
-C_ZUPTS, C_ZARUS, C_NIS_SUM, C_COLOURED, C_GATED, C_CALL_RECORDS = range(6)
-COUNTERS_SIZE = 6
+# gated (de-weighted) stance samples, the coloured updates, the ckf's stance updates
+# recorded by this call, and the stance samples recorded for the whole-run RTS.
+C_ZUPTS, C_ZARUS, C_NIS_SUM, C_COLOURED, C_GATED, C_CALL_RECORDS, C_STANCE_RECORDS = range(7)
+COUNTERS_SIZE = 7
+PACKED_SIZE = 120
+"""Elements of a symmetric 15×15 matrix stored packed: its upper triangle by rows."""
 
 
 @numba.njit(cache=True)
@@ -136,11 +143,51 @@ def _record_sample(x: np.ndarray, P: np.ndarray, nis: float, i: int, hist_x: np.
     hist_pos_cov[i, 3] = P[0, 1]
 
 
+@numba.njit(inline="always")
+def record_posterior(P: np.ndarray, f_n: np.ndarray, j: int, Pu: np.ndarray, f_ns: np.ndarray) -> None:
+    """Row j of the whole-run RTS record: ``Pu[j]`` (:data:`PACKED_SIZE`,) the posterior
+    covariance P (15, 15) packed (upper triangle by rows), ``f_ns[j]`` (3,) the step's mean
+    specific force f_n (navigation frame, m/s²; with the state before the step it gives the
+    step's transition again, exactly)."""
+    q = 0
+    for r in range(15):
+        for c in range(r, 15):
+            Pu[j, q] = P[r, c]
+            q += 1
+    for k in range(3):
+        f_ns[j, k] = f_n[k]
+
+
+@numba.njit(inline="always")
+def record_stance(x: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray, n: int, st_v: np.ndarray,
+                  st_P: np.ndarray) -> None:
+    """Entry n of the whole-run RTS record of the stance samples, from the nominal state x (16,)
+    just after the sample's stance update and x_prior (16,), P_prior (15, 15) before it:
+    ``st_v[n]`` (5,) the prior velocity v⁻ (m/s) and the east and north velocity rows
+    a = (−Δv_N, Δv_E) of the update's heading reset G = I + a e_ψᵀ (Δv = v⁺ − v⁻,
+    :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`), ``st_P[n]`` (15, 4) the prior
+    covariance's columns at :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`."""
+    for k in range(3):
+        st_v[n, k] = x_prior[3 + k]
+    st_v[n, 3] = -(x[4] - x_prior[4])
+    st_v[n, 4] = x[3] - x_prior[3]
+    for r in range(15):
+        for m in range(4):
+            st_P[n, r, m] = P_prior[r, ZUPT_COLUMNS[m]]
+
+
+def no_record() -> tuple[np.ndarray, ...]:
+    """The record arguments of :func:`run_foot_ins` of a run that records nothing."""
+    return (np.empty((0, PACKED_SIZE)), np.empty((0, 3)), np.empty((0, 5)), np.empty((0, 15, 4)), np.empty(16),
+            np.empty((0, 0)))
+
+
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                  stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
                  phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, hist_nis: np.ndarray,
-                 counters: np.ndarray) -> None:
+                 counters: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
+                 x_prior: np.ndarray, P_prior: np.ndarray) -> None:
     """The ``ekf``: process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i],
     propagate P, and at stance samples apply the gated ZUPT (and the ZARU when its σ > 0).
 
@@ -150,16 +197,30 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     (variances east, north, up and the east–north covariance, m^2), and ``hist_nis`` (N,) its
     stance update's NIS before gating (:data:`NO_STANCE` at a swing sample). ``counters`` accumulates (layout ``C_*``). ``phi`` (15, 15) accumulates the error-state
     transition for the fuser's cross-covariances (empty (0, 0): off).
-    """
+
+    Unless ``Pu`` is empty (:func:`no_record`), the run records for the whole-run RTS: row i of
+    ``Pu`` (N, :data:`PACKED_SIZE`) and ``f_ns`` (N, 3) (:func:`record_posterior`) and, at the
+    n-th stance sample of the run (n = ``counters[C_STANCE_RECORDS]``), entry n of ``st_v``
+    (S, 5) and ``st_P`` (S, 15, 4) (:func:`record_stance`); ``x_prior`` (16,) and ``P_prior``
+    (15, 15) are left with the nominal state and covariance before the step to i1 − 1 (the
+    sample a correction from outside the loop would be made at)."""
     q_diag = process_noise_diag(params)
     work = np.empty((2, 15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
+    no_prior = np.empty((0, 0))
+    recording = Pu.shape[0] > 0
     for i in range(i0, i1):
-        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, None,
-                       None, None)
+        keep = recording and (stance[i] or i == i1 - 1)
+        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, x_prior,
+                       P_prior if keep else no_prior, None)
         if nis != NO_STANCE:
             _count(params, nis, counters)
+        if recording:
+            if nis != NO_STANCE:
+                record_stance(x, x_prior, P_prior, int(counters[C_STANCE_RECORDS]), st_v, st_P)
+                counters[C_STANCE_RECORDS] += 1
+            record_posterior(P, f_n, i, Pu, f_ns)
         _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
 
 

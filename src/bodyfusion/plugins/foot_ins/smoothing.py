@@ -15,7 +15,10 @@ replayed against the recorded states, and the last covariance). The segmented ki
 the current block (O(longest block) × 15 × 15 floats); the whole-run RTS keeps a compact record
 of the replay (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, about 1.3 kB
 per sample) for as much of the run as :data:`STORE_BYTES` allows, so a run of up to some
-50 000 samples is replayed once.
+50 000 samples is replayed once. When the system knows before its run that it will be
+smoothed so (:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.plan_smoothing`) and the
+record fits, the ekf writes that record itself as it runs (:class:`ForwardRecord`), and the
+whole-run RTS replays nothing: its record is the filter's, not a replay of it.
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
 ``min_stance_s`` are ignored so a one-sample detector flicker does not cut a stride; gaps
@@ -102,7 +105,8 @@ import numpy as np
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, filter_pass, fuse_block,
+from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record
+from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, boxminus, filter_pass, fuse_block,
                                                            integrate_position, position_covariance, rts_block)
 from bodyfusion.plugins.foot_ins.smoothing_mbf import mbf_sweep, record_pass
 
@@ -117,10 +121,15 @@ forward σ at the segment end and the filter's initial σ (information ≤ 1 % o
 pass's)."""
 
 STORE_BYTES = 64 * 2**20
-"""What the whole-run RTS keeps of the filter's replay at once (bytes): about 1 kB per sample
+"""What the whole-run RTS keeps of the filter's record at once (bytes): about 1 kB per sample
 and 0.5 kB more per stance sample (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
-so a run of up to some 50 000 samples (8 min at 100 Hz) is replayed once; a longer one in
-chunks, each but the last replayed twice (once for the covariance at its start)."""
+so a run of up to some 50 000 samples (8 min at 100 Hz) is recorded by the filter as it runs
+(:class:`ForwardRecord`) or replayed once; a longer one is replayed in chunks, each but the
+last replayed twice (once for the covariance at its start)."""
+
+_UPPER = np.triu_indices(15)
+"""The packed order of a symmetric 15×15 matrix (upper triangle by rows, as
+:func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior` writes it)."""
 
 _BACKWARD_SIGN = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
 """Error-state signs of the backward form: velocity and gyro bias negated."""
@@ -161,13 +170,20 @@ def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_
     return np.asarray(out, dtype=np.int64)
 
 
-def _chunks(bounds: np.ndarray, plain: np.ndarray, general: np.ndarray) -> list[tuple[int, int]]:
+def record_bytes(samples: int, stance: int, general: int = 0) -> int:
+    """Bytes the whole-run RTS's record of ``samples`` samples, ``stance`` of them stance
+    samples and ``general`` with a general update, takes
+    (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`): 8 × (123 per sample, 65
+    per stance sample, 242 per general update)."""
+    return 8 * (123 * samples + 65 * stance + 242 * general)
+
+
+def _chunks(bounds: np.ndarray, stance: np.ndarray, general: np.ndarray) -> list[tuple[int, int]]:
     """Consecutive sample ranges (a, b) over the segment ``bounds``, each as long as what
-    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` stores of it fits
-    :data:`STORE_BYTES` (at least one segment): 8 bytes × (123 per sample, 65 per ZUPT
-    sample ``plain``, 242 per ``general`` update)."""
-    cost = 8 * (123 + 65 * np.cumsum(plain, dtype=np.int64) + 242 * np.cumsum(general, dtype=np.int64))
-    cost += 8 * 123 * np.arange(plain.size, dtype=np.int64)
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` stores of it
+    (:func:`record_bytes`) fits :data:`STORE_BYTES` (at least one segment)."""
+    cost = record_bytes(1 + np.arange(stance.size, dtype=np.int64), np.cumsum(stance, dtype=np.int64),
+                        np.cumsum(general, dtype=np.int64))
     out, a = [], int(bounds[0])
     for k in range(1, bounds.size):
         b, nxt = int(bounds[k]), int(bounds[min(k + 1, bounds.size - 1)])
@@ -234,6 +250,7 @@ class _Record:
         self.gap_idx = np.ascontiguousarray(rec.get("gap_idx", np.empty(0)), dtype=np.int64)
         self.gap_dP = np.ascontiguousarray(rec.get("gap_dP", np.empty((0, 15, 15))), dtype=f64)
         self.rate_hz = float(rec["rate_hz"])
+        self.forward_record: ForwardRecord = rec.get("forward_record") or ForwardRecord()
         self.n = self.hist_x.shape[0]
         self.state_error = 0.0
         """Largest |replayed − recorded| nominal state element over the stored forward passes."""
@@ -290,6 +307,91 @@ class _Record:
                     buf.dx, buf.jump, buf.yaw_reset)
 
 
+class ForwardRecord:
+    """The whole-run RTS's record written by the ekf as it runs
+    (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`): per sample the packed posterior
+    covariance ``Pu`` and the specific force ``f_ns``, per stance sample ``st_v`` and ``st_P``,
+    and the nominal state ``x_prior`` and covariance ``P_prior`` before the kernel's last step.
+    A system holds one and reuses its arrays across restarts; inactive (no arrays) unless
+    :meth:`plan` asks for it.
+
+    A correction made outside the compiled loop (fuser, position fix) comes after the kernel's
+    last step: :meth:`capture` keeps what that step left (prior state and covariance,
+    posterior covariance). :meth:`sweep_arrays` then completes the record as
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes it from the replay:
+    the same numbers, as the replay reproduces the filter."""
+
+    def __init__(self) -> None:
+        self.active = False
+        self.captured: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def plan(self, cfg: SmootherConfig, filter_kind: str, params: np.ndarray, stance: np.ndarray) -> bool:
+        """Active for the whole-run RTS (``kind: rts``, ``span: whole``) of an ``ekf`` without
+        the ZARU (whose every stance update the sweep takes in general form) whose record of
+        the run with these ``stance`` flags fits :data:`STORE_BYTES`; True when that changed."""
+        samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
+        active = (cfg.kind == "rts" and not cfg.segmented and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
+                  and record_bytes(samples, n_stance) <= STORE_BYTES)
+        if active == self.active:
+            return False
+        self.active = active
+        if active:
+            self.Pu = np.empty((samples, PACKED_SIZE))
+            self.f_ns = np.empty((samples, 3))
+            self.st_v = np.empty((n_stance, 5))
+            self.st_P = np.empty((n_stance, 15, 4))
+            self.x_prior = np.empty(16)
+            self.P_prior = np.empty((15, 15))
+        return True
+
+    def restart(self, P0: np.ndarray, counters: np.ndarray) -> tuple[np.ndarray, ...]:
+        """A new run from the covariance P0 at sample 0, the kernel counting into ``counters``;
+        returns the record arguments of :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`."""
+        self.captured = {}
+        if not self.active:
+            return no_record()
+        self.Pu[0] = P0[_UPPER]
+        self.f_ns[0] = 0.0
+        self.counters = counters
+        return self.Pu, self.f_ns, self.st_v, self.st_P, self.x_prior, self.P_prior
+
+    def capture(self, i: int, P: np.ndarray) -> None:
+        """After the kernel's last step, to sample i, whose posterior covariance is P (15, 15):
+        keep the step's prior and P, for a correction outside the loop made there."""
+        if self.active:
+            self.captured[i] = (self.x_prior.copy(), self.P_prior.copy(), P[:15, :15].copy())
+
+    def sweep_arrays(self, r: _Record, general: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """The record of the whole run as :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`
+        takes it (``Pu`` … ``kept_P``; ``Pu`` at each corrected sample set to the covariance
+        the corrections left), or None when it cannot serve (a stance sample not recorded, a
+        correction at sample 0 or one without its capture): the replay does then."""
+        n = r.n
+        stance = int(np.count_nonzero(r.stance[1:]))
+        gen = np.flatnonzero(general)
+        if (not self.active or self.Pu.shape[0] < n or int(self.counters[C_STANCE_RECORDS]) != stance or (gen.size and gen[0] == 0)
+                or any(int(i) not in self.captured for i in gen)):
+            return None
+        ordinal = np.cumsum(r.stance) - 1 - r.stance[0]  # the stance entry of each stance sample
+        kept = np.zeros(n, dtype=np.bool_)
+        kept[r.kept_idx] = True
+        gen_P, gen_dx = np.empty((gen.size, 15, 15)), np.empty((gen.size, 15))
+        gen_a, kept_P = np.zeros((gen.size, 2)), np.empty((r.kept_idx.size, 15, 15))
+        last = np.searchsorted(r.ov_idx, gen, side="right") - 1
+        for g, i in enumerate(gen):
+            x_prior, P_prior, P_post = self.captured[int(i)]
+            gen_P[g] = P_prior
+            if r.stance[i]:
+                gen_a[g] = self.st_v[ordinal[i], 3:5]
+            k = int(np.searchsorted(r.kept_idx, i))
+            boxminus(r.kept_x[k] if kept[i] else r.hist_x[i], x_prior, gen_dx[g])
+            if kept[i]:
+                kept_P[k] = P_post
+            self.Pu[i] = r.ov_P[last[g]][_UPPER]
+        return (self.Pu[:n], self.f_ns[:n], self.st_v[:stance], self.st_P[:stance], gen_P, gen_dx, gen_a,
+                kept[gen], kept_P)
+
+
 def _latency(ms: list[float]) -> dict:
     if not ms:
         return {}
@@ -320,16 +422,20 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
         diag["rts_gain_failures"] = failed
         return P, latencies
     general = r.general_updates()
-    plain = r.stance & ~general
-    chunks = _chunks(bounds, plain, general)
+    forward = r.forward_record.sweep_arrays(r, general)
+    lam, Lam = np.zeros(15), np.zeros((15, 15))
+    if forward is not None:  # the filter's own record: nothing to replay
+        diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward, lam,
+                                              Lam, out_x, out_var)
+        return r.P_end, latencies
+    chunks = _chunks(bounds, r.stance, general)
     ckpt = [r.P0]  # the filter's covariance at each chunk start; the last chunk is replayed once
     for a, b in chunks[:-1]:
         ckpt.append(r.forward(a, b, ckpt[-1], False, _Pass(1)))
-    lam, Lam = np.zeros(15), np.zeros((15, 15))
     P_last = r.P0
     for k in range(len(chunks) - 1, -1, -1):
         a, b = chunks[k]
-        ns, ng = int(np.count_nonzero(plain[a + 1:b + 1])), int(np.count_nonzero(general[a + 1:b + 1]))
+        ns, ng = int(np.count_nonzero(r.stance[a + 1:b + 1])), int(np.count_nonzero(general[a + 1:b + 1]))
         nk = int(np.count_nonzero((r.kept_idx > a) & (r.kept_idx <= b)))
         store = (np.empty((b - a + 1, 120)), np.empty((b - a + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
                  np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),

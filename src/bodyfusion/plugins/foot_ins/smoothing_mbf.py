@@ -23,13 +23,8 @@ from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inv3_sym,
                                        process_noise_diag)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
-from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
+from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
-
-PACKED = np.array([(r, c) for r in range(15) for c in range(r, 15)], dtype=np.int64)
-"""(120, 2): row and column of each element of a symmetric 15×15 matrix stored as its upper
-triangle by rows."""
-
 
 @numba.njit(inline="always")
 def _transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
@@ -251,12 +246,12 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     state, covariance and mechanisation memory at i0, its corrections outside the loop and its
     gaps replayed), storing compactly what :func:`mbf_sweep` needs, j = i − i0:
 
-    * ``Pu`` (L+1, 120): the posterior covariance, upper triangle by rows (:data:`PACKED`);
-    * ``f_ns`` (L+1, 3): the step's mean specific force, navigation frame (m/s²; with the
-      recorded state before the step it gives the step's transition again, exactly);
-    * per stance sample with the ekf's own ZUPT (in order): ``st_v`` (·, 5) the prior velocity
-      (m/s) and the heading reset's a (``yaw_reset`` of ``filter_pass``), ``st_P`` (·, 15, 4)
-      the prior covariance's columns at ZUPT_COLUMNS;
+    * ``Pu`` (L+1, 120), ``f_ns`` (L+1, 3): the posterior covariance packed and the step's
+      mean specific force (:func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior`);
+    * per stance sample (in order): ``st_v`` (·, 5) the prior velocity (m/s) and the heading
+      reset's a (``yaw_reset`` of ``filter_pass``), ``st_P`` (·, 15, 4) the prior covariance's
+      columns at ZUPT_COLUMNS (:func:`~bodyfusion.plugins.foot_ins.kernels.record_stance`; what
+      the ekf records as it runs, :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`);
     * per sample with a ``general`` update (in order): ``gen_P`` (·, 15, 15) the prior
       covariance, ``gen_dx`` (·, 15) the correction injected (posterior ⊖ prior nominal; up to
       the state before a kept correction, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.replay_corrections`),
@@ -281,10 +276,9 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     moved = np.empty(3)
     ns = ng = nk = 0
     error = 0.0
-    for q in range(120):
-        Pu[0, q] = P[PACKED[q, 0], PACKED[q, 1]]
     for k in range(3):
-        f_ns[0, k] = 0.0
+        f_n[k] = 0.0
+    record_posterior(P, f_n, 0, Pu, f_ns)
     for i in range(i0 + 1, i1 + 1):
         while gptr < gap_idx.shape[0] and gap_idx[gptr] == i:
             for r in range(15):
@@ -295,8 +289,9 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                        P_prior, None)
         j = i - i0
         stanced = nis != NO_STANCE
-        a0 = -(x[4] - x_prior[4]) if stanced else 0.0
-        a1 = (x[3] - x_prior[3]) if stanced else 0.0
+        if stanced:
+            record_stance(x, x_prior, P_prior, ns, st_v, st_P)
+            ns += 1
         kept = kptr < kept_idx.shape[0] and kept_idx[kptr] == i
         if kept:
             for r in range(15):
@@ -307,29 +302,17 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                                        general[i], scratch, moved)
         for k in range(16):
             error = max(error, abs(x[k] - recorded_x[i, k]))
-        for q in range(120):
-            Pu[j, q] = P[PACKED[q, 0], PACKED[q, 1]]
-        for k in range(3):
-            f_ns[j, k] = f_n[k]
+        record_posterior(P, f_n, j, Pu, f_ns)
         if general[i]:
             for r in range(15):
                 for c in range(15):
                     gen_P[ng, r, c] = P_prior[r, c]
             for k in range(15):
                 gen_dx[ng, k] = scratch[k]
-            gen_a[ng, 0] = a0
-            gen_a[ng, 1] = a1
+            gen_a[ng, 0] = st_v[ns - 1, 3] if stanced else 0.0
+            gen_a[ng, 1] = st_v[ns - 1, 4] if stanced else 0.0
             gen_kept[ng] = kept
             ng += 1
-        elif stanced:
-            for k in range(3):
-                st_v[ns, k] = x_prior[3 + k]
-            st_v[ns, 3] = a0
-            st_v[ns, 4] = a1
-            for r in range(15):
-                for m in range(4):
-                    st_P[ns, r, m] = P_prior[r, ZUPT_COLUMNS[m]]
-            ns += 1
     return P, error
 
 
@@ -428,8 +411,9 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
                     lam[r] = 0.0
                     for c in range(15):
                         Lam[r, c] = 0.0
-        elif stance[i]:
+        if stance[i]:
             ns -= 1
-            _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
+            if not general[i]:
+                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
         _transition_adjoint(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
     return failed

@@ -29,9 +29,9 @@ from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                                 NO_STANCE, run_foot_ins)
+                                                 NO_STANCE, no_record, run_foot_ins)
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
-from bodyfusion.plugins.foot_ins.smoothing import smooth_system
+from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
@@ -86,22 +86,19 @@ class FootIns(SensorSystem):
     Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`bodyfusion.nav.error_state`.
     ``filter.kind`` selects the estimator:
 
-    * ``ekf``, ``ckf``: the per-sample loop runs compiled
-      (:func:`bodyfusion.plugins.foot_ins.kernels.run_foot_ins`) in chunks between the fuser's
-      sync epochs; the ckf's stance update is :mod:`bodyfusion.plugins.foot_ins.coloured`. The
-      smoothers rebuild the EKF's covariances with ordinary ZUPTs, so the ckf keeps its
-      covariance after every coloured update for them (15×15 floats, 1.8 kB, per stance sample).
-    * ``enekf``, ``cenekf``: M members (:class:`bodyfusion.plugins.foot_ins.ensemble.Ensemble`);
-      ``x`` is their mean, ``P`` the sample covariance of their error-state deviations (15,
-      or 18 with the cenekf's coloured noise δV), and a correction moves the mean and maps
-      the deviations so that their sample covariance is the one given. Position fixes are
-      applied the same way: a gated Kalman update of the mean and covariance, carried to the
-      members by that correction. Not smoothable, no cross-covariance tracking (refused at
-      validation, :meth:`check_layout`).
+    * ``ekf``, ``ckf``: the per-sample loop runs compiled (:func:`bodyfusion.plugins.foot_ins.kernels.run_foot_ins`)
+      in chunks between the fuser's sync epochs; the ckf's stance update is :mod:`bodyfusion.plugins.foot_ins.coloured`.
+      The smoothers rebuild the EKF's covariances with ordinary ZUPTs, so the ckf keeps its covariance after
+      every coloured update for them (15×15 floats, 1.8 kB, per stance sample).
+    * ``enekf``, ``cenekf``: M members (:class:`bodyfusion.plugins.foot_ins.ensemble.Ensemble`); ``x`` is their
+      mean, ``P`` the sample covariance of their error-state deviations (15, or 18 with the cenekf's coloured
+      noise δV), and a correction moves the mean and maps the deviations so that their sample covariance is
+      the one given. Position fixes are applied the same way: a gated Kalman update of the mean and
+      covariance, carried to the members by that correction. Not smoothable, no cross-covariance tracking
+      (refused at validation, :meth:`check_layout`).
 
-    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal (mean) states,
-    ``stance`` (N,) detector output.
-    """
+    Results (after the run): :meth:`trajectory`, ``hist_x`` (N, 16) nominal (mean) states, ``stance`` (N,)
+    detector output."""
 
     plugin_name = "foot_ins"
     Config = FootInsConfig
@@ -126,6 +123,7 @@ class FootIns(SensorSystem):
         heading = config.initial.heading_deg
         self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
         self._x0, self._P0 = self._initial_state()
+        self._forward_record = ForwardRecord()  # what the filter records for the whole-run RTS
         self.restart()
 
     @classmethod
@@ -286,7 +284,7 @@ class FootIns(SensorSystem):
         hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
         run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
-                     hist_x, hist_cov, np.empty(s + 1), self.backward_counters)
+                     hist_x, hist_cov, np.empty(s + 1), self.backward_counters, *no_record())
         xb[3:6] *= -1.0
         xb[13:16] *= -1.0
         Pb = 2.0 * (Pb * flip)
@@ -298,14 +296,14 @@ class FootIns(SensorSystem):
         return x0, P0
 
     def restart(self) -> None:
-        """Back to the initial state at the first sample; history cleared (an ensemble
-        redrawn from the same seed)."""
+        """Back to the initial state at the first sample; history cleared (an ensemble redrawn from the same seed)."""
         n = len(self.stream)
         self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
                                                                      self.context.seed, self.name)
         self.run_data = RunData(self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
                                 np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
                                 np.zeros(COUNTERS_SIZE))
+        self.run_data.record = self._forward_record.restart(self._P0, self.run_data.counters)
         self.run_data.hist_x[0] = self.x
         self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
         self._record_position_covariance(0)
@@ -381,6 +379,7 @@ class FootIns(SensorSystem):
                 self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
             self.filter.run(self.run_data, a, b, self.phi)
         self._i = i1 - 1
+        self._forward_record.capture(self._i, self.P)  # for a correction made here next
 
     # --- heading ------------------------------------------------------------------
     @property
@@ -457,14 +456,13 @@ class FootIns(SensorSystem):
 
     # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) ---------------------------------------------
     def smoothing_record(self) -> dict:
-        """What the smoothers need to replay this filter's run (nothing is copied but the few
-        covariances set outside the compiled loop): IMU samples, stance flags, filter
-        parameters, the recorded nominal history, the initial covariance, the gaps (sample
-        index after each gap, sorted, and the covariance the gap policy added before the step
-        to it: process noise of that step), the sample indices (sorted) with the
-        covariance left there by a fuser correction or a fix (and, for the ckf, after every
-        coloured update), and the kept corrections' sample indices (sorted, one per sample)
-        with the nominal state before the first of them there. Ensemble kinds have no such record."""
+        """What the smoothers need to replay this filter's run (nothing is copied but the few covariances set outside
+        the compiled loop): IMU samples, stance flags, filter parameters, the recorded nominal history, the initial
+        covariance, the gaps (sample index after each gap, sorted, and the covariance the gap policy added before the
+        step to it: process noise of that step), the sample indices (sorted) with the covariance left there by a fuser
+        correction or a fix (and, for the ckf, after every coloured update), the kept corrections' sample indices
+        (sorted, one per sample) with the nominal state before the first of them there, and what the filter recorded
+        for the whole-run RTS as it ran (``forward_record``). Ensemble kinds have no such record."""
         if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
@@ -485,18 +483,22 @@ class FootIns(SensorSystem):
                 "override_P": Ps if keep.all() else Ps[keep], "kept_idx": kept_idx,
                 "kept_x": np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)[first],
                 "gap_idx": np.ascontiguousarray(gap_idx), "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
-                "rate_hz": float(1.0 / np.median(np.diff(self.stream.t)))}
+                "rate_hz": float(1.0 / np.median(np.diff(self.stream.t))), "forward_record": self._forward_record}
+
+    def plan_smoothing(self, cfg: SmootherConfig) -> None:
+        """Before the run: the filter records what the layout's ``smoother`` needs as it runs when
+        :meth:`~bodyfusion.plugins.foot_ins.smoothing.ForwardRecord.plan` says so; restarts when that changes."""
+        if self._forward_record.plan(cfg, self.config.filter.kind, self._params, self.stance):
+            self.restart()
 
     def smooth(self, cfg: SmootherConfig) -> dict | None:
-        """RTS, FB or FB-RTS over this run (:mod:`bodyfusion.plugins.foot_ins.smoothing`);
-        afterwards :meth:`trajectory` is the smoothed track. The ensemble kinds are refused at
-        validation (:meth:`check_layout`)."""
+        """RTS, FB or FB-RTS over this run (:mod:`bodyfusion.plugins.foot_ins.smoothing`); then :meth:`trajectory`
+        is the smoothed track. The ensemble kinds are refused at validation (:meth:`check_layout`)."""
         return smooth_system(self, cfg).diagnostics
 
     def set_smoothed(self, x: np.ndarray | None, pos_cov: np.ndarray | None, diagnostics: dict) -> None:
-        """Store the smoother's result: (n, 16) nominal states and (n, 4) position covariances
-        (as :attr:`hist_pos_cov`) replace the filter's in :meth:`trajectory` (None keeps the
-        filter's)."""
+        """Store the smoother's result: (n, 16) nominal states and (n, 4) position covariances (as
+        :attr:`hist_pos_cov`) replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
         self.smoothed_x = x
         self.smoothed_pos_cov = pos_cov
         self.smoothing_diagnostics = diagnostics
