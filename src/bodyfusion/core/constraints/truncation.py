@@ -53,63 +53,27 @@ def truncated_moments(beta: float) -> tuple[float, float]:
 
 
 @_kernel
-def _cut(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, row: np.ndarray, bound: float, fixed: bool,
-         others: np.ndarray, dx: np.ndarray, PH: np.ndarray, K: np.ndarray) -> bool:
-    """One limit X = row·p ≤ bound (= when ``fixed``) taken into δx (n,) and P (n, n), in place
-    (module docstring). ``others`` (n,): rows kept out of the correction. False when it cuts
-    nothing (s² = 0, or V ≥ s²)."""
-    n = P.shape[0]
-    n3 = pos.shape[0]
-    s2 = 0.0
-    m = 0.0
-    for a in range(n):
-        acc = 0.0
-        for c in range(n3):
-            if row[c] != 0.0:
-                acc += P[a, pos[c]] * row[c]
-        PH[a] = acc
-    for c in range(n3):
-        s2 += row[c] * PH[pos[c]]
-        m += row[c] * (p_hat[c] + dx[pos[c]])
-    if not s2 > 0.0:
-        return False
-    s = math.sqrt(s2)
-    if fixed:
-        shift, var = bound - m, 0.0
-    else:
-        mean_t, var_t = truncated_moments((bound - m) / s)
-        shift, var = s * mean_t, s2 * var_t
-    if var >= s2:
-        return False
-    scale = (s2 - var) / (s2 * s2)
-    for a in range(n):
-        if others[a]:
-            K[a] = 0.0
-        else:
-            dx[a] += PH[a] / s2 * shift
-            K[a] = PH[a] * scale
-    w = s2 + var * s2 / (s2 - var)
-    for a in range(n):
-        for b in range(n):
-            P[a, b] += -K[a] * PH[b] - PH[a] * K[b] + w * K[a] * K[b]
-    return True
-
-
-@_kernel
 def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, bounds: np.ndarray,
               fixed: np.ndarray, idx: np.ndarray, geo: np.ndarray, active: np.ndarray, tail_beta: float,
               others: np.ndarray, dx: np.ndarray, tail: np.ndarray) -> int:
-    """Every limit the truncation takes at one epoch, into δx (n,) and P (n, n) in place:
-    the active ones' ``rows`` (A, 3n) with ``bounds`` and ``fixed`` flags, then the inactive
-    inequalities within ``tail_beta`` σ of p̂ (flagged in ``tail`` (K,)). Geometry ``idx``,
-    ``geo`` as in :mod:`bodyfusion.core.constraints.kernels`. Returns the limits that cut."""
+    """Every limit the truncation takes at one epoch, into δx (n,) and P (n, n) in place
+    (module docstring): the active ones' ``rows`` (A, 3n) with ``bounds`` and ``fixed`` flags,
+    then the inactive inequalities within ``tail_beta`` σ of p̂ (flagged in ``tail`` (K,)).
+    Geometry ``idx``, ``geo`` as in :mod:`bodyfusion.core.constraints.kernels`; ``others``
+    (n,): rows kept out of the correction. Returns the limits that cut (s² > 0, V < s²)."""
     n = P.shape[0]
     n3 = pos.shape[0]
-    PH = np.empty(n)
-    K = np.empty(n)
+    A = rows.shape[0]
+    limits = np.zeros((A + idx.shape[0], n3))
+    limit_bounds = np.empty(A + idx.shape[0])
+    limit_fixed = np.zeros(A + idx.shape[0], dtype=np.bool_)
+    for q in range(A):  # scalar loops: a slice assignment compiles numba's shape checks (seconds)
+        for c in range(n3):
+            limits[q, c] = rows[q, c]
+        limit_bounds[q] = bounds[q]
+        limit_fixed[q] = fixed[q]
+    L = A
     r = np.empty(3)
-    tail_rows = np.zeros((idx.shape[0], n3))
-    tail_bounds = np.empty(idx.shape[0])
     for k in range(idx.shape[0]):  # the tails, tested on the estimate before any cut
         tail[k] = False
         code = idx[k, 3]
@@ -121,24 +85,59 @@ def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarra
         i3, j3, D = idx[k, 0], idx[k, 1], idx[k, 2]
         sign = -1.0 if code == 1 else 1.0
         g = sign * (rho - geo[k, 0])
+        for t in range(D):
+            limits[L, i3 + t] = sign * r[t] / rho
+            limits[L, j3 + t] = -sign * r[t] / rho
         s2 = 0.0
         lin = 0.0
-        for t in range(D):
-            tail_rows[k, i3 + t] = sign * r[t] / rho
-            tail_rows[k, j3 + t] = -sign * r[t] / rho
         for c in range(n3):
-            lin += tail_rows[k, c] * p_hat[c]
+            lin += limits[L, c] * p_hat[c]
             for e in range(n3):
-                s2 += tail_rows[k, c] * P[pos[c], pos[e]] * tail_rows[k, e]
+                s2 += limits[L, c] * P[pos[c], pos[e]] * limits[L, e]
         if s2 > 0.0 and -g < tail_beta * math.sqrt(s2):
             tail[k] = True
-            tail_bounds[k] = lin - g
+            limit_bounds[L] = lin - g
+            L += 1
+        else:
+            for c in range(n3):
+                limits[L, c] = 0.0
+    PH = np.empty(n)
+    K = np.empty(n)
     taken = 0
-    for q in range(rows.shape[0]):
-        taken += _cut(P, pos, p_hat, rows[q], bounds[q], fixed[q], others, dx, PH, K)
-    for k in range(idx.shape[0]):
-        if tail[k]:
-            taken += _cut(P, pos, p_hat, tail_rows[k], tail_bounds[k], False, others, dx, PH, K)
+    for q in range(L):  # X = J_q p ≤ b_q (= when fixed), on the state the previous ones left
+        s2 = 0.0
+        m = 0.0
+        for a in range(n):
+            acc = 0.0
+            for c in range(n3):
+                if limits[q, c] != 0.0:
+                    acc += P[a, pos[c]] * limits[q, c]
+            PH[a] = acc
+        for c in range(n3):
+            s2 += limits[q, c] * PH[pos[c]]
+            m += limits[q, c] * (p_hat[c] + dx[pos[c]])
+        if not s2 > 0.0:
+            continue
+        s = math.sqrt(s2)
+        if limit_fixed[q]:
+            shift, var = limit_bounds[q] - m, 0.0
+        else:
+            mean_t, var_t = truncated_moments((limit_bounds[q] - m) / s)
+            shift, var = s * mean_t, s2 * var_t
+        if var >= s2:
+            continue
+        taken += 1
+        scale = (s2 - var) / (s2 * s2)
+        for a in range(n):
+            if others[a]:
+                K[a] = 0.0
+            else:
+                dx[a] += PH[a] / s2 * shift
+                K[a] = PH[a] * scale
+        w = s2 + var * s2 / (s2 - var)  # s² + R
+        for a in range(n):
+            for b in range(n):
+                P[a, b] += -K[a] * PH[b] - PH[a] * K[b] + w * K[a] * K[b]
     for a in range(n):
         for b in range(a):
             P[a, b] = P[b, a] = 0.5 * (P[a, b] + P[b, a])
