@@ -46,6 +46,18 @@ def test_trajectory_files_are_written_without_pandas(tmp_path):
     assert (tmp_path / "x.parquet").is_file()
 
 
+def test_tables_are_read_without_pandas(tmp_path):
+    """Arrow's CSV reader path (:func:`bodyfusion.io.tables._arrow_columns`), labels and an
+    allowed empty cell included: ``to_numpy`` would import pandas."""
+    (tmp_path / "truth.csv").write_text("system,t,x\nleft,0,1.5\nright,1,\n")
+    loaded = _modules_after(
+        "from bodyfusion.io.tables import read_labelled_table\n"
+        f"arrays, _, (codes, names) = read_labelled_table({str(tmp_path / 'truth.csv')!r}, ['t', 'x'], 'system',"
+        " allow_missing=('x',))\n"
+        "assert names == ['left', 'right'] and list(codes) == [0, 1]")
+    assert not loaded
+
+
 @pytest.mark.parametrize("probability, dof", [(0.025, 2), (0.975, 2), (0.99, 3), (0.025, 40), (0.975, 40)])
 def test_chi2_quantiles_are_those_of_scipy_stats(probability, dof):
     from scipy.stats import chi2
