@@ -112,3 +112,16 @@ def test_nees_after_an_alignment_turns_the_covariance_with_the_frame():
 def test_nees_is_nan_where_the_covariance_is_singular():
     values = nees(np.array([[1.0, 0.0], [0.0, 0.0], [1.0, 1.0]]), np.stack([np.eye(2), np.zeros((2, 2)), 4 * np.eye(2)]))
     assert values[0] == 1.0 and np.isnan(values[1]) and values[2] == pytest.approx(0.5)
+
+
+def test_covariance_health_checked_in_pieces_is_that_of_all_at_once():
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(1000, 3, 3))
+    covs = A @ A.transpose(0, 2, 1)
+    covs[700] = np.diag([1.0, -1e-3, 1.0])  # a violation in the third piece
+    covs[900, 0, 1] += 1e-3  # an asymmetric one
+    t = np.arange(1000) * 0.01
+    whole = CovarianceHealth()
+    whole.add_many(covs, t)
+    assert CovarianceHealth.of(covs, t, piece=300) == whole
+    assert whole.violations == 2 and whole.first_violation_t_s == 7.0

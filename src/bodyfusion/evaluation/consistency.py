@@ -112,10 +112,13 @@ class CovarianceHealth:
         self.end_asymmetry, self.end_min_eigenvalue = float(asym[-1]), float(lam[-1])
 
     @classmethod
-    def of(cls, covs: np.ndarray, t: np.ndarray) -> CovarianceHealth:
-        """The figures of covariances (K, n, n) at times t (K,) s."""
+    def of(cls, covs: np.ndarray, t: np.ndarray, piece: int = 1 << 14) -> CovarianceHealth:
+        """The figures of covariances (K, n, n) at times t (K,) s, checked ``piece`` at a time
+        (the checks' temporaries are ~10 copies of what they check: a whole hour's at once
+        held ~90 MB)."""
         health = cls()
-        health.add_many(covs, t)
+        for a in range(0, len(covs), piece):
+            health.add_many(covs[a:a + piece], t[a:a + piece])
         return health
 
     def to_dict(self) -> dict:
