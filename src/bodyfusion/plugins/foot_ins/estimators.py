@@ -43,7 +43,8 @@ class RunData:
     kept corrections (sample index, nominal state before the correction): those derived from
     other systems' estimates, which the smoothers keep as the filter made them; ``record``: the
     arrays the ekf records the whole-run RTS's sweep into as it runs
-    (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`; :func:`~bodyfusion.plugins.foot_ins.kernels.no_record`: none)."""
+    (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`;
+    :func:`~bodyfusion.plugins.foot_ins.kernels.no_record`: none)."""
 
     t: np.ndarray
     acc_b: np.ndarray

@@ -369,8 +369,8 @@ class ForwardRecord:
         n = r.n
         stance = int(np.count_nonzero(r.stance[1:]))
         gen = np.flatnonzero(general)
-        if (not self.active or self.Pu.shape[0] < n or int(self.counters[C_STANCE_RECORDS]) != stance or (gen.size and gen[0] == 0)
-                or any(int(i) not in self.captured for i in gen)):
+        if (not self.active or self.Pu.shape[0] < n or int(self.counters[C_STANCE_RECORDS]) != stance
+                or (gen.size and gen[0] == 0) or any(int(i) not in self.captured for i in gen)):
             return None
         ordinal = np.cumsum(r.stance) - 1 - r.stance[0]  # the stance entry of each stance sample
         kept = np.zeros(n, dtype=np.bool_)
