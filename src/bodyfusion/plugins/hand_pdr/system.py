@@ -72,7 +72,7 @@ from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
-from bodyfusion.evaluation.consistency import NisRecord, innovation_columns, nis
+from bodyfusion.evaluation.consistency import NisRecord, innovation_columns
 from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
 from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.io.imu import read_imu
@@ -197,6 +197,7 @@ class HandPdr(SensorSystem):
         self._gate_pos = chi2_gate(config.filter.gate_probability, 3)
         self._gate_psi = chi2_gate(config.filter.gate_probability, 1)
         self._gate_mag = chi2_gate(mag.gate_probability, 1)
+        self._models()
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
@@ -213,8 +214,9 @@ class HandPdr(SensorSystem):
         ``filter.pose_window_s`` (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`)."""
         return self._steady[np.maximum(np.searchsorted(self.t, t, side="right") - 1, 0)]
 
-    def _event_list(self) -> list[tuple[float, int, int]]:
-        """(time, kind, index) of steps, GNSS fixes and magnetometer updates, in time order."""
+    def _event_list(self) -> list[tuple[float, int, int, int]]:
+        """(time, kind, index, IMU sample at or before the time) of steps, GNSS fixes,
+        magnetometer updates and re-opened headings, in time order."""
         ev = [(float(self.t[i]), STEP, k) for k, i in enumerate(self.step_index)]
         if self._fixes is not None:
             ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fixes.t) if self.t[0] < tf <= self.t[-1]]
@@ -223,7 +225,41 @@ class HandPdr(SensorSystem):
         if self.config.initial.heading_deg == "gnss_track":  # the phone held steadily again
             again = np.flatnonzero(self._steady[1:] & ~self._steady[:-1]) + 1
             ev += [(float(self.t[i]), STEADY, int(i)) for i in again]
-        return sorted(ev)
+        ev.sort()
+        sample = np.searchsorted(self.t, [e[0] for e in ev], side="right") - 1
+        return [(te, kind, k, int(i)) for (te, kind, k), i in zip(ev, sample)]
+
+    def _models(self) -> None:
+        """The filter's constant model terms and the buffers its steps fill in place (see
+        :meth:`_propagate_to`, :meth:`_step`, :meth:`_gnss`): process noise per second (rad²/s,
+        m²/s, 1/s) and variances, F and Q of a time step and of a step (one per hypothesis of a
+        bank), H and R of a GNSS position and course fix and of a magnetometer sample."""
+        f, n, mag = self.config.filter, self.n_err, self.config.magnetometer
+        self._neg_rates = -1.0 / np.array([f.correlation_time_s, f.gnss_bias_time_s])  # bias, β decay rates
+        self._q_psi = f.heading_noise_density**2
+        self._q_bias = f.gyro_bias_sd**2
+        self._q_up = f.height_noise_density**2
+        self._q_beta = float(f.gnss_correlated_fraction > 0)
+        self._q_scale = f.step_scale_random_walk**2
+        self._q_offset = np.deg2rad(mag.offset_random_walk) ** 2
+        self._q_step = f.step_length_sd_m**2
+        self._identity = np.eye(n)
+        self._F_time, self._Q_time = np.eye(n), np.zeros((n, n))
+        count = self.config.initial.heading_hypotheses if self.config.initial.heading_deg == "gnss_track" else 1
+        self._F_step = np.repeat(self._identity[None], count, axis=0)
+        self._F_step[:, S, S] = 0.0  # the previous step's δS does not carry over
+        self._Q_step = np.zeros((count, n, n))
+        self._step_block = np.ix_([E, N, S], [E, N, S])
+        self._H_pos, self._R_pos = np.zeros((3, n)), np.zeros((3, 3))
+        self._H_pos[0, E] = self._H_pos[1, N] = self._H_pos[2, U] = 1.0
+        self._sqrt_rho = np.sqrt(f.gnss_correlated_fraction)
+        self._H_psi = np.zeros((1, n))
+        self._H_psi[0, PSI] = 1.0
+        self._R_psi = np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]])
+        self._H_mag = np.zeros((1, n))
+        if self._mag is not None:
+            self._H_mag[0, PSI], self._H_mag[0, O] = 1.0, -1.0
+        self._R_mag = np.array([[np.deg2rad(mag.sigma_deg) ** 2]])
 
     def _pdr_track(self, psi0: float) -> tuple[np.ndarray, np.ndarray]:
         """Step times and horizontal PDR positions (from the start, no filter) for heading psi0."""
@@ -252,6 +288,7 @@ class HandPdr(SensorSystem):
         self.heading_counts = {"weighted": 0, "unweighted_standing": 0, "unweighted_handling": 0, "reopened": 0}
         self.mag_counts = {"accepted": 0, "rejected_gate": 0, "rejected_field": 0, "rejected_turning": 0}
         self._tc = float(self.t[0])  # time the heading and covariance are propagated to
+        self._i_tc = int(np.searchsorted(self.t, self._tc, side="right")) - 1  # its IMU sample
         self._next = 0
         self._rejected_in_row = 0
         self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "held": 0, "too_fast": 0, "before_start": 0,
@@ -262,6 +299,7 @@ class HandPdr(SensorSystem):
         if self._mag is not None:
             self.nis_records["magnetometer"] = NisRecord(1)
         self._hist_x = GrowingArray((1 + len(self._nominal),))  # t, nominal state
+        self._row = np.empty(1 + len(self._nominal))
         self._hist_P = GrowingArray((self.n_err, self.n_err))
         self._record()
 
@@ -282,63 +320,59 @@ class HandPdr(SensorSystem):
         return len(self._bank)
 
     # --- the filter -------------------------------------------------------------
-    def _propagate_to(self, t: float) -> None:
+    def _propagate_to(self, t: float, i: int) -> None:
+        """From the current time to t (s; IMU sample i at or before it), Δt = t − t_c:
+        ψ += Δψ_gyro − b Δt, β ← e^{−Δt/τ_β} β, P ← F P Fᵀ + Q with F = I but F[ψ, b] = −Δt,
+        F[b, b] = e^{−Δt/τ}, F[β, β] = e^{−Δt/τ_β}, and Q diagonal: q_ψ Δt, σ_b² (1 − e^{−2Δt/τ}),
+        q_U Δt, (1 − e^{−2Δt/τ_β}) for β, q_c Δt, q_o Δt (module docstring)."""
         dt = t - self._tc
         if dt <= 0:
             return
-        f = self.config.filter
-        i0, i1 = (np.searchsorted(self.t, v, side="right") - 1 for v in (self._tc, t))
-        F = np.eye(self.n_err)
+        decay, beta_decay = np.exp(dt * self._neg_rates)
+        F, Q = self._F_time, self._Q_time
         F[PSI, B] = -dt
-        decay = np.exp(-dt / f.correlation_time_s)
         F[B, B] = decay
-        beta_decay = np.exp(-dt / f.gnss_bias_time_s)
         F[BE, BE] = F[BN, BN] = beta_decay
+        dpsi = self._azimuth[i] - self._azimuth[self._i_tc]
         for h in self._bank:
-            h.x[3] += self._azimuth[i1] - self._azimuth[i0] - h.x[4] * dt
+            h.x[3] += dpsi - h.x[4] * dt
             h.x[5:7] *= beta_decay
-        Q = np.zeros(self.n_err)
-        Q[PSI] = f.heading_noise_density**2 * dt
-        Q[B] = f.gyro_bias_sd**2 * (1.0 - decay**2)
-        Q[U] = f.height_noise_density**2 * dt
-        Q[BE] = Q[BN] = float(f.gnss_correlated_fraction > 0) * (1.0 - beta_decay**2)
-        Q[C] = f.step_scale_random_walk**2 * dt
+        Q[PSI, PSI] = self._q_psi * dt
+        Q[B, B] = self._q_bias * (1.0 - decay**2)
+        Q[U, U] = self._q_up * dt
+        Q[BE, BE] = Q[BN, BN] = self._q_beta * (1.0 - beta_decay**2)
+        Q[C, C] = self._q_scale * dt
         if self._mag is not None:
-            Q[O] = np.deg2rad(self.config.magnetometer.offset_random_walk) ** 2 * dt
+            Q[O, O] = self._q_offset * dt
         self._bank.transition(F, Q)
-        self._tc = t
+        self._tc, self._i_tc = t, i
 
     def _step(self, k: int) -> None:
-        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS."""
+        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS: per
+        hypothesis F = I with F[S, S] = 0 (δS does not carry over) and the rows of δE, δN of
+        eqs. 38–39 in the δψ and δc columns; Q = σ_S² f fᵀ, f = (sin ψ, cos ψ, 1) at (E, N, S)."""
         s_model = self.step_length_m[k]
-        fresh = np.eye(self.n_err)
-        fresh[S, S] = 0.0  # the previous step's δS does not carry over
-        Qs = np.zeros(self.n_err)
-        Qs[S] = self.config.filter.step_length_sd_m**2
-        Fs, Qs_ = [], []
-        for h in self._bank:
+        count = len(self._bank)
+        F, Q = self._F_step[:count], self._Q_step[:count]
+        for h, Fh, Qh in zip(self._bank, F, Q):
             psi, s = h.x[3], h.x[7] * s_model
-            F = np.eye(self.n_err)
-            F[E, PSI], F[E, S], F[E, C] = s * np.cos(psi), np.sin(psi), s_model * np.sin(psi)
-            F[N, PSI], F[N, S], F[N, C] = -s * np.sin(psi), np.cos(psi), s_model * np.cos(psi)
-            h.x[0] += s * np.sin(psi)
-            h.x[1] += s * np.cos(psi)
-            Fs.append(F @ fresh)
-            Qs_.append(F @ np.diag(Qs) @ F.T)
-        self._bank.transition(Fs, Qs_)
+            sin, cos = np.sin(psi), np.cos(psi)
+            Fh[E, PSI], Fh[E, C] = s * cos, s_model * sin
+            Fh[N, PSI], Fh[N, C] = -s * sin, s_model * cos
+            f = np.array([sin, cos, 1.0])
+            Qh[self._step_block] = np.multiply.outer(f * self._q_step, f)
+            h.x[0] += s * sin
+            h.x[1] += s * cos
+        self._bank.transition(F, Q)
 
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
                 weigh: bool, kind: str | None) -> bool:
         """:meth:`BankFilter.update`; the time an open bank collapses is the heading's resolution.
         The NIS of a ``kind`` of :attr:`nis_records` is recorded while the bank is one filter."""
         was_open = len(self._bank) > 1
-        value = None
-        if kind is not None and not was_open:
-            x, P = self._bank.moments()
-            value = nis(residual(x), H @ P @ H.T + R)
         ok = self._bank.update(H, residual, R, gate, weigh)
-        if value is not None:
-            self.nis_records[kind].add(self._tc, value, ok)
+        if kind is not None and not was_open:
+            self.nis_records[kind].add(self._tc, self._bank.nis[0], ok)
         if was_open and len(self._bank) == 1:
             self.heading_resolved_s = self._tc
             self.heading_resolutions.append(self._tc)
@@ -364,8 +398,7 @@ class HandPdr(SensorSystem):
         """δp ← fresh with σ :data:`DIFFUSE_SD_M` (rows of δp in the transition zeroed)."""
         F = np.eye(self.n_err)
         F[[E, N, U]] = 0.0
-        Q = np.zeros(self.n_err)
-        Q[[E, N, U]] = DIFFUSE_SD_M**2
+        Q = np.diag([DIFFUSE_SD_M**2 if i in (E, N, U) else 0.0 for i in range(self.n_err)])
         self._bank.transition(F, Q)
 
     def _gnss(self, j: int) -> None:
@@ -377,13 +410,14 @@ class HandPdr(SensorSystem):
         f = self.config.filter
         walking, steady = bool(fx.walking[j]), bool(fx.steady[j])
         sd, rho = fx.sd[j], f.gnss_correlated_fraction
-        H = np.zeros((3, self.n_err))
-        H[0, E] = H[1, N] = H[2, U] = 1.0
-        H[0, BE] = H[1, BN] = sd * np.sqrt(rho)
-        R = np.diag([sd**2 * (1.0 - rho), sd**2 * (1.0 - rho), (2.0 * sd) ** 2])
+        H, R = self._H_pos, self._R_pos
+        H[0, BE] = H[1, BN] = sd * self._sqrt_rho
+        R[0, 0] = R[1, 1] = sd**2 * (1.0 - rho)
+        R[2, 2] = (2.0 * sd) ** 2
+        H_nominal = H[:, self._nominal]
 
         def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
-            return fx.pos[j] - H[:, self._nominal] @ x
+            return fx.pos[j] - H_nominal @ x
 
         ok = self._update(H, residual, R, self._gate_pos, walking and steady, "gnss_position")
         self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
@@ -405,11 +439,8 @@ class HandPdr(SensorSystem):
         elif fx.accuracy[j] > f.max_accuracy_for_heading_m:
             counts["heading_skipped_accuracy"] += 1
         else:
-            Hp = np.zeros((1, self.n_err))
-            Hp[0, PSI] = 1.0
-            okh = self._update(Hp, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]),
-                               np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]]), self._gate_psi, True,
-                               "gnss_course")
+            okh = self._update(self._H_psi, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]), self._R_psi,
+                               self._gate_psi, True, "gnss_course")
             counts["heading_accepted" if okh else "heading_rejected"] += 1
 
     def _magnetometer(self, k: int) -> None:
@@ -420,31 +451,30 @@ class HandPdr(SensorSystem):
         if not self._mag.quasi_static[k]:
             self.mag_counts["rejected_turning"] += 1
             return
-        r = np.deg2rad(self.config.magnetometer.sigma_deg) ** 2
         psi_d = self._mag.psi_d[k]
         if not self._offset_known:  # δo ← δψ + v
             F = np.eye(self.n_err)
             F[O] = 0.0
             F[O, PSI] = 1.0
-            Q = np.zeros(self.n_err)
-            Q[O] = r
+            Q = np.zeros((self.n_err, self.n_err))
+            Q[O, O] = self._R_mag[0, 0]
             for h in self._bank:
                 h.x[8] = wrap_angle(h.x[3] - psi_d)
             self._bank.transition(F, Q)
             self._offset_known = True
             self.mag_counts["accepted"] += 1
             return
-        H = np.zeros((1, self.n_err))
-        H[0, PSI], H[0, O] = 1.0, -1.0
         tm = np.array([self._mag.t[k]])
-        ok = self._update(H, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), np.array([[r]]),
+        ok = self._update(self._H_mag, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), self._R_mag,
                           self._gate_mag, bool(self.walking(tm)[0] and self.held_steadily(tm)[0]), "magnetometer")
         self.mag_counts["accepted" if ok else "rejected_gate"] += 1
 
     def _record(self) -> None:
         """History row: time, nominal state and error-state covariance (the mixture's moments)."""
-        x, P = self._bank.moments()
-        self._hist_x.append((self._tc, *x))
+        x, P = self._bank.moments(copy=False)
+        self._row[0] = self._tc
+        self._row[1:] = x
+        self._hist_x.append(self._row)
         self._hist_P.append(P)
 
     def _last_record_t(self) -> float:
@@ -457,8 +487,8 @@ class HandPdr(SensorSystem):
 
     def advance(self, t: float) -> None:
         while self._next < len(self._events) and self._events[self._next][0] <= t:
-            te, kind, idx = self._events[self._next]
-            self._propagate_to(te)
+            te, kind, idx, i = self._events[self._next]
+            self._propagate_to(te, i)
             if kind == STEP:
                 self._step(idx)
             elif kind == GNSS:
@@ -471,7 +501,7 @@ class HandPdr(SensorSystem):
             self._next += 1
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         if i >= 0:
-            self._propagate_to(float(self.t[i]))  # the state refers to the last sample at or before t
+            self._propagate_to(float(self.t[i]), i)  # the state refers to the last sample at or before t
         if t >= self.t_end and self._last_record_t() < self._tc:
             self._record()  # the trajectory covers the whole data span
 
@@ -495,10 +525,10 @@ class HandPdr(SensorSystem):
 
     # --- fuser interface ------------------------------------------------------------
     def position_n(self) -> np.ndarray:
-        return self.x[:3].copy()
+        return self._bank.moments(copy=False)[0][:3].copy()
 
     def covariance(self) -> np.ndarray:
-        return self.P.copy()
+        return self._bank.moments(copy=False)[1].copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """Closed-loop reset of one filter or of every hypothesis (:meth:`BankFilter.correct`)."""
@@ -511,10 +541,10 @@ class HandPdr(SensorSystem):
             self._record()
 
     def track_transition(self) -> None:
-        self._bank.phi = np.eye(self.n_err)
+        self._bank.phi = self._identity.copy()
 
     def transition_since_sync(self) -> np.ndarray:
-        phi, self._bank.phi = self._bank.phi, np.eye(self.n_err)
+        phi, self._bank.phi = self._bank.phi, self._identity.copy()
         return phi
 
     def sync_times(self) -> np.ndarray:
