@@ -218,6 +218,17 @@ def _arrow_columns(path: Path, columns: list[str], n_header: int, idx: list[int]
                                                                     quoted_strings_can_be_null=False))
     except (pa.ArrowException, OSError):
         return None
+    try:
+        return _arrow_result(table, path, columns, idx, label_j, header_line, n_lines, allowed)
+    finally:  # the reader's buffers back to the system, not kept by Arrow's allocator (~100 MB an hour of truth)
+        del table
+        pa.default_memory_pool().release_unused()
+
+
+def _arrow_result(table: Any, path: Path, columns: list[str], idx: list[int], label_j: int | None, header_line: int,
+                  n_lines: int, allowed: np.ndarray
+                  ) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None] | None:
+    """:func:`_arrow_columns`' result from the table Arrow read (columns ``c<j>``), or None."""
     with path.open("rb") as fh:
         fh.seek(-1, 2)
         rows = n_lines - header_line - (fh.read(1) == b"\n")
@@ -234,7 +245,7 @@ def _arrow_columns(path: Path, columns: list[str], n_header: int, idx: list[int]
         arrays[name] = values
     labels = None
     if label_j is not None:
-        encoded = table.column(names[label_j]).combine_chunks().dictionary_encode()  # codes in order of first sight
+        encoded = table.column(f"c{label_j}").combine_chunks().dictionary_encode()  # codes in order of first sight
         found: dict[str, int] = {}
         code = np.array([found.setdefault(clean_cell(v), len(found)) for v in encoded.dictionary.to_pylist()],
                         dtype=np.int32)
