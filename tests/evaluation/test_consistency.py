@@ -125,3 +125,14 @@ def test_covariance_health_checked_in_pieces_is_that_of_all_at_once():
     whole.add_many(covs, t)
     assert CovarianceHealth.of(covs, t, piece=300) == whole
     assert whole.violations == 2 and whole.first_violation_t_s == 7.0
+
+
+def test_the_closed_form_smallest_eigenvalue_of_a_2x2_covariance_is_lapacks():
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(5000, 2, 2)) * rng.uniform(1e-4, 1e3, size=(5000, 1, 1))
+    covs = A @ A.transpose(0, 2, 1)
+    covs[:3] = [np.diag([1.0, -1e-3]), np.ones((2, 2)), np.zeros((2, 2))]
+    _, lam, bad = covariance_defects(covs)
+    exact = np.linalg.eigvalsh(covs)[:, 0]
+    np.testing.assert_allclose(lam, exact, rtol=0, atol=1e-12 * np.abs(covs).max(axis=(1, 2)).clip(1.0))
+    assert bad.tolist()[:3] == [True, False, False] and not bad[3:].any()
