@@ -19,8 +19,9 @@ lap) goes, in this one process, through
 
 The project's stance detection and initial alignment run once when the system is built and
 are not timed. Every job runs once untimed (JIT compilation, caches), then ``--repeats``
-times; the figure is the median CPU time of this process (``time.process_time``: the machine
-is shared, and all the jobs are single-threaded). Printed: samples/s of each job, the
+rounds run every job once each, in turn, so that a change of the shared machine's load in
+the meantime falls on all of them alike; a job's figure is its median CPU time of this
+process (``time.process_time``: the machine is shared, and all the jobs are single-threaded). Printed: samples/s of each job, the
 distance each estimate walked against the truth's (a check that both did the work), and as
 the last line the ratio of the project's forward + RTS to gaitmap's RtsKalman,
 ``rts_vs_gaitmap=<ratio>`` (``rts_vs_gaitmap=n/a`` when gaitmap is not installed).
@@ -62,15 +63,18 @@ def scenario(laps: int) -> dict:
     }
 
 
-def cpu_seconds(job: Callable[[], object], repeats: int) -> float:
-    """Median CPU seconds of ``job`` over ``repeats`` calls after one untimed call."""
-    job()
-    times = []
-    for _ in range(repeats):
-        t0 = time.process_time()
+def cpu_seconds(jobs: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Median CPU seconds of each job over ``repeats`` rounds that call every job once, in
+    turn, after one untimed call of each."""
+    for job in jobs.values():
         job()
-        times.append(time.process_time() - t0)
-    return statistics.median(times)
+    times: dict[str, list[float]] = {name: [] for name in jobs}
+    for _ in range(repeats):
+        for name, job in jobs.items():
+            t0 = time.process_time()
+            job()
+            times[name].append(time.process_time() - t0)
+    return {name: statistics.median(t) for name, t in times.items()}
 
 
 def walked_m(pos: np.ndarray) -> float:
@@ -159,10 +163,9 @@ def main() -> None:
           f"{foot.stance.mean():.2f}; CPU time, median of {args.repeats} warm calls")
     print(f"truth walked {sim.distance_m:.1f} m")
     rate = {}
-    for name, job in jobs.items():
-        seconds = cpu_seconds(job, args.repeats)
+    for name, seconds in cpu_seconds(jobs, args.repeats).items():
         rate[name] = n / seconds
-        print(f"{name}: {rate[name]:,.0f} samples/s ({seconds * 1e3:.1f} ms), walked {walked_m(job()):.1f} m")
+        print(f"{name}: {rate[name]:,.0f} samples/s ({seconds * 1e3:.1f} ms), walked {walked_m(jobs[name]()):.1f} m")
     if "gaitmap RtsKalman.estimate" not in rate:
         print('gaitmap not installed (pip install -e ".[bench]" in its own environment): peer skipped')
         print("rts_vs_gaitmap=n/a")
