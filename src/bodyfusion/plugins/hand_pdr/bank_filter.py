@@ -129,7 +129,7 @@ class BankFilter:
         N(x̄ + dx, P): x_i ← x̄ + dx + T d_i, P_i ← T P_i Tᵀ, with T P̄ Tᵀ = P
         (:func:`~bodyfusion.plugins.hand_pdr.hypotheses.affine_map`), d_i = x_i − x̄."""
         x_bar, P_bar = self.moments(copy=False)
-        changed = bool(dx.any()) or not np.array_equal(P, P_bar)
+        changed = bool(dx.any() or (P != P_bar).any())
         if len(self.hypotheses) == 1:
             h = self.hypotheses[0]
             h.x += dx[self._nominal]
