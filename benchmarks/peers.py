@@ -21,7 +21,9 @@ The project's stance detection and initial alignment run once when the system is
 are not timed. Every job runs once untimed (JIT compilation, caches), then ``--repeats``
 rounds run every job once each, in turn, so that a change of the shared machine's load in
 the meantime falls on all of them alike; a job's figure is its median CPU time of this
-process (``time.process_time``: the machine is shared, and all the jobs are single-threaded). Printed: samples/s of each job, the
+process (``time.process_time``: the machine is shared, and all the jobs are single-threaded),
+each call timed as ``timeit`` times one: Python's garbage collector run before it and off
+during it (a collection the objects of one job call for would otherwise fall in another's). Printed: samples/s of each job, the
 distance each estimate walked against the truth's (a check that both did the work), and as
 the last line the ratio of the project's forward + RTS to gaitmap's RtsKalman,
 ``rts_vs_gaitmap=<ratio>`` (``rts_vs_gaitmap=n/a`` when gaitmap is not installed).
@@ -32,6 +34,7 @@ Run: python benchmarks/peers.py [--laps 4] [--repeats 7] [--seed 0]
 from __future__ import annotations
 
 import argparse
+import gc
 import statistics
 import tempfile
 import time
@@ -65,15 +68,19 @@ def scenario(laps: int) -> dict:
 
 def cpu_seconds(jobs: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
     """Median CPU seconds of each job over ``repeats`` rounds that call every job once, in
-    turn, after one untimed call of each."""
+    turn (the garbage collector run before each call and off during it), after one untimed
+    call of each."""
     for job in jobs.values():
         job()
     times: dict[str, list[float]] = {name: [] for name in jobs}
     for _ in range(repeats):
         for name, job in jobs.items():
+            gc.collect()
+            gc.disable()
             t0 = time.process_time()
             job()
             times[name].append(time.process_time() - t0)
+            gc.enable()
     return {name: statistics.median(t) for name, t in times.items()}
 
 

@@ -234,6 +234,45 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
     return True
 
 
+@numba.njit(inline="always")
+def _smoothed_error_columns(P: np.ndarray, lam: np.ndarray, Lam: np.ndarray, r0: int, d: np.ndarray,
+                            T: np.ndarray) -> None:
+    """Columns r0 … r0 + 4 of d = −P lam (15,) and T = (Lam P[:, 0:3])ᵀ (3, 15), from P and
+    Lam (15, 15) symmetric: row k of P (of Lam) for column k, so each element sums over k in
+    the order of the row-times-column product; the 20 sums held in registers."""
+    d0 = d1 = d2 = d3 = d4 = 0.0
+    a0 = a1 = a2 = a3 = a4 = 0.0
+    b0 = b1 = b2 = b3 = b4 = 0.0
+    c0 = c1 = c2 = c3 = c4 = 0.0
+    for k in range(15):
+        lk, p0, p1, p2 = lam[k], P[k, 0], P[k, 1], P[k, 2]
+        d0 += P[k, r0] * lk
+        d1 += P[k, r0 + 1] * lk
+        d2 += P[k, r0 + 2] * lk
+        d3 += P[k, r0 + 3] * lk
+        d4 += P[k, r0 + 4] * lk
+        l0, l1, l2, l3, l4 = Lam[k, r0], Lam[k, r0 + 1], Lam[k, r0 + 2], Lam[k, r0 + 3], Lam[k, r0 + 4]
+        a0 += l0 * p0
+        a1 += l1 * p0
+        a2 += l2 * p0
+        a3 += l3 * p0
+        a4 += l4 * p0
+        b0 += l0 * p1
+        b1 += l1 * p1
+        b2 += l2 * p1
+        b3 += l3 * p1
+        b4 += l4 * p1
+        c0 += l0 * p2
+        c1 += l1 * p2
+        c2 += l2 * p2
+        c3 += l3 * p2
+        c4 += l4 * p2
+    d[r0], d[r0 + 1], d[r0 + 2], d[r0 + 3], d[r0 + 4] = -d0, -d1, -d2, -d3, -d4
+    T[0, r0], T[0, r0 + 1], T[0, r0 + 2], T[0, r0 + 3], T[0, r0 + 4] = a0, a1, a2, a3, a4
+    T[1, r0], T[1, r0 + 1], T[1, r0 + 2], T[1, r0 + 3], T[1, r0 + 4] = b0, b1, b2, b3, b4
+    T[2, r0], T[2, r0 + 1], T[2, r0 + 2], T[2, r0 + 3], T[2, r0 + 4] = c0, c1, c2, c3, c4
+
+
 @numba.njit(cache=True)
 def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
                 gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
@@ -361,22 +400,8 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
                 P[r, c] = v
                 P[c, r] = v
                 q += 1
-        # d = −P lam and T = (Lam P[:, 0:3])ᵀ a row of P (of Lam) at a time: P and Lam are
-        # symmetric, so each element sums over k in the order of the row-times-column product
-        for r in range(15):
-            d[r] = 0.0
-            T[0, r] = T[1, r] = T[2, r] = 0.0
-        for k in range(15):
-            lk, p0, p1, p2 = lam[k], P[k, 0], P[k, 1], P[k, 2]
-            for r in range(15):
-                d[r] += P[k, r] * lk
-            for r in range(15):
-                lkr = Lam[k, r]
-                T[0, r] += lkr * p0
-                T[1, r] += lkr * p1
-                T[2, r] += lkr * p2
-        for r in range(15):
-            d[r] = -d[r]
+        for r0 in range(0, 15, 5):
+            _smoothed_error_columns(P, lam, Lam, r0, d, T)
         for k in range(16):
             y[k] = hist_x[i, k]
         inject(y, d)
