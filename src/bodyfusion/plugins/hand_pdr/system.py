@@ -82,6 +82,7 @@ from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
 from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
+from bodyfusion.plugins.hand_pdr.model import B, BE, BN, C, E, N, O, PSI, U, PdrModel
 from bodyfusion.plugins.hand_pdr.magnetometer import (
     MagneticHeading,
     read_magnetometer_csv,
@@ -94,7 +95,6 @@ from bodyfusion.plugins.hand_pdr.pdr import (
     up_in_body,
 )
 
-E, N, U, PSI, S, B, BE, BN, C, O = range(10)
 NOMINAL = [E, N, U, PSI, B, BE, BN, C]
 """Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN, c)."""
 N_ERR = 9
@@ -197,7 +197,8 @@ class HandPdr(SensorSystem):
         self._gate_pos = chi2_gate(config.filter.gate_probability, 3)
         self._gate_psi = chi2_gate(config.filter.gate_probability, 1)
         self._gate_mag = chi2_gate(mag.gate_probability, 1)
-        self._models()
+        self._identity = np.eye(self.n_err)
+        self._model = PdrModel(f, mag, self.n_err, ini.heading_hypotheses if ini.heading_deg == "gnss_track" else 1)
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
@@ -228,38 +229,6 @@ class HandPdr(SensorSystem):
         ev.sort()
         sample = np.searchsorted(self.t, [e[0] for e in ev], side="right") - 1
         return [(te, kind, k, int(i)) for (te, kind, k), i in zip(ev, sample)]
-
-    def _models(self) -> None:
-        """The filter's constant model terms and the buffers its steps fill in place (see
-        :meth:`_propagate_to`, :meth:`_step`, :meth:`_gnss`): process noise per second (rad²/s,
-        m²/s, 1/s) and variances, F and Q of a time step and of a step (one per hypothesis of a
-        bank), H and R of a GNSS position and course fix and of a magnetometer sample."""
-        f, n, mag = self.config.filter, self.n_err, self.config.magnetometer
-        self._neg_rates = -1.0 / np.array([f.correlation_time_s, f.gnss_bias_time_s])  # bias, β decay rates
-        self._q_psi = f.heading_noise_density**2
-        self._q_bias = f.gyro_bias_sd**2
-        self._q_up = f.height_noise_density**2
-        self._q_beta = float(f.gnss_correlated_fraction > 0)
-        self._q_scale = f.step_scale_random_walk**2
-        self._q_offset = np.deg2rad(mag.offset_random_walk) ** 2
-        self._q_step = f.step_length_sd_m**2
-        self._identity = np.eye(n)
-        self._F_time, self._Q_time = np.eye(n), np.zeros((n, n))
-        count = self.config.initial.heading_hypotheses if self.config.initial.heading_deg == "gnss_track" else 1
-        self._F_step = np.repeat(self._identity[None], count, axis=0)
-        self._F_step[:, S, S] = 0.0  # the previous step's δS does not carry over
-        self._Q_step = np.zeros((count, n, n))
-        self._step_block = np.ix_([E, N, S], [E, N, S])
-        self._H_pos, self._R_pos = np.zeros((3, n)), np.zeros((3, 3))
-        self._H_pos[0, E] = self._H_pos[1, N] = self._H_pos[2, U] = 1.0
-        self._sqrt_rho = np.sqrt(f.gnss_correlated_fraction)
-        self._H_psi = np.zeros((1, n))
-        self._H_psi[0, PSI] = 1.0
-        self._R_psi = np.array([[np.deg2rad(f.gnss_heading_sd_deg) ** 2]])
-        self._H_mag = np.zeros((1, n))
-        if self._mag is not None:
-            self._H_mag[0, PSI], self._H_mag[0, O] = 1.0, -1.0
-        self._R_mag = np.array([[np.deg2rad(mag.sigma_deg) ** 2]])
 
     def _pdr_track(self, psi0: float) -> tuple[np.ndarray, np.ndarray]:
         """Step times and horizontal PDR positions (from the start, no filter) for heading psi0."""
@@ -322,48 +291,30 @@ class HandPdr(SensorSystem):
     # --- the filter -------------------------------------------------------------
     def _propagate_to(self, t: float, i: int) -> None:
         """From the current time to t (s; IMU sample i at or before it), Δt = t − t_c:
-        ψ += Δψ_gyro − b Δt, β ← e^{−Δt/τ_β} β, P ← F P Fᵀ + Q with F = I but F[ψ, b] = −Δt,
-        F[b, b] = e^{−Δt/τ}, F[β, β] = e^{−Δt/τ_β}, and Q diagonal: q_ψ Δt, σ_b² (1 − e^{−2Δt/τ}),
-        q_U Δt, (1 − e^{−2Δt/τ_β}) for β, q_c Δt, q_o Δt (module docstring)."""
+        ψ += Δψ_gyro − b Δt, β ← e^{−Δt/τ_β} β, P ← F P Fᵀ + Q (:meth:`PdrModel.time_step`)."""
         dt = t - self._tc
         if dt <= 0:
             return
-        decay, beta_decay = np.exp(dt * self._neg_rates)
-        F, Q = self._F_time, self._Q_time
-        F[PSI, B] = -dt
-        F[B, B] = decay
-        F[BE, BE] = F[BN, BN] = beta_decay
+        _, beta_decay = self._model.time_step(dt)
         dpsi = self._azimuth[i] - self._azimuth[self._i_tc]
         for h in self._bank:
             h.x[3] += dpsi - h.x[4] * dt
             h.x[5:7] *= beta_decay
-        Q[PSI, PSI] = self._q_psi * dt
-        Q[B, B] = self._q_bias * (1.0 - decay**2)
-        Q[U, U] = self._q_up * dt
-        Q[BE, BE] = Q[BN, BN] = self._q_beta * (1.0 - beta_decay**2)
-        Q[C, C] = self._q_scale * dt
-        if self._mag is not None:
-            Q[O, O] = self._q_offset * dt
-        self._bank.transition(F, Q)
+        self._bank.transition(self._model.F_time, self._model.Q_time)
         self._tc, self._i_tc = t, i
 
     def _step(self, k: int) -> None:
-        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS: per
-        hypothesis F = I with F[S, S] = 0 (δS does not carry over) and the rows of δE, δN of
-        eqs. 38–39 in the δψ and δc columns; Q = σ_S² f fᵀ, f = (sin ψ, cos ψ, 1) at (E, N, S)."""
+        """Eq. 37 for step k, and the covariance by eqs. 38–40 with a fresh white δS
+        (:meth:`PdrModel.step`, one F and Q per hypothesis)."""
         s_model = self.step_length_m[k]
-        count = len(self._bank)
-        F, Q = self._F_step[:count], self._Q_step[:count]
-        for h, Fh, Qh in zip(self._bank, F, Q):
+        for i, h in enumerate(self._bank):
             psi, s = h.x[3], h.x[7] * s_model
             sin, cos = np.sin(psi), np.cos(psi)
-            Fh[E, PSI], Fh[E, C] = s * cos, s_model * sin
-            Fh[N, PSI], Fh[N, C] = -s * sin, s_model * cos
-            f = np.array([sin, cos, 1.0])
-            Qh[self._step_block] = np.multiply.outer(f * self._q_step, f)
+            self._model.step(i, sin, cos, s, s_model)
             h.x[0] += s * sin
             h.x[1] += s * cos
-        self._bank.transition(F, Q)
+        count = len(self._bank)
+        self._bank.transition(self._model.F_step[:count], self._model.Q_step[:count])
 
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
                 weigh: bool, kind: str | None) -> bool:
@@ -409,11 +360,8 @@ class HandPdr(SensorSystem):
             return
         f = self.config.filter
         walking, steady = bool(fx.walking[j]), bool(fx.steady[j])
-        sd, rho = fx.sd[j], f.gnss_correlated_fraction
-        H, R = self._H_pos, self._R_pos
-        H[0, BE] = H[1, BN] = sd * self._sqrt_rho
-        R[0, 0] = R[1, 1] = sd**2 * (1.0 - rho)
-        R[2, 2] = (2.0 * sd) ** 2
+        self._model.gnss_position(fx.sd[j])
+        H, R = self._model.H_pos, self._model.R_pos
         H_nominal = H[:, self._nominal]
 
         def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
@@ -439,7 +387,7 @@ class HandPdr(SensorSystem):
         elif fx.accuracy[j] > f.max_accuracy_for_heading_m:
             counts["heading_skipped_accuracy"] += 1
         else:
-            okh = self._update(self._H_psi, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]), self._R_psi,
+            okh = self._update(self._model.H_psi, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]), self._model.R_psi,
                                self._gate_psi, True, "gnss_course")
             counts["heading_accepted" if okh else "heading_rejected"] += 1
 
@@ -457,7 +405,7 @@ class HandPdr(SensorSystem):
             F[O] = 0.0
             F[O, PSI] = 1.0
             Q = np.zeros((self.n_err, self.n_err))
-            Q[O, O] = self._R_mag[0, 0]
+            Q[O, O] = self._model.R_mag[0, 0]
             for h in self._bank:
                 h.x[8] = wrap_angle(h.x[3] - psi_d)
             self._bank.transition(F, Q)
@@ -465,7 +413,7 @@ class HandPdr(SensorSystem):
             self.mag_counts["accepted"] += 1
             return
         tm = np.array([self._mag.t[k]])
-        ok = self._update(self._H_mag, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), self._R_mag,
+        ok = self._update(self._model.H_mag, lambda x: np.array([wrap_angle(psi_d - (x[3] - x[8]))]), self._model.R_mag,
                           self._gate_mag, bool(self.walking(tm)[0] and self.held_steadily(tm)[0]), "magnetometer")
         self.mag_counts["accepted" if ok else "rejected_gate"] += 1
 
