@@ -47,7 +47,7 @@ def test_trajectory_files_are_written_without_pandas(tmp_path):
 
 
 def test_tables_are_read_without_pandas(tmp_path):
-    """Arrow's CSV reader path (:func:`bodyfusion.io.tables._arrow_columns`), labels and an
+    """Arrow's CSV reader path (:func:`bodyfusion.io.arrow_tables.read_clean_table`), labels and an
     allowed empty cell included: ``to_numpy`` would import pandas."""
     (tmp_path / "truth.csv").write_text("system,t,x\nleft,0,1.5\nright,1,\n")
     loaded = _modules_after(

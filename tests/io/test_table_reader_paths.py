@@ -58,7 +58,7 @@ def test_arrow_and_chunked_readers_agree_on_every_file(content, tmp_path, monkey
     label = "system" if content.lstrip(b"\xef\xbb\xbf").startswith(b"system") else None
     fast = read(path, label)
     with monkeypatch.context() as m:
-        m.setattr(tables, "_arrow_columns", lambda *args, **kwargs: None)
+        m.setattr(tables, "read_clean_table", lambda *args, **kwargs: None)
         chunked = read(path, label)
     if isinstance(chunked, str):
         assert fast == chunked
@@ -78,8 +78,8 @@ def test_a_clean_file_is_read_by_arrow(tmp_path, monkeypatch):
     path = tmp_path / "truth.csv"
     path.write_text("system,t,x,y\nleft,0.0,1.5,\n\"right\",0.01,-2e-3,4\nleft,0.02,3,5\n")
     taken = []
-    arrow = tables._arrow_columns
-    monkeypatch.setattr(tables, "_arrow_columns", lambda *a, **k: taken.append(arrow(*a, **k)) or taken[-1])
+    arrow = tables.read_clean_table
+    monkeypatch.setattr(tables, "read_clean_table", lambda *a, **k: taken.append(arrow(*a, **k)) or taken[-1])
     arrays, line_no, (codes, names) = tables.read_labelled_table(path, COLUMNS, "system", allow_missing=("y",))
     assert taken and taken[0] is not None
     np.testing.assert_array_equal(arrays["x"], [1.5, -2e-3, 3.0])
@@ -92,5 +92,5 @@ def test_a_clean_file_is_read_by_arrow(tmp_path, monkeypatch):
 def test_files_arrow_would_read_differently_go_to_the_chunked_reader(body, tmp_path):
     path = tmp_path / "table.csv"
     path.write_text("t,x,y\n" + body)
-    assert tables._arrow_columns(path, COLUMNS, 3, [0, 1, 2], None, 1, body.count("\n") + 2,
+    assert tables.read_clean_table(path, COLUMNS, 3, [0, 1, 2], None, 1, body.count("\n") + 2,
                                  ",", np.array([False, False, False])) is None

@@ -6,7 +6,7 @@ line number of the file (as an editor shows it).
 
 Parsing strategy: a clean file (every row after the header has its fields, no blank line,
 every cell asked for a finite number, line ends ``\n`` or ``\r\n``) is read by Arrow's CSV
-reader (:func:`_arrow_columns`; a 1-hour 100 Hz IMU file, 35 MB, in about 0.2 s). Any other
+reader (:func:`bodyfusion.io.arrow_tables.read_clean_table`; a 1-hour 100 Hz IMU file, 35 MB, in about 0.2 s). Any other
 file is read a chunk of lines at a time (:mod:`bodyfusion.io.lines`) into arrays sized once
 from its line count, so a long recording costs its numbers and one chunk's text. Each chunk's
 rows are first handed to ``numpy.loadtxt`` (C parser, fast); only when that fails, or when a
@@ -32,6 +32,7 @@ import numpy as np
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
+from bodyfusion.io.arrow_tables import read_clean_table
 from bodyfusion.io.lines import line_chunks, read_lines, scan_lines, scan_text  # noqa: F401 (other readers take read_lines)
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
@@ -176,84 +177,6 @@ def _labels(path: Path, rows: list[str], line_no: np.ndarray, j: int, label: str
     return None
 
 
-def _arrow_values(values: Any, dtype: type) -> np.ndarray:
-    """The numbers of an Arrow array or chunked array of ``dtype`` (float64, int32) as one numpy
-    array (a copy), nulls NaN, read from its buffers: ``to_numpy`` and ``fill_null`` with a
-    Python float would import pandas (0.3 s)."""
-    dtype = np.dtype(dtype)
-    out = []
-    for c in getattr(values, "chunks", [values]):
-        v = np.frombuffer(c.buffers()[1], dtype=dtype, count=len(c), offset=c.offset * dtype.itemsize).copy()
-        if c.null_count:
-            valid = np.unpackbits(np.frombuffer(c.buffers()[0], dtype=np.uint8), bitorder="little")
-            v[~valid[c.offset:c.offset + len(c)].astype(bool)] = np.nan
-        out.append(v)
-    return np.concatenate(out or [np.empty(0, dtype)])
-
-
-def _arrow_columns(path: Path, columns: list[str], n_header: int, idx: list[int], label_j: int | None,
-                   header_line: int, n_lines: int, delimiter: str, allowed: np.ndarray
-                   ) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None] | None:
-    """What :func:`read_labelled_table` returns, read by Arrow's CSV reader (C++, several times
-    ``numpy.loadtxt``'s speed), for a file it reads exactly as the chunked reader would: every
-    row after the header has the header's fields, none is blank, every cell asked for is a
-    number (an empty one only where ``allowed``), finite. None for any other file: the chunked
-    reader reads it, and names its first bad line. Columns are taken by position (``idx``, the
-    label's ``label_j``), so the header's own spelling is the chunked reader's business."""
-    import pyarrow as pa
-    import pyarrow.csv as pacsv
-
-    if len(delimiter) != 1:
-        return None
-    names = [f"c{j}" for j in range(n_header)]
-    types = {names[j]: pa.float64() for j in idx}
-    if label_j is not None:
-        types[names[label_j]] = pa.string()
-    try:
-        table = pacsv.read_csv(path, read_options=pacsv.ReadOptions(column_names=names, skip_rows=header_line,
-                                                                    use_threads=False, block_size=1 << 22),
-                               parse_options=pacsv.ParseOptions(delimiter=delimiter, quote_char='"'),
-                               convert_options=pacsv.ConvertOptions(column_types=types, include_columns=list(types),
-                                                                    null_values=[""], strings_can_be_null=False,
-                                                                    quoted_strings_can_be_null=False))
-    except (pa.ArrowException, OSError):
-        return None
-    try:
-        return _arrow_result(table, path, columns, idx, label_j, header_line, n_lines, allowed)
-    finally:  # the reader's buffers back to the system, not kept by Arrow's allocator (~100 MB an hour of truth)
-        del table
-        pa.default_memory_pool().release_unused()
-
-
-def _arrow_result(table: Any, path: Path, columns: list[str], idx: list[int], label_j: int | None, header_line: int,
-                  n_lines: int, allowed: np.ndarray
-                  ) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None] | None:
-    """:func:`_arrow_columns`' result from the table Arrow read (columns ``c<j>``), or None."""
-    with path.open("rb") as fh:
-        fh.seek(-1, 2)
-        rows = n_lines - header_line - (fh.read(1) == b"\n")
-    if table.num_rows != rows:  # a blank line skipped, or a quoted line end
-        return None
-    arrays = {}
-    for name, j, ok in zip(columns, idx, allowed):
-        column = table.column(f"c{j}")
-        if column.null_count and not ok:
-            return None
-        values = _arrow_values(column, np.float64)
-        if not np.all(np.isfinite(values) | (ok & np.isnan(values))):
-            return None
-        arrays[name] = values
-    labels = None
-    if label_j is not None:
-        encoded = table.column(f"c{label_j}").combine_chunks().dictionary_encode()  # codes in order of first sight
-        found: dict[str, int] = {}
-        code = np.array([found.setdefault(clean_cell(v), len(found)) for v in encoded.dictionary.to_pylist()],
-                        dtype=np.int32)
-        labels = code[_arrow_values(encoded.indices, np.int32)], list(found)
-    line_no = np.arange(header_line + 1, header_line + 1 + rows, dtype=np.int64)
-    return arrays, line_no, labels
-
-
 def read_table(
     path: str | Path,
     columns: Sequence[str],
@@ -353,7 +276,12 @@ def read_labelled_table(
             deferred = InputError(path, f"missing column {label!r}; the header has {header}", header_line)
     allowed = np.array([c in allow_missing for c in columns], dtype=bool)
     if plain and deferred is None:
-        fast = _arrow_columns(path, columns, len(header), idx, label_j, header_line, n_lines, delimiter, allowed)
+        fast = read_clean_table(path, columns, len(header), idx, label_j, header_line, n_lines, delimiter, allowed)
+        if fast is not None and fast[2] is not None:  # label names as the chunked reader cleans them
+            raw_codes, raw_names = fast[2]
+            names_found: dict[str, int] = {}
+            code = np.array([names_found.setdefault(clean_cell(v), len(names_found)) for v in raw_names], dtype=np.int32)
+            fast = fast[0], fast[1], (code[raw_codes], list(names_found))
         first = pending[0][:1]
         if fast is not None and np.array_equal(
                 np.column_stack([fast[0][name][:1] for name in columns]) if columns else np.empty((1, 0)),
