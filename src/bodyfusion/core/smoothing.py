@@ -22,12 +22,11 @@ from bodyfusion.base.types import LOG, Trajectory
 
 
 def plan_smoothing(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> None:
-    """Before the run, tell every system that asks (a ``plan_smoothing(cfg)`` method: the foot
-    INS, which then records what its smoother needs as it runs) the layout's smoother."""
+    """Before the run, tell every system the layout's smoother
+    (:meth:`~bodyfusion.core.system.SensorSystem.plan_smoothing`: the foot INS then records what
+    its smoother needs as it runs)."""
     for system in systems.values():
-        plan = getattr(system, "plan_smoothing", None)
-        if plan is not None:
-            plan(cfg)
+        system.plan_smoothing(cfg)
 
 
 def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:

@@ -268,6 +268,10 @@ class SensorSystem(Plugin):
         """Times (s) of every sample the system processes."""
 
     # --- smoothing ----------------------------------------------------------------
+    def plan_smoothing(self, cfg: SmootherConfig) -> None:
+        """Before the run: the layout's ``smoother`` section, for a system that records what its
+        smoother needs as it runs instead of replaying itself afterwards (the default: nothing)."""
+
     def smooth(self, cfg: SmootherConfig) -> dict | None:
         """Smooth the run once the fuser is done (the layout's ``smoother`` section); afterwards
         :meth:`trajectory` returns the smoothed track. Returns the smoother's diagnostics, or
