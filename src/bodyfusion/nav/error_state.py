@@ -58,69 +58,77 @@ def process_noise_diag(params: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _apply_A_left(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, out: np.ndarray) -> None:
-    """out = A P for the block-sparse A of the module docstring (P may be non-symmetric)."""
-    n = P.shape[1]
-    for c in range(n):
-        for r in range(3):
-            out[r, c] = P[3 + r, c]
-        a0, a1, a2 = P[6, c], P[7, c], P[8, c]
-        # −[f×] δθ
-        out[3, c] = -(-f_n[2] * a1 + f_n[1] * a2)
-        out[4, c] = -(f_n[2] * a0 - f_n[0] * a2)
-        out[5, c] = -(-f_n[1] * a0 + f_n[0] * a1)
-        for r in range(3):
-            out[3 + r, c] -= C[r, 0] * P[9, c] + C[r, 1] * P[10, c] + C[r, 2] * P[11, c]
-            out[6 + r, c] = -(C[r, 0] * P[12, c] + C[r, 1] * P[13, c] + C[r, 2] * P[14, c])
+def bias_decay(q_diag: np.ndarray, dt: float) -> tuple[float, float]:
+    """(da, dg) = (−β_a dt, −β_g dt): the bias decay entries of E = Φ − I over dt (s), β (1/s)
+    from the process model ``q_diag`` (:func:`process_noise_diag`; (0, 0) when it holds the 15
+    densities² only)."""
+    if q_diag.shape[0] > Q_DECAY:
+        return -dt * q_diag[Q_DECAY], -dt * q_diag[Q_DECAY + 1]
+    return 0.0, 0.0
+
+
+@numba.njit(cache=True)
+def transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
+                    lower: bool) -> None:
+    """M ← Φ M in place (M (15, m)) for the first-order transition Φ = I + E of one step,
+    written from the non-zero entries of E = A dt (module docstring; C_nb (3, 3), the step's
+    mean specific force f_n (3,) m/s² in the navigation frame, dt s): E[r, 3+r] = dt
+    (δp ← δv), E[3:6, 6:9] = −[f_n×] dt (δv ← δθ), E[3:6, 9:12] = −C_nb dt (δv ← δb_a),
+    E[6:9, 12:15] = −C_nb dt (δθ ← δb_g), E[9+k, 9+k] = da, E[12+k, 12+k] = dg (the bias
+    decay, :func:`bias_decay`; the bias rows are scaled by 1 + da, 1 + dg). Rows are done
+    from the first, each reading rows below it, not yet changed. With ``lower`` only
+    M[r, :r + 1] of each row changes (the lower triangle of Φ M).
+
+    The same entries, transposed, are what
+    :func:`bodyfusion.plugins.foot_ins.smoothing_mbf._transition_left` applies (M ← Φᵀ M)."""
+    m = M.shape[1]
+    for r in range(3):  # position rows: from δv
+        for q in range(r + 1 if lower else m):
+            M[r, q] = M[r, q] + dt * M[3 + r, q]
+    f0, f1, f2 = dt * f_n[0], dt * f_n[1], dt * f_n[2]
+    for r in range(3):  # velocity rows: −[f×] dt from δθ, −C_nb dt from δb_a
+        c0, c1, c2 = dt * C[r, 0], dt * C[r, 1], dt * C[r, 2]
+        if r == 0:
+            for q in range(4 if lower else m):
+                M[3, q] = M[3, q] + f2 * M[7, q] - f1 * M[8, q] - c0 * M[9, q] - c1 * M[10, q] - c2 * M[11, q]
+        elif r == 1:
+            for q in range(5 if lower else m):
+                M[4, q] = M[4, q] - f2 * M[6, q] + f0 * M[8, q] - c0 * M[9, q] - c1 * M[10, q] - c2 * M[11, q]
+        else:
+            for q in range(6 if lower else m):
+                M[5, q] = M[5, q] + f1 * M[6, q] - f0 * M[7, q] - c0 * M[9, q] - c1 * M[10, q] - c2 * M[11, q]
+    for r in range(3):  # attitude rows: −C_nb dt from δb_g
+        c0, c1, c2 = dt * C[r, 0], dt * C[r, 1], dt * C[r, 2]
+        for q in range(7 + r if lower else m):
+            M[6 + r, q] = M[6 + r, q] - c0 * M[12, q] - c1 * M[13, q] - c2 * M[14, q]
+    if da != 0.0 or dg != 0.0:
         for r in range(9, 15):
-            out[r, c] = 0.0
+            d = 1.0 + (da if r < 12 else dg)
+            for q in range(r + 1 if lower else m):
+                M[r, q] *= d
 
 
 @numba.njit(cache=True)
 def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray,
                          work: np.ndarray) -> None:
-    """P ← F P Fᵀ + Q_d in place, F = I + A dt. ``q_diag``: densities² (per Hz) of the 15
-    states, optionally followed by the bias decay rates (:func:`process_noise_diag`); ``work``
-    is (2, 15, 15) scratch. Symmetrises the result.
-
-    The bias rows of A are −β on the diagonal, so F = D F₀ with F₀ the transition of β = 0
-    and D = diag(1, …, 1, 1 − β_a dt, 1 − β_g dt): F P Fᵀ = D (F₀ P F₀ᵀ) D."""
-    AP = work[0]
-    _apply_A_left(P, C, f_n, AP)
-    FP = work[1]
+    """P ← Φ P Φᵀ + Q_d in place (P (15, 15) symmetric), Φ = I + A dt with the bias decay of
+    ``q_diag`` (densities² per Hz of the 15 states, optionally followed by the decay rates:
+    :func:`process_noise_diag`), Q_d = diag(q) dt. From the non-zero entries of Φ
+    (:func:`transition_left`), no dense products: V = Φ P, then Φ Vᵀ = (V Φᵀ)ᵀ, whose lower
+    triangle is that of Φ P Φᵀ; the result's lower triangle is mirrored (P exactly symmetric).
+    ``work`` is not used (the argument of the callers of the dense version's scratch)."""
+    da, dg = bias_decay(q_diag, dt)
+    transition_left(P, C, f_n, dt, da, dg, False)
     for r in range(15):
-        for c in range(15):
-            FP[r, c] = P[r, c] + dt * AP[r, c]
-    # (F P) Fᵀ = FP + dt (A FPᵀ)ᵀ
-    FPt = np.empty((15, 15))
-    for r in range(15):
-        for c in range(15):
-            FPt[r, c] = FP[c, r]
-    _apply_A_left(FPt, C, f_n, AP)
-    for r in range(15):
-        for c in range(15):
-            P[r, c] = FP[r, c] + dt * AP[c, r]
-    if q_diag.shape[0] > Q_DECAY:
-        decay_bias_rows(P, q_diag, dt)
-        for r in range(15):
-            for c in range(9, 15):
-                P[r, c] *= 1.0 - dt * q_diag[Q_DECAY + c // 12]
+        for c in range(r + 1, 15):
+            v = P[r, c]
+            P[r, c] = P[c, r]
+            P[c, r] = v
+    transition_left(P, C, f_n, dt, da, dg, True)
     for r in range(15):
         P[r, r] += q_diag[r] * dt
         for c in range(r + 1, 15):
-            s = 0.5 * (P[r, c] + P[c, r])
-            P[r, c] = s
-            P[c, r] = s
-
-
-@numba.njit(cache=True)
-def decay_bias_rows(M: np.ndarray, q_diag: np.ndarray, dt: float) -> None:
-    """M ← D M in place, D = diag(1, …, 1, 1 − β_a dt (rows 9:12), 1 − β_g dt (rows 12:15)),
-    β from the process model ``q_diag`` (:func:`process_noise_diag`): the bias decay of F."""
-    for r in range(9, 15):
-        d = 1.0 - dt * q_diag[Q_DECAY + r // 12]
-        for c in range(M.shape[1]):
-            M[r, c] *= d
+            P[r, c] = P[c, r]
 
 
 @numba.njit(cache=True)
@@ -133,12 +141,10 @@ def decay_biases(x: np.ndarray, q_diag: np.ndarray, dt: float) -> None:
 
 @numba.njit(cache=True)
 def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, work: np.ndarray) -> None:
-    """phi ← F₀ phi in place (F₀ = I + A dt without the bias decay, which
-    :func:`decay_bias_rows` applies); ``work`` is (15, 15) scratch."""
-    _apply_A_left(phi, C, f_n, work)
-    for r in range(15):
-        for c in range(15):
-            phi[r, c] += dt * work[r, c]
+    """phi ← F₀ phi in place (F₀ = I + A dt without the bias decay: :func:`transition_left`
+    with da = dg = 0). ``work`` is not used (the argument of the callers of the dense version's
+    scratch)."""
+    transition_left(phi, C, f_n, dt, 0.0, 0.0, False)
 
 
 @numba.njit(cache=True)

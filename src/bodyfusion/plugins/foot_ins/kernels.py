@@ -28,9 +28,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, _apply_A_left,
-                                       accumulate_propagation, decay_bias_rows, decay_biases, process_noise_diag,
-                                       propagate_covariance)
+from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, bias_decay, decay_biases,
+                                       process_noise_diag, propagate_covariance, transition_left)
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
@@ -63,27 +62,23 @@ def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.nda
     C = mechanise(x, acc_b[i], gyro_b[i], dt, params[P_GRAVITY], params[7:10], f_n, mech_memory)
     decay_biases(x, q_diag, dt)
     if phi.shape[0] > 0:
-        accumulate_propagation(phi, C, f_n, dt, work[0])
-        decay_bias_rows(phi, q_diag, dt)
+        da, dg = bias_decay(q_diag, dt)
+        transition_left(phi, C, f_n, dt, da, dg, False)
     propagate_covariance(P, C, f_n, dt, q_diag, work)
     return C
 
 
 @numba.njit(cache=True)
-def transition(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, Phi: np.ndarray,
-               work: np.ndarray) -> None:
+def transition(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, Phi: np.ndarray) -> None:
     """Phi (15, 15) = I + A dt, the first-order error-state transition of one step (C_nb and
     f_n as :func:`bodyfusion.nav.strapdown.mechanise` returns them, dt s, the bias decay of the
-    process model ``q_diag``, :func:`bodyfusion.nav.error_state.process_noise_diag`); ``work``
-    (15, 15) scratch."""
+    process model ``q_diag``, :func:`bodyfusion.nav.error_state.process_noise_diag`): Φ I by
+    :func:`bodyfusion.nav.error_state.transition_left`."""
     for r in range(15):
         for c in range(15):
-            work[r, c] = 1.0 if r == c else 0.0
-    _apply_A_left(work, C, f_n, Phi)
-    for r in range(15):
-        for c in range(15):
-            Phi[r, c] = (1.0 if r == c else 0.0) + dt * Phi[r, c]
-    decay_bias_rows(Phi, q_diag, dt)
+            Phi[r, c] = 1.0 if r == c else 0.0
+    da, dg = bias_decay(q_diag, dt)
+    transition_left(Phi, C, f_n, dt, da, dg, False)
 
 
 NO_STANCE = -1.0
@@ -115,7 +110,7 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
                 x_prior[k] = x[k]
     if Phi is not None:
         if Phi.shape[0] > 0:
-            transition(C, f_n, t[i] - t[i - 1], q_diag, Phi, work[0])
+            transition(C, f_n, t[i] - t[i - 1], q_diag, Phi)
     if stance[i]:
         return stance_update(x, P, gyro_b[i], params, dx, phi)
     return NO_STANCE
