@@ -1,12 +1,12 @@
 """Compiled per-call steps of the phone's filter: its covariance steps (one hypothesis of the
-bank) and the per-sample recursion of the PDR's low-pass filter.
+bank).
 
 The filter's matrices are small (n = 9 or 10 error states, m ≤ 3 measurement rows) and its
 transitions and Jacobians mostly zero: compiled, a step costs a few microseconds where the
 numpy expression of :mod:`bodyfusion.plugins.hand_pdr.bank_filter` cost tens (one call per
 product, a new array each). Zero entries of F and H are skipped, which leaves every sum
 unchanged; the sums of the products run in index order, so results agree with the numpy
-(BLAS) products to rounding. Three kernels (their helpers are inlined), each of one signature:
+(BLAS) products to rounding. Two kernels (their helpers are inlined), each of one signature:
 C-contiguous float64 arrays, a float gate, ``phi`` (0, 0) when the fuser's transition Φ is not
 tracked. The temporaries live in the compiled code (no Python object per call).
 """
@@ -167,19 +167,3 @@ def kalman_update(P: np.ndarray, H: np.ndarray, R: np.ndarray, y: np.ndarray, ga
     if phi.shape[0] == n:
         _left_multiply(A, phi, work)
     return q, logdet
-
-
-@numba.njit(cache=True)
-def biquad(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> None:
-    """One second-order section sos = (b0, b1, b2, 1, a1, a2) run along each row of x (m, N) in
-    place, transposed direct form II from the state zi (m, 2):
-    y_n = b0 x_n + z0,  z0 ← b1 x_n − a1 y_n + z1,  z1 ← b2 x_n − a2 y_n
-    (scipy.signal's sosfilt, in its order of operations)."""
-    for i in range(x.shape[0]):
-        z0, z1 = zi[i, 0], zi[i, 1]
-        for n in range(x.shape[1]):
-            xn = x[i, n]
-            y = sos[0] * xn + z0
-            z0 = sos[1] * xn - sos[4] * y + z1
-            z1 = sos[2] * xn - sos[5] * y
-            x[i, n] = y
