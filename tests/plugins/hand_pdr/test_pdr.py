@@ -21,5 +21,5 @@ def test_weinberg_features_are_the_range_of_each_steps_span():
     assert len(steps) > 100
     a = lowpass(np.linalg.norm(acc, axis=1), 1.0 / np.median(np.diff(t)), cfg.lowpass_hz)
     bounds = np.concatenate([[max(0, steps[0] - (steps[1] - steps[0]))], steps])
-    expected = [max(np.ptp(a[bounds[k]:bounds[k + 1] + 1]), 0.0) ** 0.25 for k in range(len(steps))]
+    expected = np.maximum([np.ptp(a[bounds[k]:bounds[k + 1] + 1]) for k in range(len(steps))], 0.0) ** 0.25
     np.testing.assert_array_equal(weinberg_features(t, acc, steps, cfg), expected)
