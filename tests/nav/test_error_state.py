@@ -338,7 +338,7 @@ def test_zupt_drives_velocity_to_zero_and_returns_the_nis():
     nis_expected = float(v @ np.linalg.solve(S, v))  # y = 0 − v̂
     P_before = P.copy()
     dx = np.empty(ERROR_SIZE)
-    nis = zero_velocity_update(x, P, sigma, 0.0, dx, np.empty((0, 0)))
+    nis = zero_velocity_update(x, P, sigma, 0.0, dx, np.empty((0, 0)), np.empty((15, 15)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
     # the posterior explains the innovation: what velocity is left is the heading correction's
     # share, H_v dx_v + H_ψ dx_ψ = −v̂
@@ -365,6 +365,6 @@ def test_zaru_pulls_gyro_bias_to_the_stance_rate():
     y = gyro - x[13:16]
     S = P[12:15, 12:15] + 1e-8 * np.eye(3)
     nis_expected = float(y @ np.linalg.solve(S, y))
-    nis = zero_angular_rate_update(x, P, gyro, 1e-4, dx, np.empty((0, 0)))
+    nis = zero_angular_rate_update(x, P, gyro, 1e-4, dx, np.empty((0, 0)), np.empty((15, 15)))
     assert nis == pytest.approx(nis_expected, rel=1e-12)
     np.testing.assert_allclose(x[13:16], gyro, atol=1e-5)

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.nav.error_state import ERROR_SIZE, accumulate_propagation, update_columns
+from bodyfusion.nav.error_state import ERROR_SIZE, accumulate_propagation, selection_moments, selection_update
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import zero_angular_rate_update, zero_velocity_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
 from bodyfusion.testing import random_nominal_state
 
 EMPTY = np.empty((0, 0))
+WORK = np.empty((ERROR_SIZE, ERROR_SIZE))
 
 
 def random_spd(rng: np.random.Generator, scale: float = 1e-3) -> np.ndarray:
@@ -42,19 +43,22 @@ def moving_state(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return x, random_spd(rng)
 
 
-def test_update_columns_equals_the_textbook_joseph_update():
+def test_selection_update_equals_the_textbook_joseph_update():
+    """H = [0 I h 0 0] (velocity states and a heading column h, as the ZUPT's)."""
     rng = np.random.default_rng(1)
     P = random_spd(rng, 1.0)
-    cols = np.array([3, 4, 5, 8])
-    Hc = rng.normal(0, 1, (3, 4))
+    h = rng.normal(0, 1, 3)
     H = np.zeros((3, ERROR_SIZE))
-    H[:, cols] = Hc
+    H[:, 3:6] = np.eye(3)
+    H[:, 8] = h
     y, r_var = rng.normal(0, 1, 3), 0.2**2
     S = H @ P @ H.T + r_var * np.eye(3)
     K = P @ H.T @ np.linalg.inv(S)
     IKH = np.eye(ERROR_SIZE) - K @ H
     got, dx, phi = P.copy(), np.empty(ERROR_SIZE), np.eye(ERROR_SIZE)
-    nis = update_columns(got, cols, Hc, y, r_var, dx, phi)
+    S0 = selection_moments(got, 3, tuple(h), WORK)
+    np.testing.assert_allclose(np.array(S0), (H @ P @ H.T)[np.triu_indices(3)], atol=1e-12, rtol=0)
+    nis = selection_update(got, 3, tuple(h), S0, r_var, tuple(y), dx, phi, WORK)
     np.testing.assert_allclose(got, IKH @ P @ IKH.T + r_var * K @ K.T, atol=1e-12, rtol=0)
     np.testing.assert_allclose(dx, K @ y, atol=1e-12, rtol=0)
     np.testing.assert_allclose(phi, IKH, atol=1e-12, rtol=0)
@@ -79,7 +83,7 @@ def test_zupt_and_reset_add_no_information_about_a_rotation_about_up(gate):
     update is consistent or de-weighted by the gate (gate 1: every update is beyond it)."""
     x, P = moving_state(np.random.default_rng(3))
     before = information(P, heading_direction(x))
-    zero_velocity_update(x, P, 1e-4, gate, np.empty(ERROR_SIZE), EMPTY)
+    zero_velocity_update(x, P, 1e-4, gate, np.empty(ERROR_SIZE), EMPTY, WORK)
     assert np.linalg.norm(x[3:6]) < 0.03
     assert information(P, heading_direction(x)) == pytest.approx(before, rel=1e-7)
     np.testing.assert_array_equal(P, P.T)
@@ -88,7 +92,7 @@ def test_zupt_and_reset_add_no_information_about_a_rotation_about_up(gate):
 def test_zaru_adds_no_information_about_a_rotation_about_up():
     x, P = moving_state(np.random.default_rng(4))
     before = information(P, heading_direction(x))
-    zero_angular_rate_update(x, P, np.array([0.01, -0.02, 0.005]), 1e-3, np.empty(ERROR_SIZE), EMPTY)
+    zero_angular_rate_update(x, P, np.array([0.01, -0.02, 0.005]), 1e-3, np.empty(ERROR_SIZE), EMPTY, WORK)
     assert information(P, heading_direction(x)) == pytest.approx(before, rel=1e-7)
 
 

@@ -25,8 +25,8 @@ def state(v):
 def test_a_consistent_update_is_the_plain_update():
     x, P = state([0.01, -0.01, 0.005])
     xa, Pa, xb, Pb = x.copy(), P.copy(), x.copy(), P.copy()
-    nis_a = zero_velocity_update(xa, Pa, 0.01, GATE, np.empty(15), np.empty((0, 0)))
-    nis_b = zero_velocity_update(xb, Pb, 0.01, 0.0, np.empty(15), np.empty((0, 0)))
+    nis_a = zero_velocity_update(xa, Pa, 0.01, GATE, np.empty(15), np.empty((0, 0)), np.empty((15, 15)))
+    nis_b = zero_velocity_update(xb, Pb, 0.01, 0.0, np.empty(15), np.empty((0, 0)), np.empty((15, 15)))
     assert nis_a == nis_b < GATE
     np.testing.assert_array_equal(xa, xb)
     np.testing.assert_array_equal(Pa, Pb)
@@ -37,9 +37,9 @@ def test_a_false_stance_moves_the_state_by_a_bounded_amount():
     drags attitude along; the gated one moves it by a few per cent, its NIS set to the gate."""
     x, P = state([2.0, 0.5, 0.0])
     x_plain, P_plain = x.copy(), P.copy()
-    zero_velocity_update(x_plain, P_plain, 0.01, 0.0, np.empty(15), np.empty((0, 0)))
+    zero_velocity_update(x_plain, P_plain, 0.01, 0.0, np.empty(15), np.empty((0, 0)), np.empty((15, 15)))
     x_gated, P_gated = x.copy(), P.copy()
-    nis = zero_velocity_update(x_gated, P_gated, 0.01, GATE, np.empty(15), np.empty((0, 0)))
+    nis = zero_velocity_update(x_gated, P_gated, 0.01, GATE, np.empty(15), np.empty((0, 0)), np.empty((15, 15)))
     assert nis > 100 * GATE
     moved_plain = np.linalg.norm(x_plain[3:6] - x[3:6])
     moved_gated = np.linalg.norm(x_gated[3:6] - x[3:6])
@@ -56,5 +56,5 @@ def test_a_wrong_velocity_is_still_pulled_back_over_a_stance():
     dx = np.empty(15)
     for _ in range(100):
         P[3:6, 3:6] += np.eye(3) * 1e-6  # propagation between samples
-        zero_velocity_update(x, P, 0.01, GATE, dx, np.empty((0, 0)))
+        zero_velocity_update(x, P, 0.01, GATE, dx, np.empty((0, 0)), np.empty((15, 15)))
     assert np.linalg.norm(x[3:6]) < 0.05

@@ -162,131 +162,145 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
+def inverse3(s00: float, s01: float, s02: float, s11: float, s12: float,
+             s22: float) -> tuple[float, float, float, float, float, float]:
+    """The upper triangle (i00, i01, i02, i11, i12, i22) of the inverse of the symmetric
+    positive-definite 3×3 matrix of upper triangle (s00, s01, s02, s11, s12, s22), by
+    cofactors: S⁻¹ = adj(S) / det S."""
+    A = s11 * s22 - s12 * s12
+    B = s02 * s12 - s01 * s22
+    C = s01 * s12 - s02 * s11
+    det = s00 * A + s01 * B + s02 * C
+    return A / det, B / det, C / det, (s00 * s22 - s02 * s02) / det, (s01 * s02 - s00 * s12) / det, \
+        (s00 * s11 - s01 * s01) / det
+
+
+@numba.njit(cache=True)
 def inv3_sym(S: np.ndarray) -> np.ndarray:
-    """Inverse of a symmetric positive-definite 3×3 matrix (cofactors)."""
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e = S[1, 1], S[1, 2]
-    f = S[2, 2]
-    A = d * f - e * e
-    B = c * e - b * f
-    C = b * e - c * d
-    det = a * A + b * B + c * C
+    """Inverse (3, 3) of a symmetric positive-definite 3×3 matrix (cofactors, :func:`inverse3`)."""
+    i00, i01, i02, i11, i12, i22 = inverse3(S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
     out = np.empty((3, 3))
-    out[0, 0] = A / det
-    out[0, 1] = B / det
-    out[0, 2] = C / det
-    out[1, 0] = B / det
-    out[1, 1] = (a * f - c * c) / det
-    out[1, 2] = (b * c - a * e) / det
-    out[2, 0] = C / det
-    out[2, 1] = out[1, 2]
-    out[2, 2] = (a * d - b * b) / det
+    out[0, 0] = i00
+    out[0, 1] = i01
+    out[0, 2] = i02
+    out[1, 0] = i01
+    out[1, 1] = i11
+    out[1, 2] = i12
+    out[2, 0] = i02
+    out[2, 1] = i12
+    out[2, 2] = i22
     return out
 
 
 @numba.njit(cache=True)
-def quadratic_inverse(S: np.ndarray, y: np.ndarray) -> float:
-    """yᵀ S⁻¹ y for a symmetric positive-definite S (3, 3): the normalised innovation squared."""
-    Si = inv3_sym(S)
+def nis3(S: tuple[float, float, float, float, float, float], r_var: float, y: tuple[float, float, float]) -> float:
+    """Normalised innovation squared yᵀ (S + r_var I)⁻¹ y of a 3-D innovation y with
+    H P Hᵀ = S (its upper triangle (s00, s01, s02, s11, s12, s22)) and isotropic noise variance
+    r_var (unit of y squared): the chi-square statistic of 3 degrees of freedom. The sum runs
+    over the 9 terms y_r (S⁻¹)_rc y_c, row by row."""
+    i00, i01, i02, i11, i12, i22 = inverse3(S[0] + r_var, S[1], S[2], S[3] + r_var, S[4], S[5] + r_var)
+    y0, y1, y2 = y
     out = 0.0
-    for r in range(3):
-        for c in range(3):
-            out += y[r] * Si[r, c] * y[c]
+    out += y0 * i00 * y0
+    out += y0 * i01 * y1
+    out += y0 * i02 * y2
+    out += y1 * i01 * y0
+    out += y1 * i11 * y1
+    out += y1 * i12 * y2
+    out += y2 * i02 * y0
+    out += y2 * i12 * y1
+    out += y2 * i22 * y2
     return out
 
 
 @numba.njit(cache=True)
-def innovation_covariance(P: np.ndarray, cols: np.ndarray, Hc: np.ndarray, r_var: float) -> np.ndarray:
-    """S = H P Hᵀ + r_var I (3, 3) of a 3-D measurement whose Jacobian H (3, 15) is zero but
-    in the columns ``cols`` (m,), where it is ``Hc`` (3, m)."""
-    m = cols.shape[0]
-    S = np.empty((3, 3))
-    for r in range(3):
-        for c in range(r, 3):
-            s = 0.0
-            for a in range(m):
-                row = 0.0
-                for b in range(m):
-                    row += P[cols[a], cols[b]] * Hc[c, b]
-                s += Hc[r, a] * row
-            S[r, c] = s
-            S[c, r] = s
-        S[r, r] += r_var
-    return S
+def selection_moments(P: np.ndarray, first: int, h: tuple[float, float, float],
+                      work: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """The prior moments of a 3-D measurement δz = H δx whose Jacobian H (3, 15) selects the
+    states first:first+3 (identity) and has the column h (3,) on the heading δψ (state 8;
+    zeros: none; first:first+3 must not hold state 8 unless h is zero): M = P Hᵀ (15, 3),
+    M[r] = P[r, first:first+3] + P[r, 8] h, written to ``work[:, 0:3]`` (``work`` (15, 15)
+    scratch), and the upper triangle of H P Hᵀ = H M, (H M)[r] = M[first + r] + h_r M[8]."""
+    h0, h1, h2 = h
+    for r in range(15):
+        p8 = P[r, 8]
+        work[r, 0] = P[r, first] + p8 * h0
+        work[r, 1] = P[r, first + 1] + p8 * h1
+        work[r, 2] = P[r, first + 2] + p8 * h2
+    a, b = first, first + 1
+    c = first + 2
+    return (work[a, 0] + h0 * work[8, 0], work[a, 1] + h0 * work[8, 1], work[a, 2] + h0 * work[8, 2],
+            work[b, 1] + h1 * work[8, 1], work[b, 2] + h1 * work[8, 2], work[c, 2] + h2 * work[8, 2])
+
+
+@numba.njit(cache=True)
+def selection_update(P: np.ndarray, first: int, h: tuple[float, float, float],
+                     S: tuple[float, float, float, float, float, float], r_var: float, y: tuple[float, float, float],
+                     dx: np.ndarray, phi: np.ndarray, work: np.ndarray) -> float:
+    """Kalman update of the measurement of :func:`selection_moments` (which wrote M = P Hᵀ to
+    ``work[:, 0:3]`` and returned H P Hᵀ = ``S``), innovation y (3,), isotropic noise variance
+    r_var. Joseph form, P (15, 15) in place, written with M and S = H M + R:
+    (I − K H) P (I − K H)ᵀ + K R Kᵀ = P − K Mᵀ − M Kᵀ + K S Kᵀ, K = M S⁻¹ (15, 3): rank-3
+    terms, K and K S kept in ``work[:, 3:6]``, ``work[:, 6:9]``. Writes dx = K y (15,) and
+    returns the normalised innovation squared yᵀ S⁻¹ y.
+
+    ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
+    is left-multiplied by (I − K H) in place (H phi kept in ``work[:, 9:12]``, transposed);
+    pass an empty (0, 0) array when the fuser does not track cross-covariances."""
+    s00, s01, s02 = S[0] + r_var, S[1], S[2]
+    s11, s12, s22 = S[3] + r_var, S[4], S[5] + r_var
+    i00, i01, i02, i11, i12, i22 = inverse3(s00, s01, s02, s11, s12, s22)
+    y0, y1, y2 = y
+    for r in range(15):
+        m0, m1, m2 = work[r, 0], work[r, 1], work[r, 2]
+        k0 = m0 * i00 + m1 * i01 + m2 * i02
+        k1 = m0 * i01 + m1 * i11 + m2 * i12
+        k2 = m0 * i02 + m1 * i12 + m2 * i22
+        work[r, 3] = k0
+        work[r, 4] = k1
+        work[r, 5] = k2
+        work[r, 6] = k0 * s00 + k1 * s01 + k2 * s02
+        work[r, 7] = k0 * s01 + k1 * s11 + k2 * s12
+        work[r, 8] = k0 * s02 + k1 * s12 + k2 * s22
+        dx[r] = k0 * y0 + k1 * y1 + k2 * y2
+    if phi.shape[0] > 0:
+        h0, h1, h2 = h
+        for c in range(15):
+            p8 = phi[8, c]
+            work[c, 9] = phi[first, c] + h0 * p8
+            work[c, 10] = phi[first + 1, c] + h1 * p8
+            work[c, 11] = phi[first + 2, c] + h2 * p8
+        for r in range(15):
+            k0, k1, k2 = work[r, 3], work[r, 4], work[r, 5]
+            for c in range(15):
+                phi[r, c] -= k0 * work[c, 9] + k1 * work[c, 10] + k2 * work[c, 11]
+    for r in range(15):
+        for c in range(r, 15):
+            v = P[r, c]
+            for k in range(3):
+                v += work[r, 6 + k] * work[c, 3 + k] - work[r, 3 + k] * work[c, k] - work[r, k] * work[c, 3 + k]
+            P[r, c] = v
+            P[c, r] = v
+    return nis3(S, r_var, y)
 
 
 @numba.njit(cache=True)
 def nis_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float) -> float:
     """Normalised innovation squared yᵀ S⁻¹ y of a 3-D measurement selecting states
     first:first+3, S = P_sel + r_var I (the chi-square test statistic, 3 degrees of freedom)."""
-    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
-    for k in range(3):  # the selection H = [0 I 0] (not np.arange, np.eye: two more numba compilations)
-        cols[k] = first + k
-        Hc[k, k] = 1.0
-    return quadratic_inverse(innovation_covariance(P, cols, Hc, r_var), y)
-
-
-@numba.njit(cache=True)
-def update_columns(P: np.ndarray, cols: np.ndarray, Hc: np.ndarray, y: np.ndarray, r_var: float, dx: np.ndarray,
-                   phi: np.ndarray) -> float:
-    """Kalman update of a 3-D measurement whose Jacobian H (3, 15) is zero but in the columns
-    ``cols`` (m,), where it is ``Hc`` (3, m); innovation y (3,), isotropic noise variance
-    r_var. Joseph form, P in place, written with M = P Hᵀ and S = H M + R:
-    (I − K H) P (I − K H)ᵀ + K R Kᵀ = P − K Mᵀ − M Kᵀ + K S Kᵀ, K = M S⁻¹. Writes dx = K y
-    (15,) and returns the normalised innovation squared yᵀ S⁻¹ y.
-
-    ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
-    is left-multiplied by (I − K H) in place; pass an empty (0, 0) array when the fuser
-    does not track cross-covariances."""
-    m = cols.shape[0]
-    M = np.empty((15, 3))
-    for r in range(15):
-        for c in range(3):
-            s = 0.0
-            for a in range(m):
-                s += P[r, cols[a]] * Hc[c, a]
-            M[r, c] = s
-    S = innovation_covariance(P, cols, Hc, r_var)
-    Si = inv3_sym(S)
-    K = np.empty((15, 3))
-    KS = np.empty((15, 3))
-    for r in range(15):
-        for c in range(3):
-            K[r, c] = M[r, 0] * Si[0, c] + M[r, 1] * Si[1, c] + M[r, 2] * Si[2, c]
-        for c in range(3):
-            KS[r, c] = K[r, 0] * S[0, c] + K[r, 1] * S[1, c] + K[r, 2] * S[2, c]
-        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
-    if phi.shape[0] > 0:
-        Hphi = np.empty((3, 15))
-        for r in range(3):
-            for c in range(15):
-                s = 0.0
-                for a in range(m):
-                    s += Hc[r, a] * phi[cols[a], c]
-                Hphi[r, c] = s
-        for r in range(15):
-            for c in range(15):
-                phi[r, c] -= K[r, 0] * Hphi[0, c] + K[r, 1] * Hphi[1, c] + K[r, 2] * Hphi[2, c]
-    for r in range(15):
-        for c in range(r, 15):
-            v = P[r, c]
-            for k in range(3):
-                v += KS[r, k] * K[c, k] - K[r, k] * M[c, k] - M[r, k] * K[c, k]
-            P[r, c] = v
-            P[c, r] = v
-    return quadratic_inverse(S, y)
+    S = selection_moments(P, first, (0.0, 0.0, 0.0), np.empty((15, 15)))
+    return nis3(S, r_var, (y[0], y[1], y[2]))
 
 
 @numba.njit(cache=True)
 def update_selected(P: np.ndarray, first: int, y: np.ndarray, r_var: float, dx: np.ndarray,
                     phi: np.ndarray) -> float:
-    """:func:`update_columns` for a 3-D measurement that selects states first:first+3
-    (H = [0 I 0])."""
-    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
-    for k in range(3):  # not np.arange, np.eye: two more numba compilations (~0.5 s at a cold start)
-        cols[k] = first + k
-        Hc[k, k] = 1.0
-    return update_columns(P, cols, Hc, y, r_var, dx, phi)
+    """:func:`selection_update` of a 3-D measurement that selects states first:first+3
+    (H = [0 I 0]), innovation y (3,), with its own scratch."""
+    work = np.empty((15, 15))
+    h = (0.0, 0.0, 0.0)
+    S = selection_moments(P, first, h, work)
+    return selection_update(P, first, h, S, r_var, (y[0], y[1], y[2]), dx, phi, work)
 
 
 @numba.njit(cache=True)

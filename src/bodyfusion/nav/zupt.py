@@ -35,40 +35,32 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, inject, innovation_covariance,
-                                       keep_yaw_unobservable, quadratic_inverse, update_columns, update_selected)
+from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, inject, keep_yaw_unobservable, nis3,
+                                       selection_moments, selection_update)
 
 ZUPT_COLUMNS = np.array([3, 4, 5, 8], dtype=np.int64)
-"""The error states a ZUPT's Jacobian touches: δv (3:6) and the heading δψ (8). Kernels take
-a writable copy: numba types a global array as read-only, and a kernel given both read-only
-and writable index arrays compiles twice."""
+"""The error states a ZUPT's Jacobian touches: δv (3:6) and the heading δψ (8)."""
 
 
 @numba.njit(cache=True)
-def _nis_with_noise(S0: np.ndarray, y: np.ndarray, r_var: float) -> float:
-    S = S0.copy()
-    for k in range(3):
-        S[k, k] += r_var
-    return quadratic_inverse(S, y)
-
-
-@numba.njit(cache=True)
-def gate_noise_variance(S0: np.ndarray, y: np.ndarray, r_var: float, gate: float) -> float:
+def gated_variance(S0: tuple[float, float, float, float, float, float], y: tuple[float, float, float], r_var: float,
+                   gate: float) -> float:
     """The noise variance (isotropic, unit of y squared) of a 3-D measurement with
-    H P Hᵀ = ``S0`` (3, 3): ``r_var`` when its NIS is within ``gate`` (or the gate is off, 0),
-    else the r ≥ r_var with yᵀ (S0 + r I)⁻¹ y = gate (the NIS falls monotonically in r;
-    bisection on log r to 1e-6 relative)."""
-    if gate <= 0.0 or _nis_with_noise(S0, y, r_var) <= gate:
+    H P Hᵀ = ``S0`` (its upper triangle, :func:`bodyfusion.nav.error_state.nis3`) and
+    innovation y: ``r_var`` when its NIS is within ``gate`` (or the gate is off, 0), else the
+    r ≥ r_var with yᵀ (S0 + r I)⁻¹ y = gate (the NIS falls monotonically in r; bisection on
+    log r to 1e-6 relative)."""
+    if gate <= 0.0 or nis3(S0, r_var, y) <= gate:
         return r_var
     lo = r_var
     hi = max(r_var, (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) / gate)  # NIS(hi) ≤ |y|²/hi = gate
-    while _nis_with_noise(S0, y, hi) > gate:
+    while nis3(S0, hi, y) > gate:
         hi *= 2.0
     for _ in range(60):
         if hi <= lo * (1.0 + 1e-6):
             break
         mid = np.sqrt(lo * hi)
-        if _nis_with_noise(S0, y, mid) > gate:
+        if nis3(S0, mid, y) > gate:
             lo = mid
         else:
             hi = mid
@@ -76,13 +68,17 @@ def gate_noise_variance(S0: np.ndarray, y: np.ndarray, r_var: float, gate: float
 
 
 @numba.njit(cache=True)
+def gate_noise_variance(S0: np.ndarray, y: np.ndarray, r_var: float, gate: float) -> float:
+    """:func:`gated_variance` of H P Hᵀ = ``S0`` (3, 3) and the innovation y (3,) as arrays."""
+    return gated_variance((S0[0, 0], S0[0, 1], S0[0, 2], S0[1, 1], S0[1, 2], S0[2, 2]), (y[0], y[1], y[2]), r_var,
+                          gate)
+
+
+@numba.njit(cache=True)
 def gated_noise_variance(P: np.ndarray, first: int, y: np.ndarray, r_var: float, gate: float) -> float:
-    """:func:`gate_noise_variance` of a 3-D measurement selecting states first:first+3."""
-    cols, Hc = np.empty(3, np.int64), np.zeros((3, 3))
-    for k in range(3):  # the selection H = [0 I 0], as update_selected writes it
-        cols[k] = first + k
-        Hc[k, k] = 1.0
-    return gate_noise_variance(innovation_covariance(P, cols, Hc, 0.0), y, r_var, gate)
+    """:func:`gated_variance` of a 3-D measurement selecting states first:first+3."""
+    S0 = selection_moments(P, first, (0.0, 0.0, 0.0), np.empty((15, 15)))
+    return gated_variance(S0, (y[0], y[1], y[2]), r_var, gate)
 
 
 @numba.njit(cache=True)
@@ -97,27 +93,20 @@ def unobservable_yaw_column(H_v: np.ndarray, v: np.ndarray, out: np.ndarray) -> 
 
 @numba.njit(cache=True)
 def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: float, dx: np.ndarray,
-                         phi: np.ndarray) -> float:
-    """Gated ZUPT with noise σ_v (m/s) and chi-square gate ``gate`` (0: off), the heading
-    column of its Jacobian from the prior velocity (module docstring); corrects x and P
-    (and the transition accumulator phi, see :func:`bodyfusion.nav.error_state.update_columns`)
-    in place, then the reset of :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`;
-    returns the NIS before gating (the caller counts NIS > gate as gated)."""
-    y = np.empty(3)
-    for k in range(3):
-        y[k] = -x[3 + k]
-    Hc = np.zeros((3, 4))
-    for k in range(3):
-        Hc[k, k] = 1.0
-    yaw = np.empty(3)
-    unobservable_yaw_column(Hc[:, 0:3], x[3:6], yaw)
-    for k in range(3):  # not Hc[:, 3] = yaw: a slice assignment compiles numba's shape-error message (~2 s)
-        Hc[k, 3] = yaw[k]
-    cols = ZUPT_COLUMNS.copy()  # writable like update_selected's: one signature of each kernel
-    S0 = innovation_covariance(P, cols, Hc, 0.0)
+                         phi: np.ndarray, work: np.ndarray) -> float:
+    """Gated ZUPT with noise σ_v (m/s) and chi-square gate ``gate`` (0: off): y = −v̂ (m/s),
+    H = [0 I h 0 0] with the heading column h = −(e_z × v̂) = (v̂_N, −v̂_E, 0) of the prior
+    velocity (:func:`unobservable_yaw_column` of H_v = I; module docstring). Corrects x and P
+    (and the transition accumulator phi) in place by
+    :func:`bodyfusion.nav.error_state.selection_update` (``work`` (15, 15) scratch), then the
+    reset of :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`; returns the NIS before
+    gating (the caller counts NIS > gate as gated)."""
+    y = (-x[3], -x[4], -x[5])
+    h = (x[4], -x[3], 0.0)
+    S0 = selection_moments(P, 3, h, work)
     r_var = sigma_v * sigma_v
-    nis = _nis_with_noise(S0, y, r_var)
-    update_columns(P, cols, Hc, y, gate_noise_variance(S0, y, r_var, gate), dx, phi)
+    nis = nis3(S0, r_var, y)
+    selection_update(P, 3, h, S0, gated_variance(S0, y, r_var, gate), y, dx, phi, work)
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis
@@ -125,13 +114,14 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: flo
 
 @numba.njit(cache=True)
 def zero_angular_rate_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, sigma_w: float,
-                             dx: np.ndarray, phi: np.ndarray) -> float:
-    """ZARU with noise σ_w (rad/s); corrects x, P and phi in place (with the reset of
+                             dx: np.ndarray, phi: np.ndarray, work: np.ndarray) -> float:
+    """ZARU with noise σ_w (rad/s): y = ω̃_b − b̂_g, H = [0 0 0 0 I]; corrects x, P and phi in
+    place (``work`` (15, 15) scratch; with the reset of
     :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`); returns the NIS."""
-    y = np.empty(3)
-    for k in range(3):
-        y[k] = gyro_b[k] - x[13 + k]
-    nis = update_selected(P, np.int64(12), y, sigma_w * sigma_w, dx, phi)
+    y = (gyro_b[0] - x[13], gyro_b[1] - x[14], gyro_b[2] - x[15])
+    h = (0.0, 0.0, 0.0)
+    S = selection_moments(P, 12, h, work)
+    nis = selection_update(P, 12, h, S, sigma_w * sigma_w, y, dx, phi, work)
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis
@@ -139,12 +129,12 @@ def zero_angular_rate_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, s
 
 @numba.njit(cache=True)
 def stance_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, params: np.ndarray, dx: np.ndarray,
-                  phi: np.ndarray) -> float:
+                  phi: np.ndarray, work: np.ndarray) -> float:
     """The update of a stance sample with the filter parameters ``params`` (layout in
     :mod:`bodyfusion.nav.error_state`): the gated ZUPT, then, when its NIS is within the gate and
-    the ZARU σ > 0, the ZARU with the sample's angular rate ``gyro_b`` (rad/s). Returns the
-    ZUPT's NIS before gating."""
-    nis = zero_velocity_update(x, P, params[P_ZUPT_SIGMA], params[P_ZUPT_GATE], dx, phi)
+    the ZARU σ > 0, the ZARU with the sample's angular rate ``gyro_b`` (rad/s); ``work``
+    (15, 15) scratch. Returns the ZUPT's NIS before gating."""
+    nis = zero_velocity_update(x, P, params[P_ZUPT_SIGMA], params[P_ZUPT_GATE], dx, phi, work)
     if params[P_ZARU_SIGMA] > 0 and (params[P_ZUPT_GATE] <= 0.0 or nis <= params[P_ZUPT_GATE]):
-        zero_angular_rate_update(x, P, gyro_b, params[P_ZARU_SIGMA], dx, phi)
+        zero_angular_rate_update(x, P, gyro_b, params[P_ZARU_SIGMA], dx, phi, work)
     return nis

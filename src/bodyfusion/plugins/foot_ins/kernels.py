@@ -112,7 +112,7 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
         if Phi.shape[0] > 0:
             transition(C, f_n, t[i] - t[i - 1], q_diag, Phi)
     if stance[i]:
-        return stance_update(x, P, gyro_b[i], params, dx, phi)
+        return stance_update(x, P, gyro_b[i], params, dx, phi, work[0])
     return NO_STANCE
 
 
@@ -252,9 +252,9 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
                                                     params[P_ZUPT_SIGMA], gate, dx, phi)
                 coloured = gate <= 0.0 or nis <= gate
                 if coloured and params[P_ZARU_SIGMA] > 0:
-                    zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi)
+                    zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi, work[0])
             if not coloured:
-                nis = stance_update(x, P, gyro_b[i], ordinary, dx, phi)
+                nis = stance_update(x, P, gyro_b[i], ordinary, dx, phi, work[0])
             _count(params, nis, counters)
             if coloured:
                 counters[C_COLOURED] += 1

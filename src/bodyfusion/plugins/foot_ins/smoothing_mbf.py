@@ -87,9 +87,9 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
 @numba.njit(cache=True)
 def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray) -> np.ndarray:
     """H P⁻ Hᵀ (3, 3) of the ZUPT from the prior's columns ``Pc`` (15, 4) at
-    :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`: the loop of
-    :func:`bodyfusion.nav.error_state.innovation_covariance` (noise 0), so the same number
-    and the same gate decision as the filter's."""
+    :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`: the sums of
+    :func:`bodyfusion.nav.error_state.selection_moments` (their zero terms too, which add
+    nothing), so the same number and the same gate decision as the filter's."""
     S = np.empty((3, 3))
     for r in range(3):
         for c in range(r, 3):
