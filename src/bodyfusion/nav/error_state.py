@@ -219,68 +219,75 @@ def selection_moments(P: np.ndarray, first: int, h: tuple[float, float, float],
     """The prior moments of a 3-D measurement δz = H δx whose Jacobian H (3, 15) selects the
     states first:first+3 (identity) and has the column h (3,) on the heading δψ (state 8;
     zeros: none; first:first+3 must not hold state 8 unless h is zero): M = P Hᵀ (15, 3),
-    M[r] = P[r, first:first+3] + P[r, 8] h, written to ``work[:, 0:3]`` (``work`` (15, 15)
-    scratch), and the upper triangle of H P Hᵀ = H M, (H M)[r] = M[first + r] + h_r M[8]."""
+    M[r] = P[r, first:first+3] + P[r, 8] h, written transposed to ``work[0:3]`` (``work``
+    (15, 15) scratch; rows, so that the update's loops over the states read it contiguously),
+    and the upper triangle of H P Hᵀ = H M, (H M)[r] = M[first + r] + h_r M[8]."""
     h0, h1, h2 = h
     for r in range(15):
         p8 = P[r, 8]
-        work[r, 0] = P[r, first] + p8 * h0
-        work[r, 1] = P[r, first + 1] + p8 * h1
-        work[r, 2] = P[r, first + 2] + p8 * h2
+        work[0, r] = P[r, first] + p8 * h0
+        work[1, r] = P[r, first + 1] + p8 * h1
+        work[2, r] = P[r, first + 2] + p8 * h2
     a, b = first, first + 1
     c = first + 2
-    return (work[a, 0] + h0 * work[8, 0], work[a, 1] + h0 * work[8, 1], work[a, 2] + h0 * work[8, 2],
-            work[b, 1] + h1 * work[8, 1], work[b, 2] + h1 * work[8, 2], work[c, 2] + h2 * work[8, 2])
+    return (work[0, a] + h0 * work[0, 8], work[1, a] + h0 * work[1, 8], work[2, a] + h0 * work[2, 8],
+            work[1, b] + h1 * work[1, 8], work[2, b] + h1 * work[2, 8], work[2, c] + h2 * work[2, 8])
 
 
 @numba.njit(cache=True)
 def selection_update(P: np.ndarray, first: int, h: tuple[float, float, float],
                      S: tuple[float, float, float, float, float, float], r_var: float, y: tuple[float, float, float],
                      dx: np.ndarray, phi: np.ndarray, work: np.ndarray) -> float:
-    """Kalman update of the measurement of :func:`selection_moments` (which wrote M = P Hᵀ to
-    ``work[:, 0:3]`` and returned H P Hᵀ = ``S``), innovation y (3,), isotropic noise variance
+    """Kalman update of the measurement of :func:`selection_moments` (which wrote Mᵀ = H P to
+    ``work[0:3]`` and returned H P Hᵀ = ``S``), innovation y (3,), isotropic noise variance
     r_var. Joseph form, P (15, 15) in place, written with M and S = H M + R:
     (I − K H) P (I − K H)ᵀ + K R Kᵀ = P − K Mᵀ − M Kᵀ + K S Kᵀ, K = M S⁻¹ (15, 3): rank-3
-    terms, K and K S kept in ``work[:, 3:6]``, ``work[:, 6:9]``. Writes dx = K y (15,) and
-    returns the normalised innovation squared yᵀ S⁻¹ y.
+    terms, Kᵀ and (K S)ᵀ kept in ``work[3:6]``, ``work[6:9]``; the upper triangle, then
+    mirrored. Writes dx = K y (15,) and returns the normalised innovation squared yᵀ S⁻¹ y.
 
     ``phi`` (15, 15), the error-state transition accumulated since the fuser's last sync,
-    is left-multiplied by (I − K H) in place (H phi kept in ``work[:, 9:12]``, transposed);
-    pass an empty (0, 0) array when the fuser does not track cross-covariances."""
+    is left-multiplied by (I − K H) in place (H phi kept in ``work[9:12]``); pass an empty
+    (0, 0) array when the fuser does not track cross-covariances."""
     s00, s01, s02 = S[0] + r_var, S[1], S[2]
     s11, s12, s22 = S[3] + r_var, S[4], S[5] + r_var
     i00, i01, i02, i11, i12, i22 = inverse3(s00, s01, s02, s11, s12, s22)
     y0, y1, y2 = y
     for r in range(15):
-        m0, m1, m2 = work[r, 0], work[r, 1], work[r, 2]
+        m0, m1, m2 = work[0, r], work[1, r], work[2, r]
         k0 = m0 * i00 + m1 * i01 + m2 * i02
         k1 = m0 * i01 + m1 * i11 + m2 * i12
         k2 = m0 * i02 + m1 * i12 + m2 * i22
-        work[r, 3] = k0
-        work[r, 4] = k1
-        work[r, 5] = k2
-        work[r, 6] = k0 * s00 + k1 * s01 + k2 * s02
-        work[r, 7] = k0 * s01 + k1 * s11 + k2 * s12
-        work[r, 8] = k0 * s02 + k1 * s12 + k2 * s22
+        work[3, r] = k0
+        work[4, r] = k1
+        work[5, r] = k2
+        work[6, r] = k0 * s00 + k1 * s01 + k2 * s02
+        work[7, r] = k0 * s01 + k1 * s11 + k2 * s12
+        work[8, r] = k0 * s02 + k1 * s12 + k2 * s22
         dx[r] = k0 * y0 + k1 * y1 + k2 * y2
     if phi.shape[0] > 0:
         h0, h1, h2 = h
         for c in range(15):
             p8 = phi[8, c]
-            work[c, 9] = phi[first, c] + h0 * p8
-            work[c, 10] = phi[first + 1, c] + h1 * p8
-            work[c, 11] = phi[first + 2, c] + h2 * p8
+            work[9, c] = phi[first, c] + h0 * p8
+            work[10, c] = phi[first + 1, c] + h1 * p8
+            work[11, c] = phi[first + 2, c] + h2 * p8
         for r in range(15):
-            k0, k1, k2 = work[r, 3], work[r, 4], work[r, 5]
+            k0, k1, k2 = work[3, r], work[4, r], work[5, r]
             for c in range(15):
-                phi[r, c] -= k0 * work[c, 9] + k1 * work[c, 10] + k2 * work[c, 11]
+                phi[r, c] -= k0 * work[9, c] + k1 * work[10, c] + k2 * work[11, c]
     for r in range(15):
+        m0, m1, m2 = work[0, r], work[1, r], work[2, r]
+        k0, k1, k2 = work[3, r], work[4, r], work[5, r]
+        e0, e1, e2 = work[6, r], work[7, r], work[8, r]
         for c in range(r, 15):
             v = P[r, c]
-            for k in range(3):
-                v += work[r, 6 + k] * work[c, 3 + k] - work[r, 3 + k] * work[c, k] - work[r, k] * work[c, 3 + k]
+            v += e0 * work[3, c] - k0 * work[0, c] - m0 * work[3, c]
+            v += e1 * work[4, c] - k1 * work[1, c] - m1 * work[4, c]
+            v += e2 * work[5, c] - k2 * work[2, c] - m2 * work[5, c]
             P[r, c] = v
-            P[c, r] = v
+    for r in range(15):
+        for c in range(r + 1, 15):
+            P[c, r] = P[r, c]
     return nis3(S, r_var, y)
 
 
