@@ -118,13 +118,15 @@ def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: floa
     triangle is that of Φ P Φᵀ; the result's lower triangle is mirrored (P exactly symmetric).
     ``work`` is not used (the argument of the callers of the dense version's scratch)."""
     da, dg = bias_decay(q_diag, dt)
-    transition_left(P, C, f_n, dt, da, dg, False)
+    # np.bool_, not a bare True/False: numba types a constant argument as a literal, one
+    # compilation per value
+    transition_left(P, C, f_n, dt, da, dg, np.bool_(False))
     for r in range(15):
         for c in range(r + 1, 15):
             v = P[r, c]
             P[r, c] = P[c, r]
             P[c, r] = v
-    transition_left(P, C, f_n, dt, da, dg, True)
+    transition_left(P, C, f_n, dt, da, dg, np.bool_(True))
     for r in range(15):
         P[r, r] += q_diag[r] * dt
         for c in range(r + 1, 15):
@@ -144,7 +146,7 @@ def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: 
     """phi ← F₀ phi in place (F₀ = I + A dt without the bias decay: :func:`transition_left`
     with da = dg = 0). ``work`` is not used (the argument of the callers of the dense version's
     scratch)."""
-    transition_left(phi, C, f_n, dt, 0.0, 0.0, False)
+    transition_left(phi, C, f_n, dt, 0.0, 0.0, np.bool_(False))  # np.bool_: see propagate_covariance
 
 
 @numba.njit(cache=True)

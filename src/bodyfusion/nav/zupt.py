@@ -103,10 +103,11 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: flo
     gating (the caller counts NIS > gate as gated)."""
     y = (-x[3], -x[4], -x[5])
     h = (x[4], -x[3], 0.0)
-    S0 = selection_moments(P, 3, h, work)
+    first = np.int64(3)  # not a bare 3: numba types a constant argument as a literal, one compilation per value
+    S0 = selection_moments(P, first, h, work)
     r_var = sigma_v * sigma_v
     nis = nis3(S0, r_var, y)
-    selection_update(P, 3, h, S0, gated_variance(S0, y, r_var, gate), y, dx, phi, work)
+    selection_update(P, first, h, S0, gated_variance(S0, y, r_var, gate), y, dx, phi, work)
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis
@@ -120,8 +121,9 @@ def zero_angular_rate_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, s
     :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`); returns the NIS."""
     y = (gyro_b[0] - x[13], gyro_b[1] - x[14], gyro_b[2] - x[15])
     h = (0.0, 0.0, 0.0)
-    S = selection_moments(P, 12, h, work)
-    nis = selection_update(P, 12, h, S, sigma_w * sigma_w, y, dx, phi, work)
+    first = np.int64(12)  # not a literal (zero_velocity_update)
+    S = selection_moments(P, first, h, work)
+    nis = selection_update(P, first, h, S, sigma_w * sigma_w, y, dx, phi, work)
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis

@@ -63,7 +63,7 @@ def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.nda
     decay_biases(x, q_diag, dt)
     if phi.shape[0] > 0:
         da, dg = bias_decay(q_diag, dt)
-        transition_left(phi, C, f_n, dt, da, dg, False)
+        transition_left(phi, C, f_n, dt, da, dg, np.bool_(False))  # not a literal: one signature
     propagate_covariance(P, C, f_n, dt, q_diag, work)
     return C
 
@@ -78,7 +78,7 @@ def transition(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, Ph
         for c in range(15):
             Phi[r, c] = 1.0 if r == c else 0.0
     da, dg = bias_decay(q_diag, dt)
-    transition_left(Phi, C, f_n, dt, da, dg, False)
+    transition_left(Phi, C, f_n, dt, da, dg, np.bool_(False))
 
 
 NO_STANCE = -1.0
