@@ -38,11 +38,9 @@ NOMINAL_SIZE = 16
 
 
 @numba.njit(cache=True)
-def _cross_into(a: np.ndarray, b: np.ndarray, out: np.ndarray, scale: float) -> None:
-    """out += scale · (a × b)."""
-    out[0] += scale * (a[1] * b[2] - a[2] * b[1])
-    out[1] += scale * (a[2] * b[0] - a[0] * b[2])
-    out[2] += scale * (a[0] * b[1] - a[1] * b[0])
+def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple[float, float, float]:
+    """a × b of 3-vectors given by their components."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @numba.njit(cache=True)
@@ -53,45 +51,48 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     acc_b: specific force (m/s^2), gyro_b: angular rate (rad/s), dt (s), g: gravity
     magnitude (m/s^2). Writes the mean navigation-frame specific force of the step
     into ``f_n_out`` and returns C_nb at the start of the step (both feed the error-state
-    transition matrix). Scalar loops only: array expressions cost numba compile time.
+    transition matrix). The 3-vectors are scalars (no arrays but C_nb and the attitude
+    kernels' quaternions): each array costs an allocation per sample.
     """
     C = quat_to_dcm(x[6:10])
-    dth = np.empty(3)
-    dv = np.empty(3)
-    for k in range(3):
-        dth[k] = (gyro_b[k] - x[13 + k]) * dt
-        dv[k] = (acc_b[k] - x[10 + k]) * dt
-    pth = prev[0:3].copy()
-    pv = prev[3:6].copy()
-    a = np.zeros(3)
-    _cross_into(dth, dv, a, 1.0)
-    comp = dv.copy()
-    phi = dth.copy()
-    for k in range(3):
-        comp[k] += 0.5 * a[k]
-    _cross_into(dth, a, comp, 1.0 / 6.0)
-    _cross_into(pth, dv, comp, 1.0 / 12.0)
-    _cross_into(pv, dth, comp, 1.0 / 12.0)
-    _cross_into(pth, dth, phi, 1.0 / 12.0)
-    for k in range(3):
-        prev[k] = dth[k]
-        prev[3 + k] = dv[k]
-    v0 = x[3:6].copy()
-    dvn = np.zeros(3)
-    for r in range(3):
-        dvn[r] = C[r, 0] * comp[0] + C[r, 1] * comp[1] + C[r, 2] * comp[2]
+    t0, t1, t2 = (gyro_b[0] - x[13]) * dt, (gyro_b[1] - x[14]) * dt, (gyro_b[2] - x[15]) * dt  # α_k
+    u0, u1, u2 = (acc_b[0] - x[10]) * dt, (acc_b[1] - x[11]) * dt, (acc_b[2] - x[12]) * dt  # υ_k
+    pt0, pt1, pt2, pu0, pu1, pu2 = prev[0], prev[1], prev[2], prev[3], prev[4], prev[5]  # α_{k-1}, υ_{k-1}
+    a0, a1, a2 = _cross(t0, t1, t2, u0, u1, u2)  # α × υ
+    r0, r1, r2 = _cross(t0, t1, t2, a0, a1, a2)  # α × (α × υ)
+    s0, s1, s2 = _cross(pt0, pt1, pt2, u0, u1, u2)  # α_{k-1} × υ_k
+    w0, w1, w2 = _cross(pu0, pu1, pu2, t0, t1, t2)  # υ_{k-1} × α_k
+    c0, c1, c2 = _cross(pt0, pt1, pt2, t0, t1, t2)  # α_{k-1} × α_k
+    sixth, twelfth = 1.0 / 6.0, 1.0 / 12.0
+    dv0 = u0 + 0.5 * a0 + sixth * r0 + twelfth * s0 + twelfth * w0  # Δv_b
+    dv1 = u1 + 0.5 * a1 + sixth * r1 + twelfth * s1 + twelfth * w1
+    dv2 = u2 + 0.5 * a2 + sixth * r2 + twelfth * s2 + twelfth * w2
+    phi = np.empty(3)  # the rotation vector of the step, for quat_from_rotvec
+    phi[0] = t0 + twelfth * c0
+    phi[1] = t1 + twelfth * c1
+    phi[2] = t2 + twelfth * c2
+    prev[0], prev[1], prev[2], prev[3], prev[4], prev[5] = t0, t1, t2, u0, u1, u2
+    v0, v1, v2 = x[3], x[4], x[5]
+    n0 = C[0, 0] * dv0 + C[0, 1] * dv1 + C[0, 2] * dv2  # C_nb Δv_b
+    n1 = C[1, 0] * dv0 + C[1, 1] * dv1 + C[1, 2] * dv2
+    n2 = C[2, 0] * dv0 + C[2, 1] * dv1 + C[2, 2] * dv2
     # rotation of the navigation frame over the step, −½ (ω_ie dt) × Δv_n, and Coriolis −2 ω_ie × v dt
-    _cross_into(w_ie_n, dvn.copy(), dvn, -0.5 * dt)
-    cor = np.zeros(3)
-    _cross_into(w_ie_n, v0, cor, -2.0 * dt)
-    for r in range(3):
-        f_n_out[r] = dvn[r] / dt
-        x[3 + r] = v0[r] + dvn[r] + cor[r]
+    e0, e1, e2 = w_ie_n[0], w_ie_n[1], w_ie_n[2]
+    k0, k1, k2 = _cross(e0, e1, e2, n0, n1, n2)
+    n0 += -0.5 * dt * k0
+    n1 += -0.5 * dt * k1
+    n2 += -0.5 * dt * k2
+    k0, k1, k2 = _cross(e0, e1, e2, v0, v1, v2)
+    f_n_out[0], f_n_out[1], f_n_out[2] = n0 / dt, n1 / dt, n2 / dt
+    x[3] = v0 + n0 + -2.0 * dt * k0
+    x[4] = v1 + n1 + -2.0 * dt * k1
+    x[5] = v2 + n2 + -2.0 * dt * k2
     x[5] -= g * dt
-    for r in range(3):
-        x[r] += 0.5 * (v0[r] + x[3 + r]) * dt
+    x[0] += 0.5 * (v0 + x[3]) * dt
+    x[1] += 0.5 * (v1 + x[4]) * dt
+    x[2] += 0.5 * (v2 + x[5]) * dt
     q = quat_multiply(x[6:10], quat_from_rotvec(phi))
-    if w_ie_n[0] != 0.0 or w_ie_n[1] != 0.0 or w_ie_n[2] != 0.0:
+    if e0 != 0.0 or e1 != 0.0 or e2 != 0.0:
         earth = np.empty(3)
         for k in range(3):
             earth[k] = -w_ie_n[k] * dt
