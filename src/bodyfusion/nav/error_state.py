@@ -79,8 +79,7 @@ def transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da
     from the first, each reading rows below it, not yet changed. With ``lower`` only
     M[r, :r + 1] of each row changes (the lower triangle of Φ M).
 
-    The same entries, transposed, are what
-    :func:`bodyfusion.plugins.foot_ins.smoothing_mbf._transition_left` applies (M ← Φᵀ M)."""
+    The same entries, transposed, are what :func:`transition_transpose_left` applies."""
     m = M.shape[1]
     for r in range(3):  # position rows: from δv
         for q in range(r + 1 if lower else m):
@@ -106,6 +105,39 @@ def transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da
             d = 1.0 + (da if r < 12 else dg)
             for q in range(r + 1 if lower else m):
                 M[r, q] *= d
+
+
+@numba.njit(inline="always")
+def transition_transpose_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
+                              lower: bool) -> None:
+    """M ← Φᵀ M in place (M (15, m)) for the transition Φ = I + E of :func:`transition_left`,
+    from the same non-zero entries of E (C_nb (3, 3), the step's specific force f_n (3,) m/s²
+    in the navigation frame, dt s, the bias decay da, dg): the adjoint of the smoothers'
+    backward sweep. Row c of Φᵀ M is M[c] + Σ_k E[k, c] M[k] over k < c (then k = c) in
+    increasing k, the order of a dense product; rows are done from the last, so each reads
+    rows not yet changed. With ``lower`` only M[c, :c + 1] of each row changes. Inlined into
+    its callers (their constant ``lower`` then costs no compilation of its own)."""
+    m = M.shape[1]
+    for k in range(2, -1, -1):  # gyro bias rows 12 + k: from δθ (rows 6:9)
+        c = 12 + k
+        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
+        for q in range(c + 1 if lower else m):
+            M[c, q] = M[c, q] + e0 * M[6, q] + e1 * M[7, q] + e2 * M[8, q] + dg * M[c, q]
+    for k in range(2, -1, -1):  # accelerometer bias rows 9 + k: from δv (rows 3:6)
+        c = 9 + k
+        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
+        for q in range(c + 1 if lower else m):
+            M[c, q] = M[c, q] + e0 * M[3, q] + e1 * M[4, q] + e2 * M[5, q] + da * M[c, q]
+    f0, f1, f2 = dt * f_n[0], dt * f_n[1], dt * f_n[2]  # attitude rows: −[f×] dt from δv
+    for q in range(9 if lower else m):
+        M[8, q] = M[8, q] - f1 * M[3, q] + f0 * M[4, q]
+    for q in range(8 if lower else m):
+        M[7, q] = M[7, q] + f2 * M[3, q] - f0 * M[5, q]
+    for q in range(7 if lower else m):
+        M[6, q] = M[6, q] - f2 * M[4, q] + f1 * M[5, q]
+    for r in range(2, -1, -1):  # velocity rows: from δp
+        for q in range(4 + r if lower else m):
+            M[3 + r, q] = M[3 + r, q] + dt * M[r, q]
 
 
 @numba.njit(cache=True)

@@ -21,44 +21,10 @@ import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inv3_sym,
-                                       process_noise_diag)
+                                       process_noise_diag, transition_transpose_left)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
-
-@numba.njit(inline="always")
-def _transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
-                     lower: bool) -> None:
-    """M ← Φᵀ M in place (M (15, m)) for the transition Φ = I + E of
-    :func:`~bodyfusion.plugins.foot_ins.kernels.transition`, written from its non-zero entries
-    (C_nb (3, 3), the step's specific force f_n (3,) m/s² in the navigation frame, dt s):
-    E[r, 3+r] = dt (δp ← δv), E[3:6, 6:9] = −[f_n×] dt (δv ← δθ), E[3:6, 9:12] = −C_nb dt
-    (δv ← δb_a), E[6:9, 12:15] = −C_nb dt (δθ ← δb_g), E[9+k, 9+k] = da and
-    E[12+k, 12+k] = dg (the bias decay, (1 − β dt) − 1). Row c of Φᵀ M is
-    M[c] + Σ_k E[k, c] M[k] over k < c (then k = c) in increasing k, the order of a dense
-    product; rows are done from the last, so each reads rows not yet changed. With ``lower``
-    only M[c, :c + 1] of each row changes."""
-    m = M.shape[1]
-    for k in range(2, -1, -1):  # gyro bias rows 12 + k: from δθ (rows 6:9)
-        c = 12 + k
-        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
-        for q in range(c + 1 if lower else m):
-            M[c, q] = M[c, q] + e0 * M[6, q] + e1 * M[7, q] + e2 * M[8, q] + dg * M[c, q]
-    for k in range(2, -1, -1):  # accelerometer bias rows 9 + k: from δv (rows 3:6)
-        c = 9 + k
-        e0, e1, e2 = dt * -C[0, k], dt * -C[1, k], dt * -C[2, k]
-        for q in range(c + 1 if lower else m):
-            M[c, q] = M[c, q] + e0 * M[3, q] + e1 * M[4, q] + e2 * M[5, q] + da * M[c, q]
-    f0, f1, f2 = dt * f_n[0], dt * f_n[1], dt * f_n[2]  # attitude rows: −[f×] dt from δv
-    for q in range(9 if lower else m):
-        M[8, q] = M[8, q] - f1 * M[3, q] + f0 * M[4, q]
-    for q in range(8 if lower else m):
-        M[7, q] = M[7, q] + f2 * M[3, q] - f0 * M[5, q]
-    for q in range(7 if lower else m):
-        M[6, q] = M[6, q] - f2 * M[4, q] + f1 * M[5, q]
-    for r in range(2, -1, -1):  # velocity rows: from δp
-        for q in range(4 + r if lower else m):
-            M[3 + r, q] = M[3 + r, q] + dt * M[r, q]
 
 
 @numba.njit(cache=True)
@@ -67,18 +33,19 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
     """lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ in place (Lam (15, 15) symmetric; the result's lower
     triangle mirrored) for the transition of one step (C_nb, f_n m/s², dt s and the bias decay
     of the process model ``q_diag``: :func:`~bodyfusion.plugins.foot_ins.kernels.transition`),
-    from its non-zero entries (:func:`_transition_left`) rather than a dense Φ: V = Φᵀ Lam,
-    then Φᵀ Vᵀ = (V Φ)ᵀ, whose lower triangle is that of Φᵀ Lam Φ."""
+    from its non-zero entries (:func:`bodyfusion.nav.error_state.transition_transpose_left`)
+    rather than a dense Φ: V = Φᵀ Lam, then Φᵀ Vᵀ = (V Φ)ᵀ, whose lower triangle is that of
+    Φᵀ Lam Φ."""
     da = (1.0 - dt * q_diag[Q_DECAY]) - 1.0
     dg = (1.0 - dt * q_diag[Q_DECAY + 1]) - 1.0
-    _transition_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, False)
-    _transition_left(Lam, C, f_n, dt, da, dg, False)
+    transition_transpose_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, False)
+    transition_transpose_left(Lam, C, f_n, dt, da, dg, False)
     for r in range(15):
         for c in range(r + 1, 15):
             v = Lam[r, c]
             Lam[r, c] = Lam[c, r]
             Lam[c, r] = v
-    _transition_left(Lam, C, f_n, dt, da, dg, True)
+    transition_transpose_left(Lam, C, f_n, dt, da, dg, True)
     for r in range(15):
         for c in range(r + 1, 15):
             Lam[r, c] = Lam[c, r]
