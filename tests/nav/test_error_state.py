@@ -62,11 +62,10 @@ def F_from_propagate(C: np.ndarray, f_n: np.ndarray, dt: float) -> np.ndarray:
     """Recover F = I + A dt column by column: with P = e_i e_iᵀ and Q = 0, F P Fᵀ = f_i f_iᵀ,
     whose column i is f_i · F[i, i] = f_i (A has a zero diagonal, so F[i, i] = 1)."""
     F = np.empty((ERROR_SIZE, ERROR_SIZE))
-    work = np.empty((2, ERROR_SIZE, ERROR_SIZE))
     for i in range(ERROR_SIZE):
         P = np.zeros((ERROR_SIZE, ERROR_SIZE))
         P[i, i] = 1.0
-        propagate_covariance(P, C, f_n, dt, np.zeros(ERROR_SIZE), work)
+        propagate_covariance(P, C, f_n, dt, np.zeros(ERROR_SIZE))
         assert P[i, i] == pytest.approx(1.0, abs=1e-12)
         F[:, i] = P[:, i]
     return F
@@ -154,7 +153,7 @@ def test_propagated_covariance_matches_finite_difference_transition():
     _, C, f_n = step(x, acc, gyro, dt)
     P = random_spd(rng, scale=1e-2)
     P_prop = P.copy()
-    propagate_covariance(P_prop, C, f_n, dt, np.zeros(ERROR_SIZE), np.empty((2, 15, 15)))
+    propagate_covariance(P_prop, C, f_n, dt, np.zeros(ERROR_SIZE))
     F_num = F_finite_difference(x, acc, gyro, dt)
     expected = F_num @ P @ F_num.T
     change = np.abs(expected - P).max()
@@ -171,7 +170,7 @@ def test_propagate_covariance_equals_dense_F_P_Ft_plus_Q():
     F = np.eye(ERROR_SIZE) + dense_A(C, f_n) * dt
     expected = F @ P @ F.T + np.diag(q * dt)
     got = P.copy()
-    propagate_covariance(got, np.ascontiguousarray(C), f_n, dt, q, np.empty((2, 15, 15)))
+    propagate_covariance(got, np.ascontiguousarray(C), f_n, dt, q)
     np.testing.assert_allclose(got, expected, atol=1e-13, rtol=0)
 
 
@@ -189,7 +188,7 @@ def test_propagate_covariance_with_gauss_markov_biases_equals_dense_F_P_Ft_plus_
     A[12:15, 12:15] = -beta_g * np.eye(3)
     F = np.eye(ERROR_SIZE) + A * dt
     got = P.copy()
-    propagate_covariance(got, np.ascontiguousarray(C), f_n, dt, q, np.empty((2, 15, 15)))
+    propagate_covariance(got, np.ascontiguousarray(C), f_n, dt, q)
     np.testing.assert_allclose(got, F @ P @ F.T + np.diag(q[:ERROR_SIZE] * dt), atol=1e-13, rtol=0)
 
 
@@ -205,11 +204,10 @@ def test_an_unobserved_gauss_markov_bias_settles_at_its_stationary_variance():
     x = np.zeros(16)
     x[6] = 1.0
     x[13:16] = 1e-3
-    work = np.empty((2, ERROR_SIZE, ERROR_SIZE))
     C = np.eye(3)
     f_n = np.array([0.0, 0.0, G])
     for _ in range(int(10 * tau / dt)):
-        propagate_covariance(P, C, f_n, dt, q, work)
+        propagate_covariance(P, C, f_n, dt, q)
     decay_biases(x, q, 100.0 * dt)
     np.testing.assert_allclose(np.diag(P)[12:15], sigma**2 / (1 - 0.5 * dt / tau), rtol=1e-3)
     assert np.all(np.diag(P)[9:12] == 0.0)
@@ -222,12 +220,11 @@ def test_propagate_covariance_keeps_P_symmetric_psd_over_many_steps():
     P = random_spd(rng, scale=1e-3)
     q = np.concatenate([np.zeros(3), np.full(3, 0.02**2), np.full(3, 0.002**2), np.full(3, 1e-8),
                         np.full(3, 1e-10)])
-    work = np.empty((2, 15, 15))
     Cs = Rotation.random(2000, random_state=7).as_matrix()
     for k in range(2000):
         C = np.ascontiguousarray(Cs[k])
         f_n = rng.normal(0, 5, 3) + [0, 0, G]
-        propagate_covariance(P, C, f_n, 0.01, q, work)
+        propagate_covariance(P, C, f_n, 0.01, q)
     np.testing.assert_array_equal(P, P.T)
     assert np.linalg.eigvalsh(P).min() > 0.0
     assert np.all(np.diag(P) > 0)

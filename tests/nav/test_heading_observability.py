@@ -119,7 +119,7 @@ def test_propagation_carries_the_rotation_about_up_to_the_next_sample(seed):
     f_n = np.empty(3)
     C = mechanise(x, acc, gyro, dt, 9.8, np.zeros(3), f_n, rng.normal(0, 0.01, 6))
     F = np.eye(ERROR_SIZE)
-    accumulate_propagation(F, C, f_n, dt, np.empty((ERROR_SIZE, ERROR_SIZE)))
+    accumulate_propagation(F, C, f_n, dt)
     carried = F @ n0
     np.testing.assert_allclose(carried[3:], heading_direction(x)[3:], atol=1e-14, rtol=0)
     np.testing.assert_allclose(carried[0:3], dt * n0[3:6], atol=1e-15, rtol=0)

@@ -141,14 +141,12 @@ def transition_transpose_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt:
 
 
 @numba.njit(cache=True)
-def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray,
-                         work: np.ndarray) -> None:
+def propagate_covariance(P: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray) -> None:
     """P ← Φ P Φᵀ + Q_d in place (P (15, 15) symmetric), Φ = I + A dt with the bias decay of
     ``q_diag`` (densities² per Hz of the 15 states, optionally followed by the decay rates:
     :func:`process_noise_diag`), Q_d = diag(q) dt. From the non-zero entries of Φ
     (:func:`transition_left`), no dense products: V = Φ P, then Φ Vᵀ = (V Φᵀ)ᵀ, whose lower
-    triangle is that of Φ P Φᵀ; the result's lower triangle is mirrored (P exactly symmetric).
-    ``work`` is not used (the argument of the callers of the dense version's scratch)."""
+    triangle is that of Φ P Φᵀ; the result's lower triangle is mirrored (P exactly symmetric)."""
     da, dg = bias_decay(q_diag, dt)
     # np.bool_, not a bare True/False: numba types a constant argument as a literal, one
     # compilation per value
@@ -174,10 +172,9 @@ def decay_biases(x: np.ndarray, q_diag: np.ndarray, dt: float) -> None:
 
 
 @numba.njit(cache=True)
-def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, work: np.ndarray) -> None:
+def accumulate_propagation(phi: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float) -> None:
     """phi ← F₀ phi in place (F₀ = I + A dt without the bias decay: :func:`transition_left`
-    with da = dg = 0). ``work`` is not used (the argument of the callers of the dense version's
-    scratch)."""
+    with da = dg = 0)."""
     transition_left(phi, C, f_n, dt, 0.0, 0.0, np.bool_(False))  # np.bool_: see propagate_covariance
 
 

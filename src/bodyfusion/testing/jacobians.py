@@ -117,7 +117,7 @@ def strapdown15_jacobian_cases(acc_b: np.ndarray, gyro_b: np.ndarray, dt: float,
         x = random_nominal_state(rng)
         _, C, f_n = _mechanise_step(x, acc, gyro, dt, gravity)
         F = np.eye(ERROR_SIZE)
-        accumulate_propagation(F, C, f_n, float(dt), np.empty((ERROR_SIZE, ERROR_SIZE)))
+        accumulate_propagation(F, C, f_n, float(dt))
         first_order = float(np.max(np.abs(F - np.eye(ERROR_SIZE))))
         cases.append(JacobianCase(
             name=f"strapdown15 transition F at sample {k} (|f| {np.linalg.norm(acc):.2f} m/s², "
@@ -158,7 +158,7 @@ def check_strapdown15(system: SensorSystem) -> str:
     F = case.jacobian
     q = np.linspace(1e-6, 1e-3, ERROR_SIZE)
     got = P.copy()
-    propagate_covariance(got, C, f_n, dt, q, np.empty((2, ERROR_SIZE, ERROR_SIZE)))
+    propagate_covariance(got, C, f_n, dt, q)
     want = F @ P @ F.T + np.diag(q * dt)
     if np.max(np.abs(got - want)) > 1e-12 * np.max(np.abs(want)):
         raise AssertionError(f"strapdown15: propagate_covariance differs from F P Fᵀ + Q_d ({max_diff(got, want)})")

@@ -74,7 +74,7 @@ def test_inverse_transition_rows_are_exact():
     f_n = np.array([0.4, -2.0, 9.6])
     dt = 0.02
     F = np.eye(15)
-    accumulate_propagation(F, C, f_n, dt, np.empty((15, 15)))
+    accumulate_propagation(F, C, f_n, dt)
     rows = np.empty((3, 15))
     velocity_rows_of_inverse_transition(C, f_n, dt, rows)
     np.testing.assert_allclose(rows, np.linalg.inv(F)[3:6], atol=1e-15)
@@ -104,7 +104,7 @@ def test_coloured_update_matches_the_dense_equations():
     x[6] = 1.0
     v_prev = np.array([0.008, -0.01, 0.0])
     F = np.eye(15)
-    accumulate_propagation(F, C, f_n, dt, np.empty((15, 15)))
+    accumulate_propagation(F, C, f_n, dt)
     H = np.zeros((3, 15))
     H[:, 3:6] = np.eye(3)
     T = alpha * H @ np.linalg.inv(F)

@@ -55,7 +55,7 @@ def stationary_zupt_params(params: np.ndarray, alpha: float) -> np.ndarray:
 @numba.njit(inline="always")
 def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                       i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray, mech_memory: np.ndarray,
-                      phi: np.ndarray, work: np.ndarray) -> np.ndarray:
+                      phi: np.ndarray) -> np.ndarray:
     """Mechanise sample i (from t[i-1] to t[i]), decay the bias estimates and propagate P
     (and Φ when tracked); returns C_nb (3, 3) of the step, f_n (3,) is left in ``f_n``."""
     dt = t[i] - t[i - 1]
@@ -64,7 +64,7 @@ def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.nda
     if phi.shape[0] > 0:
         da, dg = bias_decay(q_diag, dt)
         transition_left(phi, C, f_n, dt, da, dg, np.bool_(False))  # not a literal: one signature
-    propagate_covariance(P, C, f_n, dt, q_diag, work)
+    propagate_covariance(P, C, f_n, dt, q_diag)
     return C
 
 
@@ -100,7 +100,7 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
     ``P_prior`` is not empty, and its transition ``Phi`` (15, 15, :func:`transition`) when
     ``Phi`` is not empty; an empty (0, 0) array skips them, None (the filter) leaves them out of
     the compiled step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
-    C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
+    C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi)
     if P_prior is not None:  # pruned at compile time when None
         if P_prior.shape[0] > 0:
             for r in range(15):
@@ -112,7 +112,7 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
         if Phi.shape[0] > 0:
             transition(C, f_n, t[i] - t[i - 1], q_diag, Phi)
     if stance[i]:
-        return stance_update(x, P, gyro_b[i], params, dx, phi, work[0])
+        return stance_update(x, P, gyro_b[i], params, dx, phi, work)
     return NO_STANCE
 
 
@@ -200,7 +200,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     (15, 15) are left with the nominal state and covariance before the step to i1 − 1 (the
     sample a correction from outside the loop would be made at)."""
     q_diag = process_noise_diag(params)
-    work = np.empty((2, 15, 15))
+    work = np.empty((15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
     no_prior = np.empty((0, 0))
@@ -234,7 +234,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     of the chunk; ``counters[C_CALL_RECORDS]`` says how many were written."""
     q_diag = process_noise_diag(params)
     ordinary = stationary_zupt_params(params, alpha)
-    work = np.empty((2, 15, 15))
+    work = np.empty((15, 15))
     f_n = np.empty(3)
     dx = np.empty(15)
     v_prev = np.empty(3)
@@ -243,7 +243,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     for i in range(i0, i1):
         for k in range(3):
             v_prev[k] = x[3 + k]
-        C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, work)
+        C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi)
         nis = NO_STANCE
         if stance[i]:
             coloured = False
@@ -252,9 +252,9 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
                                                     params[P_ZUPT_SIGMA], gate, dx, phi)
                 coloured = gate <= 0.0 or nis <= gate
                 if coloured and params[P_ZARU_SIGMA] > 0:
-                    zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi, work[0])
+                    zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi, work)
             if not coloured:
-                nis = stance_update(x, P, gyro_b[i], ordinary, dx, phi, work[0])
+                nis = stance_update(x, P, gyro_b[i], ordinary, dx, phi, work)
             _count(params, nis, counters)
             if coloured:
                 counters[C_COLOURED] += 1

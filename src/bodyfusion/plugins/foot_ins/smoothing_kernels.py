@@ -143,7 +143,7 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     (:func:`bodyfusion.nav.error_state.keep_yaw_unobservable`; Δv the update's velocity
     correction, zero off stance). Returns the covariance at i1."""
     q_diag = process_noise_diag(params)
-    work = np.empty((2, 15, 15))
+    work = np.empty((15, 15))
     f_n = np.empty(3)
     scratch = np.empty(15)
     x = x0.copy()

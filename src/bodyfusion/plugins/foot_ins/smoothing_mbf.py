@@ -267,7 +267,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
 
     Returns the covariance at i1 and the largest |replayed − recorded| nominal state element."""
     q_diag = process_noise_diag(params)
-    work = np.empty((2, 15, 15))
+    work = np.empty((15, 15))
     f_n = np.empty(3)
     scratch = np.empty(15)
     x = x0.copy()
