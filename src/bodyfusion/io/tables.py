@@ -33,7 +33,8 @@ from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
 from bodyfusion.io.arrow_tables import read_clean_table
-from bodyfusion.io.lines import line_chunks, read_lines, scan_lines, scan_text  # noqa: F401 (other readers take read_lines)
+from bodyfusion.io.lines import (line_chunks, read_lines, scan_lines,  # noqa: F401 (other readers take read_lines)
+                                 scan_text)
 
 TIMESTAMP_POLICIES = ("drop", "sort", "error")
 
@@ -280,7 +281,8 @@ def read_labelled_table(
         if fast is not None and fast[2] is not None:  # label names as the chunked reader cleans them
             raw_codes, raw_names = fast[2]
             names_found: dict[str, int] = {}
-            code = np.array([names_found.setdefault(clean_cell(v), len(names_found)) for v in raw_names], dtype=np.int32)
+            code = np.array([names_found.setdefault(clean_cell(v), len(names_found)) for v in raw_names],
+                            dtype=np.int32)
             fast = fast[0], fast[1], (code[raw_codes], list(names_found))
         first = pending[0][:1]
         if fast is not None and np.array_equal(

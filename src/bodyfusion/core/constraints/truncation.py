@@ -173,6 +173,7 @@ class DensityTruncation:
         others = np.full(n, self.positions_only)
         others[pos] = False
         rows = np.ascontiguousarray(solution.jacobian, dtype=float).reshape(len(solution.active), p_hat.shape[0])
-        _truncate(P_new, np.asarray(pos, dtype=np.int64), np.ascontiguousarray(p_hat, dtype=float), rows, rows @ solution.p, self._fixed[solution.active], self._idx, self._geo,
-                  active, TAIL_BETA, others, dx, tail)
+        _truncate(P_new, np.asarray(pos, dtype=np.int64), np.ascontiguousarray(p_hat, dtype=float), rows,
+                  rows @ solution.p, self._fixed[solution.active], self._idx, self._geo, active, TAIL_BETA, others,
+                  dx, tail)
         return dx, P_new, tail

@@ -104,7 +104,7 @@ class CovarianceLog:
 
     def add(self, i: int, P: np.ndarray) -> None:
         """The covariance ``P`` (15, 15) left at sample ``i``."""
-        if not np.array_equal(P, P.T):
+        if not (P == P.T).all():  # NaN ≠ NaN: kept whole, as array_equal would
             self.lower_at.append(len(self.idx))
             self.lower.append(P[_LOWER])
         self.idx.append(i)

@@ -338,7 +338,7 @@ class FootIns(SensorSystem):
         return self.run_data.hist_pos_cov
 
     def _record_position_covariance(self, i: int) -> None:
-        self.hist_pos_cov[i, :3] = np.diag(self.P)[:3]
+        self.hist_pos_cov[i, :3] = self.P.diagonal()[:3]
         self.hist_pos_cov[i, 3] = self.P[0, 1]
 
     @property
