@@ -215,3 +215,16 @@ def test_every_correction_own_or_relative_is_checked():
     monitor.apply_relative_correction(np.zeros(3), np.eye(3))
     monitor.flush()
     assert system.corrections == 2 and system.health()["covariance"]["checks"] == 2
+
+
+def test_propagation_is_checked_at_the_stride_times_and_the_end_only():
+    """Between corrections a system is checked at its stride times (sync times a second apart)
+    and at its end, not at every epoch it is advanced to."""
+    system = BadCovariance(bad_from_s=100.0)
+    monitor = CovarianceMonitor(system)
+    for t in (0.2, 0.3, 0.5, 0.7, 1.2, 1.5, 2.1):  # stride times 0.5, 1.5, 2.5, ...
+        monitor.advance(t)
+    checked = len(monitor._t)
+    monitor.advance(system.t_end)
+    assert checked == 2 and monitor._t[:2] == [0.5, 1.5]
+    assert len(monitor._t) == 2 + 8 + 1 and monitor._t[-1] == system.t_end  # 2.5 ... 9.5, and the end

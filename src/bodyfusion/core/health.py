@@ -1,14 +1,15 @@
 """Covariance checks while the fuser runs: each system seen through a :class:`CovarianceMonitor`.
 
 The fuser drives a system with ``advance`` and ``apply_correction`` at its sync epochs; the
-monitor passes every call on and checks the covariance the system holds afterwards (symmetric,
-positive semi-definite: :class:`bodyfusion.evaluation.consistency.CovarianceHealth`, kept in
-the system's ``covariance_health`` for :meth:`~bodyfusion.core.system.SensorSystem.health`).
-A long advance (a system no constraint involves is advanced to its end in one call) is split
-at the system's own sync times, at most one per :data:`STRIDE_S`, so that every system is
-checked at least about once a second and at the end. Splitting there changes nothing: the
-plugin contract asks that advancing in chunks at sync times gives the same bits, and the fuser
-itself syncs there. Checks are buffered and made in batches (one vectorised eigenvalue call).
+monitor passes every call on and checks the covariance the system holds (symmetric, positive
+semi-definite: :class:`bodyfusion.evaluation.consistency.CovarianceHealth`, kept in the
+system's ``covariance_health`` for :meth:`~bodyfusion.core.system.SensorSystem.health`) after
+every correction — the fuser's updates are where a covariance can lose its definiteness from
+outside the system — and, while it propagates, at its own sync times at most one per
+:data:`STRIDE_S` and at its end: every system is checked at least about once a second. An
+advance is split at those times; splitting there changes nothing (the plugin contract asks that
+advancing in chunks at sync times gives the same bits, and the fuser itself syncs there).
+Checks are buffered and made in batches (one vectorised eigenvalue call).
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ class CovarianceMonitor:
         return getattr(self.system, name)
 
     def advance(self, t: float) -> None:
-        """The system's ``advance(t)``, split at the stride times between now and t."""
+        """The system's ``advance(t)``, split and checked at the stride times up to t, and checked
+        at t when t is one of them or the system's end."""
         s = self.system
         a, b = bisect.bisect_right(self._stride_t, s.t_now), bisect.bisect_right(self._stride_t, t)
         for ts in self._stride_t[a:b]:
@@ -58,7 +60,8 @@ class CovarianceMonitor:
                 s.advance(ts)
                 self._check()
         s.advance(t)
-        self._check()
+        if (b > a and self._stride_t[b - 1] == t) or t >= s.t_end:
+            self._check()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """The system's ``apply_correction(dx, P)``, then a check."""
