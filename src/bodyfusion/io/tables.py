@@ -171,11 +171,18 @@ def _labels(path: Path, rows: list[str], line_no: np.ndarray, j: int, label: str
                                     f"{label!r} is missing)", int(line_no[short]))
         cells = np.array([row[j] for row in split], dtype=str)
     raw, first, inverse = np.unique(cells, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
     code = np.empty(raw.size, dtype=out.dtype)
-    for u in np.argsort(first, kind="stable"):
-        code[u] = names.setdefault(clean_cell(str(raw[u])), len(names))
+    code[order] = _name_codes([str(v) for v in raw[order]], names)
     out[:] = code[inverse.reshape(-1)]
     return None
+
+
+def _name_codes(raw: list[str], names: dict[str, int]) -> np.ndarray:
+    """(len(raw),) int32 codes of label cells ``raw`` (in order of first appearance) into
+    ``names``, cleaned (:func:`clean_cell`) and extended in that order: two spellings of one
+    name (``"left"``, ``left``) share its code."""
+    return np.array([names.setdefault(clean_cell(v), len(names)) for v in raw], dtype=np.int32)
 
 
 def read_table(
@@ -278,18 +285,15 @@ def read_labelled_table(
     allowed = np.array([c in allow_missing for c in columns], dtype=bool)
     if plain and deferred is None:
         fast = read_clean_table(path, columns, len(header), idx, label_j, header_line, n_lines, delimiter, allowed)
-        if fast is not None and fast[2] is not None:  # label names as the chunked reader cleans them
-            raw_codes, raw_names = fast[2]
-            names_found: dict[str, int] = {}
-            code = np.array([names_found.setdefault(clean_cell(v), len(names_found)) for v in raw_names],
-                            dtype=np.int32)
-            fast = fast[0], fast[1], (code[raw_codes], list(names_found))
-        first = pending[0][:1]
         if fast is not None and np.array_equal(
                 np.column_stack([fast[0][name][:1] for name in columns]) if columns else np.empty((1, 0)),
-                _parse_rows(path, first, pending[1][:1], idx, columns, delimiter, allow_missing, len(header), False),
+                _parse_rows(path, pending[0][:1], pending[1][:1], idx, columns, delimiter, allow_missing, len(header),
+                            False),
                 equal_nan=True):
             arrays, line_no, labels = fast
+            if labels is not None:  # the label names cleaned as the chunked reader cleans them
+                found: dict[str, int] = {}
+                labels = _name_codes(labels[1], found)[labels[0]], list(found)
             return arrays, line_no, labels
     cap = n_lines - header_line
     cols = [np.empty(cap) for _ in columns]
