@@ -25,6 +25,7 @@ import numpy as np
 
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import Trajectory
+from bodyfusion.evaluation.covariance_kernels import symmetric_parts
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 RTOL = 1e-9
@@ -61,26 +62,22 @@ def covariance_defects(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     """Asymmetry max |P − Pᵀ|, minimum eigenvalue of ½ (P + Pᵀ), and the violation flag of
     covariances P (..., n, n) (see the module docstring); each of shape (...)."""
     P = np.asarray(P, dtype=float)
-    finite = np.all(np.isfinite(P), axis=(-2, -1))
-    P = np.where(finite[..., None, None], P, 0.0)
-    diff = np.abs(P - np.swapaxes(P, -1, -2))
-    sym = 0.5 * (P + np.swapaxes(P, -1, -2))
-    var = np.diagonal(sym, axis1=-2, axis2=-1)
-    scale = np.sqrt(np.where(var > 0.0, var, 1.0))
-    outer = scale[..., :, None] * scale[..., None, :]
-    if sym.shape[-1] == 2:  # closed form (a trajectory's east–north covariance: LAPACK per 2×2 costs 10×)
-        a, b, c = sym[..., 0, 0], sym[..., 0, 1], sym[..., 1, 1]
-        lam_min = 0.5 * (a + c) - np.hypot(0.5 * (a - c), b)
-    else:
-        lam_min = np.linalg.eigvalsh(sym)[..., 0]
+    lead, n = P.shape[:-2], P.shape[-1]
+    flat = np.ascontiguousarray(P.reshape(-1, n, n))
+    sym = np.empty_like(flat)
+    asym, flagged, lam_min = np.empty(len(flat)), np.empty(len(flat), dtype=bool), np.empty(len(flat))
+    symmetric_parts(flat, RTOL, sym, asym, flagged, lam_min)
+    if n != 2:  # a 2 × 2 (a trajectory's east–north covariance) has its closed form: LAPACK costs 10×
+        lam_min = np.linalg.eigvalsh(sym)[:, 0]
     # the correlation form D⁻¹ sym D⁻¹ has the inertia of sym (Sylvester): only a covariance
     # with a negative eigenvalue can fail its test, and only those are decomposed again
-    negative = lam_min < 0.0
-    indefinite = np.zeros_like(negative)
-    if negative.any():
-        indefinite[negative] = np.linalg.eigvalsh((sym / outer)[negative])[..., 0] < -RTOL
-    bad = (~finite | np.any(var < 0.0, axis=-1) | (np.max(diff / outer, axis=(-2, -1)) > RTOL) | indefinite)
-    return np.max(diff, axis=(-2, -1)), lam_min, bad
+    negative = np.flatnonzero(lam_min < 0.0)
+    if negative.size:
+        var = np.diagonal(sym[negative], axis1=-2, axis2=-1)
+        scale = np.sqrt(np.where(var > 0.0, var, 1.0))
+        corr = sym[negative] / (scale[:, :, None] * scale[:, None, :])
+        flagged[negative] |= np.linalg.eigvalsh(corr)[:, 0] < -RTOL
+    return asym.reshape(lead), lam_min.reshape(lead), flagged.reshape(lead)
 
 
 @dataclass

@@ -193,6 +193,19 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
+def closed_loop_reset(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray) -> None:
+    """Closed-loop reset after a correction from outside the filter: :func:`inject` dx (≥ 15,)
+    into x (16,), and P (n, n) ← ½ (P_new + P_newᵀ) in place (P_new may be P)."""
+    inject(x, dx)
+    n = P.shape[0]
+    for a in range(n):
+        for b in range(a, n):
+            v = 0.5 * (P_new[a, b] + P_new[b, a])
+            P[a, b] = v
+            P[b, a] = v
+
+
+@numba.njit(cache=True)
 def inverse3(s00: float, s01: float, s02: float, s11: float, s12: float,
              s22: float) -> tuple[float, float, float, float, float, float]:
     """The upper triangle (i00, i01, i02, i11, i12, i22) of the inverse of the symmetric

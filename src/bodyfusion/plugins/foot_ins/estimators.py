@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from bodyfusion.nav.error_state import inject, inv3_sym
+from bodyfusion.nav.error_state import closed_loop_reset, inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
@@ -82,9 +82,9 @@ class Estimator:
                      self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters, *data.record)
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
-        """Closed-loop reset: inject dx (n,) into the nominal state, take P (n, n)."""
-        inject(self.x, np.ascontiguousarray(dx[:15], dtype=np.float64))
-        self.P = P
+        """Closed-loop reset: inject dx (n,) into the nominal state, take ½ (P + Pᵀ) (n, n)."""
+        closed_loop_reset(self.x, self.P, np.ascontiguousarray(dx, dtype=np.float64),
+                          np.ascontiguousarray(P, dtype=np.float64))
 
     def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
                      phi: np.ndarray) -> None:
@@ -136,6 +136,7 @@ class EnsembleEkf(Estimator):
         self._sync()
 
     def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
+        P = 0.5 * (P + P.T)
         self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
         self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
         self.P = P

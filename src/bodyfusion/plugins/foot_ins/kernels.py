@@ -131,6 +131,11 @@ def _count(params: np.ndarray, nis: float, counters: np.ndarray) -> None:
 def _record_sample(x: np.ndarray, P: np.ndarray, nis: float, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
                    hist_nis: np.ndarray) -> None:
     hist_nis[i] = nis
+    _record_row(x, P, i, hist_x, hist_pos_cov)
+
+
+@numba.njit(inline="always")
+def _record_row(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
     for k in range(16):
         hist_x[i, k] = x[k]
     for k in range(3):
@@ -144,13 +149,38 @@ def record_posterior(P: np.ndarray, f_n: np.ndarray, j: int, Pu: np.ndarray, f_n
     covariance P (15, 15) packed (upper triangle by rows), ``f_ns[j]`` (3,) the step's mean
     specific force f_n (navigation frame, m/s²; with the state before the step it gives the
     step's transition again, exactly)."""
-    q = 0
-    for r in range(15):
-        for c in range(r, 15):
-            Pu[j, q] = P[r, c]
-            q += 1
+    _pack(P, Pu[j])
     for k in range(3):
         f_ns[j, k] = f_n[k]
+
+
+@numba.njit(inline="always")
+def _pack(P: np.ndarray, out: np.ndarray) -> bool:
+    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
+    exactly symmetric (a NaN makes it not)."""
+    q = 0
+    symmetric = True
+    for r in range(15):
+        for c in range(r, 15):
+            out[q] = P[r, c]
+            if P[c, r] != P[r, c]:
+                symmetric = False
+            q += 1
+    return symmetric
+
+
+@numba.njit(cache=True)
+def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
+    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
+    exactly symmetric (then ``out`` holds all of it)."""
+    return _pack(P, out)
+
+
+@numba.njit(cache=True)
+def record_state(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
+    """Row i of ``hist_x`` (N, 16) ← x and of ``hist_pos_cov`` (N, 4) ← P's position variances
+    east, north, up and east–north covariance (m²): a state set outside the compiled loop."""
+    _record_row(x, P, i, hist_x, hist_pos_cov)
 
 
 @numba.njit(inline="always")

@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from bodyfusion.core.system import CovarianceHistory, position_covariance
 from bodyfusion.nav import detectors
+from bodyfusion.plugins.foot_ins.kernels import pack_covariance
 
 STORED = "position variances east, north, up and the east-north covariance after each sample (m^2)"
 """What :func:`covariance_history` holds: the filter's (or the smoother's) recorded position covariance."""
@@ -66,12 +67,22 @@ class Rows:
         self._blocks: list[np.ndarray] = []
         self._n = 0
 
-    def append(self, row: object) -> None:
+    def _slot(self) -> int:
+        """Index in the last block of a row appended uninitialised."""
         k = self._n % self._block
         if k == 0:
             self._blocks.append(np.empty((self._block, *self._shape), dtype=self._dtype))
-        self._blocks[-1][k] = row
         self._n += 1
+        return k
+
+    def append(self, row: object) -> None:
+        k = self._slot()
+        self._blocks[-1][k] = row
+
+    def next_row(self) -> np.ndarray:
+        """The next row, appended uninitialised, as a view to write (rows of a shape only)."""
+        k = self._slot()
+        return self._blocks[-1][k]
 
     def __len__(self) -> int:
         return self._n
@@ -104,11 +115,10 @@ class CovarianceLog:
 
     def add(self, i: int, P: np.ndarray) -> None:
         """The covariance ``P`` (15, 15) left at sample ``i``."""
-        if not (P == P.T).all():  # NaN ≠ NaN: kept whole, as array_equal would
+        if not pack_covariance(P, self.upper.next_row()):  # NaN ≠ NaN: kept whole, as array_equal would
             self.lower_at.append(len(self.idx))
             self.lower.append(P[_LOWER])
         self.idx.append(i)
-        self.upper.append(P[_UPPER])
 
     def __len__(self) -> int:
         return len(self.idx)

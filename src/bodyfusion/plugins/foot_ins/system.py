@@ -29,7 +29,7 @@ from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                                 NO_STANCE, no_record, run_foot_ins)
+                                                 NO_STANCE, no_record, record_state, run_foot_ins)
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
@@ -304,9 +304,8 @@ class FootIns(SensorSystem):
                                 np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
                                 np.zeros(COUNTERS_SIZE))
         self.run_data.record = self._forward_record.restart(self._P0, self.run_data.counters)
-        self.run_data.hist_x[0] = self.x
+        record_state(self.x, self.P, 0, self.hist_x, self.hist_pos_cov)
         self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
-        self._record_position_covariance(0)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
         self.fix_nis = NisRecord(3)
@@ -336,10 +335,6 @@ class FootIns(SensorSystem):
         """(N, 4) position covariance after each sample: variances east, north, up and the
         east–north covariance, m²."""
         return self.run_data.hist_pos_cov
-
-    def _record_position_covariance(self, i: int) -> None:
-        self.hist_pos_cov[i, :3] = self.P.diagonal()[:3]
-        self.hist_pos_cov[i, 3] = self.P[0, 1]
 
     @property
     def counters(self) -> np.ndarray:
@@ -417,7 +412,7 @@ class FootIns(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        self.filter.correct(dx, 0.5 * (P + P.T))
+        self.filter.correct(dx, P)
         self._record_state(self._i)
 
     def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
@@ -430,8 +425,7 @@ class FootIns(SensorSystem):
     def _record_state(self, i: int) -> None:
         """History row i after a correction outside the compiled loop (fuser, fix, gap); the
         covariance left there is recorded for the smoothers."""
-        self.hist_x[i] = self.x
-        self._record_position_covariance(i)
+        record_state(self.x, self.P, i, self.hist_x, self.hist_pos_cov)
         if self.filter.smoothable:
             self.corrections.add(i, self.P)
 

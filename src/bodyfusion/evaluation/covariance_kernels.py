@@ -1,0 +1,56 @@
+"""Compiled elementwise part of the covariance checks (:func:`bodyfusion.evaluation.consistency.covariance_defects`).
+
+One pass over each covariance instead of a dozen numpy temporaries the size of the whole batch
+(the checks run after every fuser correction: 18 → 9 µs a 15 × 15 covariance, of which the
+eigenvalues are the rest)."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def symmetric_parts(P: np.ndarray, rtol: float, sym: np.ndarray, asym: np.ndarray, flagged: np.ndarray,
+                    lam_2x2: np.ndarray) -> None:
+    """For each covariance P[k] (n, n): ``sym[k]`` = ½ (P + Pᵀ) (P's non-finite entries read as
+    0), ``asym[k]`` = max |P − Pᵀ| over that, ``flagged[k]`` when an entry is not finite, a
+    variance of ``sym`` is negative or |P_ij − P_ji| > ``rtol`` √(s_ii s_jj) (s_ii read as 1
+    where it is not positive); for n = 2, ``lam_2x2[k]`` the smaller eigenvalue of ``sym[k]`` in
+    closed form ½ (a + c) − hypot(½ (a − c), b)."""
+    K, n = P.shape[0], P.shape[1]
+    scale = np.empty(n)
+    for k in range(K):
+        finite = True
+        for a in range(n):
+            for b in range(n):
+                if not math.isfinite(P[k, a, b]):
+                    finite = False
+        top = 0.0
+        bad = not finite
+        for a in range(n):
+            for b in range(n):
+                pab = P[k, a, b] if finite else 0.0
+                pba = P[k, b, a] if finite else 0.0
+                sym[k, a, b] = 0.5 * (pab + pba)
+        for a in range(n):
+            v = sym[k, a, a]
+            if v < 0.0:
+                bad = True
+            scale[a] = math.sqrt(v) if v > 0.0 else 1.0
+        for a in range(n):
+            for b in range(n):
+                pab = P[k, a, b] if finite else 0.0
+                pba = P[k, b, a] if finite else 0.0
+                d = abs(pab - pba)
+                if d > top:
+                    top = d
+                if d / (scale[a] * scale[b]) > rtol:
+                    bad = True
+        asym[k] = top
+        flagged[k] = bad
+        if n == 2:
+            lam_2x2[k] = 0.5 * (sym[k, 0, 0] + sym[k, 1, 1]) - math.hypot(0.5 * (sym[k, 0, 0] - sym[k, 1, 1]),
+                                                                           sym[k, 0, 1])
