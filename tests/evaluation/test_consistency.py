@@ -136,3 +136,27 @@ def test_the_closed_form_smallest_eigenvalue_of_a_2x2_covariance_is_lapacks():
     exact = np.linalg.eigvalsh(covs)[:, 0]
     assert (np.abs(lam - exact) <= 1e-12 * np.abs(covs).max(axis=(1, 2)).clip(1.0)).all()
     assert bad.tolist()[:3] == [True, False, False] and not bad[3:].any()
+
+
+def test_the_running_checks_give_the_figures_of_decomposing_every_covariance():
+    """Batches of 15-state covariances of mixed units (variances 1e-12 … 1e2), some shrinking
+    below the running minimum, one indefinite, one with a NaN: only the covariances that may
+    hold the minimum are decomposed, and the figures are those of decomposing every one."""
+    rng = np.random.default_rng(4)
+    K, n = 600, 15
+    A = rng.normal(size=(K, n, n)) * np.logspace(-6, 1, n)[None, :, None]
+    covs = A @ A.transpose(0, 2, 1) * np.linspace(1.0, 1e-3, K)[:, None, None]  # shrinks: each batch a new floor
+    covs[250] = covs[249] - 2.0 * np.linalg.eigvalsh(covs[249])[0] * np.eye(n)  # indefinite
+    covs[420, 3, 3] = np.nan
+    t = np.arange(K) * 0.1
+    health = CovarianceHealth.of(covs, t, piece=128)
+    asym, lam, bad = covariance_defects(covs)
+    assert health.checks == K and health.violations == int(bad.sum()) == 2
+    assert health.first_violation_t_s == 25.0
+    assert health.min_eigenvalue == float(lam.min()) and health.max_asymmetry == float(asym.max())
+    assert health.end_min_eigenvalue == float(lam[-1])
+    floor = float(np.median(lam[:128]))
+    _, above, _ = covariance_defects(covs[:128], floor=floor)
+    skipped = np.isnan(above)
+    assert 0 < skipped.sum() < 128  # the certificate skips decompositions, and only above the floor
+    assert (lam[:128][skipped] > floor).all() and (above[~skipped] == lam[:128][~skipped]).all()

@@ -25,7 +25,7 @@ import numpy as np
 
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import Trajectory
-from bodyfusion.evaluation.covariance_kernels import symmetric_parts
+from bodyfusion.evaluation.covariance_kernels import above_floor, symmetric_parts
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 RTOL = 1e-9
@@ -35,6 +35,9 @@ BAND_PROBABILITY = 0.95
 """Probability of the two-sided chi-square band the NEES is checked against."""
 PROFILE_BINS = 10
 """Time windows of the NEES profile in metrics.json."""
+PROBES = 8
+"""Covariances of a batch of checks decomposed first for the floor of the rest
+(:meth:`CovarianceHealth.add_many`)."""
 
 
 def chi2_quantile(p: float, dof: int) -> float:
@@ -58,9 +61,14 @@ def chi2_band(dof: int, probability: float = BAND_PROBABILITY, runs: int = 1) ->
 # --------------------------------------------------------------------------- covariance
 
 
-def covariance_defects(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def covariance_defects(P: np.ndarray, floor: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Asymmetry max |P − Pᵀ|, minimum eigenvalue of ½ (P + Pᵀ), and the violation flag of
-    covariances P (..., n, n) (see the module docstring); each of shape (...)."""
+    covariances P (..., n, n) (see the module docstring); each of shape (...).
+
+    With a ``floor``, the minimum eigenvalue of a covariance certified above it and positive
+    definite (:func:`~bodyfusion.evaluation.covariance_kernels.above_floor`) is not computed
+    but NaN: what a running minimum at ``floor`` needs (:class:`CovarianceHealth`), at a
+    Cholesky factorisation's cost instead of an eigenvalue decomposition's."""
     P = np.asarray(P, dtype=float)
     lead, n = P.shape[:-2], P.shape[-1]
     flat = np.ascontiguousarray(P.reshape(-1, n, n))
@@ -68,7 +76,12 @@ def covariance_defects(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     asym, flagged, lam_min = np.empty(len(flat)), np.empty(len(flat), dtype=bool), np.empty(len(flat))
     symmetric_parts(flat, RTOL, sym, asym, flagged, lam_min)
     if n != 2:  # a 2 × 2 (a trajectory's east–north covariance) has its closed form: LAPACK costs 10×
-        lam_min = np.linalg.eigvalsh(sym)[:, 0]
+        exact = np.ones(len(flat), dtype=bool)
+        if floor is not None:
+            above_floor(sym, float(floor), exact)
+            np.logical_not(exact, out=exact)
+            lam_min.fill(np.nan)
+        lam_min[exact] = np.linalg.eigvalsh(sym[exact])[:, 0]
     # the correlation form D⁻¹ sym D⁻¹ has the inertia of sym (Sylvester): only a covariance
     # with a negative eigenvalue can fail its test, and only those are decomposed again
     negative = np.flatnonzero(lam_min < 0.0)
@@ -100,13 +113,26 @@ class CovarianceHealth:
         self.add_many(np.asarray(P, dtype=float)[None], np.array([t], dtype=float))
 
     def add_many(self, covs: np.ndarray, t: np.ndarray) -> None:
-        """Check covariances (K, n, n) at times t (K,) s, in time order."""
+        """Check covariances (K, n, n) at times t (K,) s, in time order.
+
+        Only the smallest eigenvalue over all checks is kept, so only covariances that may hold
+        it are decomposed: :data:`PROBES` of them, evenly spread and the last (the ``end``),
+        are; their minimum and the running one give a floor, and the others are decomposed
+        only where a Cholesky factorisation does not certify them above it
+        (:func:`covariance_defects`). The same figures as decomposing every one, to the
+        factorisation's rounding."""
         if len(covs) == 0:
             return
-        asym, lam, bad = covariance_defects(covs)
+        if len(covs) > PROBES and covs.shape[-1] > 2:
+            probes = np.linspace(0, len(covs) - 1, PROBES).round().astype(int)
+            _, lam_probe, _ = covariance_defects(covs[probes])
+            asym, lam, bad = covariance_defects(covs, min(self.min_eigenvalue, float(lam_probe.min())))
+            lam[probes] = lam_probe
+        else:
+            asym, lam, bad = covariance_defects(covs)
         self.checks += len(covs)
         self.max_asymmetry = max(self.max_asymmetry, float(asym.max()))
-        self.min_eigenvalue = min(self.min_eigenvalue, float(lam.min()))
+        self.min_eigenvalue = min(self.min_eigenvalue, float(np.nanmin(lam)))
         self.violations += int(bad.sum())
         if self.first_violation_t_s is None and bad.any():
             self.first_violation_t_s = float(t[np.argmax(bad)])

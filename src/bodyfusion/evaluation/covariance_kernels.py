@@ -11,6 +11,8 @@ import math
 import numba
 import numpy as np
 
+from bodyfusion.base.linalg_kernels import cholesky
+
 
 @numba.njit(cache=True)
 def symmetric_parts(P: np.ndarray, rtol: float, sym: np.ndarray, asym: np.ndarray, flagged: np.ndarray,
@@ -54,3 +56,24 @@ def symmetric_parts(P: np.ndarray, rtol: float, sym: np.ndarray, asym: np.ndarra
         if n == 2:
             lam_2x2[k] = 0.5 * (sym[k, 0, 0] + sym[k, 1, 1]) - math.hypot(0.5 * (sym[k, 0, 0] - sym[k, 1, 1]),
                                                                            sym[k, 0, 1])
+
+
+@numba.njit(cache=True)
+def above_floor(sym: np.ndarray, floor: float, certified: np.ndarray) -> None:
+    """``certified[k]`` when the smallest eigenvalue of the symmetric ``sym[k]`` (n, n) is above
+    ``floor`` and ``sym[k]`` is positive definite: Cholesky factorisations of sym[k] − floor·I
+    and (when floor < 0) of sym[k] succeed. Up to the factorisation's rounding (relative to
+    ‖sym[k]‖), so a certified covariance can neither lower a minimum eigenvalue that is
+    already at ``floor`` nor be indefinite."""
+    n = sym.shape[1]
+    W = np.empty((n, n))
+    L = np.empty((n, n))
+    for k in range(sym.shape[0]):
+        for a in range(n):
+            for b in range(n):
+                W[a, b] = sym[k, a, b]
+            W[a, a] -= floor
+        ok = cholesky(W, L)
+        if ok and floor < 0.0:
+            ok = cholesky(sym[k], L)
+        certified[k] = ok

@@ -29,6 +29,8 @@ import math
 import numba
 import numpy as np
 
+from bodyfusion.base.linalg_kernels import cholesky
+
 _DEGENERATE_M = 1e-12  # ‖r‖ below this (m) is "no direction"
 _SOLVED, _INACTIVE, _FAILED = 0, 1, 2  # status of _project_pair and _qp_start_pair
 
@@ -360,28 +362,6 @@ def _secular_limits(tol_m: float, max_iter: int) -> tuple[float, int]:
 
 
 @_kernel
-def _cholesky(S: np.ndarray, L: np.ndarray) -> bool:
-    """Lower-triangular L with S = L Lᵀ (S's lower triangle is read); False unless S ≻ 0."""
-    n = S.shape[0]
-    for j in range(n):
-        for i in range(j):
-            L[i, j] = 0.0
-        s = S[j, j]
-        for t in range(j):
-            s -= L[j, t] * L[j, t]
-        if not s > 0.0:
-            return False
-        ljj = math.sqrt(s)
-        L[j, j] = ljj
-        for i in range(j + 1, n):
-            acc = S[i, j]
-            for t in range(j):
-                acc -= L[i, t] * L[j, t]
-            L[i, j] = acc / ljj
-    return True
-
-
-@_kernel
 def _curvature_scale(H: np.ndarray, neg: np.ndarray) -> float:
     """The largest t in 1, ½, …, 2⁻²⁹ with I + H + t·neg ⪰ 0.1 I (a Cholesky
     factorisation of 0.9 I + H + t·neg succeeds), else 0."""
@@ -394,7 +374,7 @@ def _curvature_scale(H: np.ndarray, neg: np.ndarray) -> float:
             for b in range(n):
                 work[a, b] = H[a, b] + t * neg[a, b]
             work[a, a] += 0.9
-        if _cholesky(work, fac):
+        if cholesky(work, fac):
             return t
         t *= 0.5
     return 0.0
@@ -514,7 +494,7 @@ def _qp_start_pair(
 ) -> tuple[int, float]:
     """The QP that certifies the projection onto constraint k, the only one: the
     projection p0 (:func:`_project_pair`), its multiplier in OSQP's sign to duals[k],
-    Σ = L Lᵀ (:func:`_cholesky`) and the SQP's QP at p0, started from that KKT point
+    Σ = L Lᵀ (:func:`~bodyfusion.base.linalg_kernels.cholesky`) and the SQP's QP at p0, started from that KKT point
     (:func:`_linearise`, :func:`_stationary_point` to y0, :func:`_linear_term`).
     Returns (status, violation at p̂); _FAILED also when Σ is not positive definite."""
     n3 = p_hat.shape[0]
@@ -523,7 +503,7 @@ def _qp_start_pair(
     status, v0, _, lam, _, _, _, _ = _project_pair(p_hat, sigma, idx, geo, k, hints, tol, max_iter, p0, gain, jac)
     if status != _SOLVED:
         return status, v0
-    if not _cholesky(sigma, L):
+    if not cholesky(sigma, L):
         return _FAILED, v0
     duals[k] = -lam if idx[k, 3] == 1 else lam
     _linearise(p_hat, L, idx, geo, hints, p0, duals, A, lo, hi, P)

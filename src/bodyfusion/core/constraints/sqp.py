@@ -27,7 +27,8 @@ from typing import Callable
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _advance, _cholesky, _linear_term, _linearise,
+from bodyfusion.base.linalg_kernels import cholesky
+from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _advance, _linear_term, _linearise,
                                                  _stationary_point)
 from bodyfusion.core.constraints.model import _Layout, _max_violation
 
@@ -39,7 +40,7 @@ QpBackend = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
 def _sqrt_cov(sigma: np.ndarray) -> np.ndarray | None:
     """L with Σ = L Lᵀ: Cholesky, or the symmetric square root for PSD Σ."""
     L = np.empty_like(sigma)
-    if _cholesky(sigma, L):
+    if cholesky(sigma, L):
         return L
     s = 0.5 * (sigma + sigma.T)
     w, V = np.linalg.eigh(s)
