@@ -53,31 +53,34 @@ def truncated_moments(beta: float) -> tuple[float, float]:
 
 
 @_kernel
-def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, bounds: np.ndarray,
-              fixed: np.ndarray, idx: np.ndarray, geo: np.ndarray, active: np.ndarray, tail_beta: float,
-              others: np.ndarray, dx: np.ndarray, tail: np.ndarray) -> int:
+def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, p_star: np.ndarray,
+              active: np.ndarray, idx: np.ndarray, geo: np.ndarray, tail_beta: float, others: np.ndarray,
+              dx: np.ndarray, tail: np.ndarray) -> int:
     """Every limit the truncation takes at one epoch, into δx (n,) and P (n, n) in place
-    (module docstring): the active ones' ``rows`` (A, 3n) with ``bounds`` and ``fixed`` flags,
-    then the inactive inequalities within ``tail_beta`` σ of p̂ (flagged in ``tail`` (K,)).
-    Geometry ``idx``, ``geo`` as in :mod:`bodyfusion.core.constraints.kernels`; ``others``
-    (n,): rows kept out of the correction. Returns the limits that cut (s² > 0, V < s²)."""
+    (module docstring): the ``active`` constraints' (A,) ``rows`` (A, 3n), bounded at the
+    solution ``p_star`` (3n,), then the inactive inequalities within ``tail_beta`` σ of p̂
+    (flagged in ``tail`` (K,)). Geometry ``idx``, ``geo`` as in
+    :mod:`bodyfusion.core.constraints.kernels`; ``others`` (n,): rows kept out of the
+    correction. Returns the limits that cut (s² > 0, V < s²)."""
     n = P.shape[0]
     n3 = pos.shape[0]
     A = rows.shape[0]
     limits = np.zeros((A + idx.shape[0], n3))
-    limit_bounds = np.empty(A + idx.shape[0])
+    limit_bounds = np.zeros(A + idx.shape[0])
     limit_fixed = np.zeros(A + idx.shape[0], dtype=np.bool_)
+    is_active = np.zeros(idx.shape[0], dtype=np.bool_)
     for q in range(A):  # scalar loops: a slice assignment compiles numba's shape checks (seconds)
         for c in range(n3):
             limits[q, c] = rows[q, c]
-        limit_bounds[q] = bounds[q]
-        limit_fixed[q] = fixed[q]
+            limit_bounds[q] += rows[q, c] * p_star[c]
+        limit_fixed[q] = idx[active[q], 3] == 2
+        is_active[active[q]] = True
     L = A
     r = np.empty(3)
     for k in range(idx.shape[0]):  # the tails, tested on the estimate before any cut
         tail[k] = False
         code = idx[k, 3]
-        if active[k] or code == 2:
+        if is_active[k] or code == 2:
             continue
         rho = _separation(p_hat, idx, geo, k, r)
         if not rho > _DEGENERATE_M:
@@ -152,8 +155,8 @@ class DensityTruncation:
     def __init__(self, constraints: list[DistanceConstraint], n_systems: int, positions_only: bool = False) -> None:
         lay = _layout(n_systems, constraints)
         self._idx, self._geo = lay.idx, lay.geo
-        self._fixed = lay.idx[:, 3] == 2
         self.positions_only = positions_only
+        self._others: dict[tuple[int, bytes], np.ndarray] = {}  # the rows kept out, per state layout
 
     def correct(self, P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray,
                 solution: ConstraintSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,18 +165,17 @@ class DensityTruncation:
         docstring), and which constraints (K,) were taken in their tails.
 
         P: (n, n) joint error-state covariance (m², rad², ...); pos: (3n_sys,) int64 indices
-        of the stacked positions in it, in the order of p̂ (ENU, m) and of the solution's
-        Jacobian rows."""
+        of the stacked positions in it, in the order of p̂ (ENU, m, float64) and of the
+        solution's Jacobian rows."""
         n = P.shape[0]
         P_new = np.array(P, dtype=float, order="C")
         dx = np.zeros(n)
         tail = np.zeros(self._idx.shape[0], dtype=bool)
-        active = np.zeros(self._idx.shape[0], dtype=bool)
-        active[solution.active] = True
-        others = np.full(n, self.positions_only)
-        others[pos] = False
-        rows = np.ascontiguousarray(solution.jacobian, dtype=float).reshape(len(solution.active), p_hat.shape[0])
-        _truncate(P_new, np.asarray(pos, dtype=np.int64), np.ascontiguousarray(p_hat, dtype=float), rows,
-                  rows @ solution.p, self._fixed[solution.active], self._idx, self._geo, active, TAIL_BETA, others,
-                  dx, tail)
+        key = (n, pos.tobytes())
+        others = self._others.get(key)
+        if others is None:
+            others = self._others[key] = np.full(n, self.positions_only)
+            others[pos] = False
+        _truncate(P_new, pos, p_hat, solution.jacobian.reshape(len(solution.active), p_hat.shape[0]), solution.p,
+                  np.array(solution.active, dtype=np.int64), self._idx, self._geo, TAIL_BETA, others, dx, tail)
         return dx, P_new, tail
