@@ -63,7 +63,8 @@ class ConstraintLog:
         self.p_before[e] = p_hat
         self.p_after[e] = p_after
         self.multiplier[e] = solution.multipliers
-        self.active[e, solution.active] = True
+        if solution.active:
+            self.active[e, solution.active] = True
         if tail_truncated is not None:
             self.tail_truncated[e] = tail_truncated
         self.n += 1

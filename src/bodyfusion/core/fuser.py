@@ -165,6 +165,7 @@ class JointState:
         self.pos = np.concatenate([offsets[k] + np.arange(s.position_indices.start, s.position_indices.stop)
                                    for k, s in enumerate(systems)])
         self.cross = np.zeros((offsets[-1], offsets[-1]))
+        self._P = np.zeros_like(self.cross)
         if track:
             for s in systems:
                 s.track_transition()
@@ -184,8 +185,10 @@ class JointState:
         self.cross[b, b] = 0.0
 
     def covariance(self) -> np.ndarray:
-        """Stacked covariance: each system's own blocks, the tracked cross-covariances."""
-        P = self.cross.copy()
+        """Stacked covariance: each system's own blocks, the tracked cross-covariances (one
+        buffer, rewritten at each call)."""
+        P = self._P
+        np.copyto(P, self.cross)
         for b, s in zip(self.blocks, self.systems):
             P[b, b] = s.covariance()
         return P
@@ -249,6 +252,7 @@ class Fuser:
             self._truncation = DensityTruncation(limits, n_constrained, self.config.correct == "positions")
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
             self._sigma_ix = np.ix_(self._pos, self._pos)
+            self._corrected = list(range(len(order) if self.joint.track else n_constrained))
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -323,5 +327,5 @@ class Fuser:
         if sol.active:
             rep.activations += 1
             rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
-        joint.correct(dx, P_new, list(range(len(joint.systems) if joint.track else n)))
+        joint.correct(dx, P_new, self._corrected)
         rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, tail)

@@ -14,7 +14,7 @@ Checks are buffered and made in batches (one vectorised eigenvalue call).
 
 from __future__ import annotations
 
-import bisect
+import inspect
 
 import numpy as np
 
@@ -44,23 +44,33 @@ class CovarianceMonitor:
     def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
         self.system = system
         self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
+        self._next = 0  # index of the first stride time after the system's time
         self._t: list[float] = []
         self._covs: list[np.ndarray] = []
 
     def __getattr__(self, name: str):
-        return getattr(self.system, name)
+        value = getattr(self.system, name)
+        if inspect.ismethod(value):  # the system's bound method: looked up once (the fuser calls them per epoch)
+            self.__dict__[name] = value
+        return value
 
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split and checked at the stride times up to t, and checked
         at t when t is one of them or the system's end."""
-        s = self.system
-        a, b = bisect.bisect_right(self._stride_t, s.t_now), bisect.bisect_right(self._stride_t, t)
-        for ts in self._stride_t[a:b]:
+        s, stride = self.system, self._stride_t
+        at_stride = False
+        while self._next < len(stride) and stride[self._next] <= t:
+            ts = stride[self._next]
+            self._next += 1
+            if ts <= s.t_now:  # passed before (the system advanced on its own)
+                continue
             if ts < t:
                 s.advance(ts)
                 self._check()
+            else:
+                at_stride = True
         s.advance(t)
-        if (b > a and self._stride_t[b - 1] == t) or t >= s.t_end:
+        if at_stride or t >= s.t_end:
             self._check()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:

@@ -365,14 +365,17 @@ class FootIns(SensorSystem):
         if i1 <= i:
             return
         g = self._gap_index  # sorted; the usual case, none, costs no search
-        gaps = g[np.searchsorted(g, i):np.searchsorted(g, i1)].tolist() if g.size else []
-        for a, b in zip([i, *gaps], [*gaps, i1]):
-            if a in gaps:
-                dP = np.zeros_like(self.P)
-                dP[:15, :15] = self._gap_P[np.searchsorted(self._gap_index, a)]
-                self._i = a - 1
-                self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
-            self.filter.run(self.run_data, a, b, self.phi)
+        if g.size == 0 or g[-1] < i:
+            self.filter.run(self.run_data, i, i1, self.phi)
+        else:
+            gaps = g[np.searchsorted(g, i):np.searchsorted(g, i1)].tolist()
+            for a, b in zip([i, *gaps], [*gaps, i1]):
+                if a in gaps:
+                    dP = np.zeros_like(self.P)
+                    dP[:15, :15] = self._gap_P[np.searchsorted(self._gap_index, a)]
+                    self._i = a - 1
+                    self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
+                self.filter.run(self.run_data, a, b, self.phi)
         self._i = i1 - 1
         self._forward_record.capture(self._i, self.P)  # for a correction made here next
 
