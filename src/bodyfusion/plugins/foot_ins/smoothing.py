@@ -12,12 +12,17 @@ inflations and the covariances set outside the compiled loop (fuser corrections,
 fixes, the ckf's coloured updates): the same numbers, bit for bit
 (``state_rebuild_max_abs_error`` and ``covariance_rebuild_rel_error`` in the diagnostics: the
 replayed against the recorded states, and the last covariance). The segmented kinds hold only
-the current block (O(longest block) × 15 × 15 floats); the whole-run RTS keeps a compact record
-of the replay (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, about 1.3 kB
-per sample) for as much of the run as :data:`STORE_BYTES` allows, so a run of up to some
-50 000 samples is replayed once. When the system knows before its run that it will be
-smoothed so (:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.plan_smoothing`) and the
-record fits, the ekf writes that record itself as it runs (:class:`ForwardRecord`), and the
+the current block (O(longest block) × 15 × 15 floats). The whole-run RTS replays the run once,
+block by block from the last, each block into a compact record
+(:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, about 1.3 kB per sample) that
+holds that block alone, then swept back into the block before it
+(:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.block_sweep`). The blocks start at the
+covariance checkpoints the filter keeps as it runs (:class:`ForwardRecord`: 120 floats every
+:data:`CHECKPOINT_SAMPLES` samples or more, about 1.4 MB for an hour at 100 Hz); a stretch
+without any is cut by a replay without a record (:func:`_blocks`). When the system knows
+before its run that it will be smoothed so
+(:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.plan_smoothing`) and the record of the
+whole run fits :data:`STORE_BYTES`, the ekf writes that record itself as it runs, and the
 whole-run RTS replays nothing: its record is the filter's, not a replay of it.
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
@@ -105,10 +110,10 @@ import numpy as np
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
-from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record
+from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, boxminus, filter_pass, fuse_block,
                                                            integrate_position, position_covariance, rts_block)
-from bodyfusion.plugins.foot_ins.smoothing_mbf import mbf_sweep, record_pass
+from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep
 
 log = logging.getLogger(__name__)
 
@@ -121,11 +126,22 @@ forward σ at the segment end and the filter's initial σ (information ≤ 1 % o
 pass's)."""
 
 STORE_BYTES = 64 * 2**20
-"""What the whole-run RTS keeps of the filter's record at once (bytes): about 1 kB per sample
-and 0.5 kB more per stance sample (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
-so a run of up to some 50 000 samples (8 min at 100 Hz) is recorded by the filter as it runs
-(:class:`ForwardRecord`) or replayed once; a longer one is replayed in chunks, each but the
-last replayed twice (once for the covariance at its start)."""
+"""The largest record of the whole run the filter writes as it runs for the whole-run RTS
+(bytes): about 1 kB per sample and 0.5 kB more per stance sample
+(:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`): a run of up to some
+50 000 samples (8 min at 100 Hz) is recorded so (:class:`ForwardRecord`); a longer one keeps
+covariance checkpoints instead (:data:`CHECKPOINT_SAMPLES`)."""
+
+CHECKPOINT_SAMPLES = 256
+"""Fewest samples between two covariance checkpoints the filter keeps as it runs when its
+whole-run RTS record does not fit :data:`STORE_BYTES` (:class:`ForwardRecord`; 120 floats
+each): the sweep replays each stretch between two once, a block whose record (about 1.3 kB
+a sample, a few hundred kB) stays in the processor's cache."""
+
+MAX_BLOCK_SAMPLES = 4 * CHECKPOINT_SAMPLES
+"""Longer stretches without a checkpoint (a run not advanced by the fuser, a record without
+checkpoints) are cut into blocks of :data:`CHECKPOINT_SAMPLES`, their start covariances
+given by a replay of the filter without a record."""
 
 _UPPER = np.triu_indices(15)
 """The packed order of a symmetric 15×15 matrix (upper triangle by rows, as
@@ -176,21 +192,6 @@ def record_bytes(samples: int, stance: int, general: int = 0) -> int:
     (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`): 8 × (123 per sample, 65
     per stance sample, 242 per general update)."""
     return 8 * (123 * samples + 65 * stance + 242 * general)
-
-
-def _chunks(bounds: np.ndarray, stance: np.ndarray, general: np.ndarray) -> list[tuple[int, int]]:
-    """Consecutive sample ranges (a, b) over the segment ``bounds``, each as long as what
-    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` stores of it
-    (:func:`record_bytes`) fits :data:`STORE_BYTES` (at least one segment)."""
-    cost = record_bytes(1 + np.arange(stance.size, dtype=np.int64), np.cumsum(stance, dtype=np.int64),
-                        np.cumsum(general, dtype=np.int64))
-    out, a = [], int(bounds[0])
-    for k in range(1, bounds.size):
-        b, nxt = int(bounds[k]), int(bounds[min(k + 1, bounds.size - 1)])
-        if k == bounds.size - 1 or cost[nxt] - cost[a] > STORE_BYTES:
-            out.append((a, b))
-            a = b
-    return out
 
 
 def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
@@ -263,23 +264,26 @@ class _Record:
         out[self.ov_idx] = True
         return out
 
-    def memory(self, a: int) -> np.ndarray:
-        """The filter's mechanisation memory before the step to a + 1: the bias-corrected
-        increments of sample a with the biases the filter held then (after sample a − 1)."""
-        m = np.zeros(6)
-        if a >= 1:
-            dt = self.t[a] - self.t[a - 1]
-            m[0:3] = (self.gyro[a] - self.hist_x[a - 1, 13:16]) * dt
-            m[3:6] = (self.acc[a] - self.hist_x[a - 1, 10:13]) * dt
+    def memory(self, a: np.ndarray) -> np.ndarray:
+        """(K, 6): the filter's mechanisation memory before the step to each a + 1 (sample
+        indices a (K,)): the bias-corrected increments of sample a with the biases the filter
+        held then (after sample a − 1)."""
+        a = np.asarray(a, dtype=np.int64)
+        m = np.zeros((a.size, 6))
+        later = a >= 1
+        b = a[later]
+        dt = (self.t[b] - self.t[b - 1])[:, None]
+        m[later, 0:3] = (self.gyro[b] - self.hist_x[b - 1, 13:16]) * dt
+        m[later, 3:6] = (self.acc[b] - self.hist_x[b - 1, 10:13]) * dt
         return m
 
     def forward(self, a: int, b: int, P_a: np.ndarray, store: bool, buf: _Pass) -> np.ndarray:
         """The filter over a < i ≤ b from its recorded state at a and the covariance P_a;
         returns the covariance at b (with ``store``, :attr:`state_error` is updated)."""
-        P_b = filter_pass(self.hist_x[a], P_a, self.memory(a), self.t, self.acc, self.gyro, self.stance, self.params,
-                          a, b, self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x, self.gap_idx,
-                          self.gap_dP, store, buf.xs, buf.xp, buf.Ppost, buf.Pprior, buf.Phi, buf.dx, buf.jump,
-                          buf.yaw_reset)
+        P_b = filter_pass(self.hist_x[a], P_a, self.memory([a])[0], self.t, self.acc, self.gyro, self.stance,
+                          self.params, a, b, self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x,
+                          self.gap_idx, self.gap_dP, store, buf.xs, buf.xp, buf.Ppost, buf.Pprior, buf.Phi, buf.dx,
+                          buf.jump, buf.yaw_reset)
         if store:
             self.state_error = max(self.state_error, float(np.max(np.abs(buf.xs[:b - a + 1] - self.hist_x[a:b + 1]))))
         return P_b
@@ -319,22 +323,32 @@ class ForwardRecord:
     last step: :meth:`capture` keeps what that step left (prior state and covariance,
     posterior covariance). :meth:`sweep_arrays` then completes the record as
     :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes it from the replay:
-    the same numbers, as the replay reproduces the filter."""
+    the same numbers, as the replay reproduces the filter.
+
+    A whole-run RTS whose record does not fit keeps checkpoints instead (``checkpointing``):
+    :meth:`capture` packs the covariance the kernel left, at least :data:`CHECKPOINT_SAMPLES`
+    after the last one kept, and the sweep replays each stretch between two once
+    (:meth:`checkpoints`)."""
 
     def __init__(self) -> None:
         self.active = False
+        self.checkpointing = False
         self.captured: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.kept = 0
 
     def plan(self, cfg: SmootherConfig, filter_kind: str, params: np.ndarray, stance: np.ndarray) -> bool:
         """Active for the whole-run RTS (``kind: rts``, ``span: whole``) of an ``ekf`` without
         the ZARU (whose every stance update the sweep takes in general form) whose record of
-        the run with these ``stance`` flags fits :data:`STORE_BYTES`; True when that changed."""
+        the run with these ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other
+        whole-run RTS. True when either changed."""
         samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
-        active = (cfg.kind == "rts" and not cfg.segmented and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
+        whole = cfg.kind == "rts" and not cfg.segmented
+        active = (whole and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
                   and record_bytes(samples, n_stance) <= STORE_BYTES)
-        if active == self.active:
+        checkpointing = whole and not active
+        if (active, checkpointing) == (self.active, self.checkpointing):
             return False
-        self.active = active
+        self.active, self.checkpointing = active, checkpointing
         if active:
             self.Pu = np.empty((samples, PACKED_SIZE))
             self.f_ns = np.empty((samples, 3))
@@ -342,12 +356,16 @@ class ForwardRecord:
             self.st_P = np.empty((n_stance, 15, 4))
             self.x_prior = np.empty(16)
             self.P_prior = np.empty((15, 15))
+        if checkpointing:
+            self.ckpt_idx = np.empty(samples // CHECKPOINT_SAMPLES + 1, dtype=np.int64)
+            self.ckpt_P = np.empty((self.ckpt_idx.size, PACKED_SIZE))
         return True
 
     def restart(self, P0: np.ndarray, counters: np.ndarray) -> tuple[np.ndarray, ...]:
         """A new run from the covariance P0 at sample 0, the kernel counting into ``counters``;
         returns the record arguments of :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`."""
         self.captured = {}
+        self.kept = 0
         if not self.active:
             return no_record()
         self.Pu[0] = P0[_UPPER]
@@ -357,9 +375,34 @@ class ForwardRecord:
 
     def capture(self, i: int, P: np.ndarray) -> None:
         """After the kernel's last step, to sample i, whose posterior covariance is P (15, 15):
-        keep the step's prior and P, for a correction outside the loop made there."""
+        keep the step's prior and P, for a correction outside the loop made there; or,
+        checkpointing, P packed when it is exactly symmetric and i at least
+        :data:`CHECKPOINT_SAMPLES` after the last checkpoint (sample 0 the first)."""
         if self.active:
             self.captured[i] = (self.x_prior.copy(), self.P_prior.copy(), P[:15, :15].copy())
+        elif self.checkpointing and i - (self.ckpt_idx[self.kept - 1] if self.kept else 0) >= CHECKPOINT_SAMPLES:
+            self.ckpt_idx[self.kept] = i
+            if pack_covariance(P, self.ckpt_P[self.kept]):
+                self.kept += 1
+
+    def checkpoints(self, r: _Record) -> tuple[np.ndarray, np.ndarray]:
+        """The block starts of the record ``r``'s whole-run RTS: sample 0 and the checkpoints
+        before its last sample (K,), and the filter's covariance (K, 15, 15) at each: the
+        initial one, a checkpoint's, or the one the last correction made there left."""
+        if not self.checkpointing:
+            return np.zeros(1, dtype=np.int64), r.P0[None].copy()
+        idx = self.ckpt_idx[:self.kept]
+        idx = idx[idx < r.n - 1]
+        P = np.empty((idx.size + 1, 15, 15))
+        P[0] = r.P0
+        packed = self.ckpt_P[:idx.size]
+        P[1:, _UPPER[0], _UPPER[1]] = packed
+        P[1:, _UPPER[1], _UPPER[0]] = packed
+        last = np.searchsorted(r.ov_idx, idx, side="right") - 1
+        corrected = last >= 0
+        corrected[corrected] = r.ov_idx[last[corrected]] == idx[corrected]
+        P[1:][corrected] = r.ov_P[last[corrected]]
+        return np.concatenate([[0], idx]), P
 
     def sweep_arrays(self, r: _Record, general: np.ndarray) -> tuple[np.ndarray, ...] | None:
         """The record of the whole run as :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`
@@ -400,12 +443,39 @@ def _latency(ms: list[float]) -> dict:
             "max_ms": float(a.max())}
 
 
+def _rebuild_error(replayed: np.ndarray, recorded: np.ndarray) -> float:
+    """The largest max |replayed − recorded| / max |recorded| over covariances (…, 15, 15)."""
+    scale = np.maximum(np.max(np.abs(recorded), axis=(-2, -1)), 1e-300)
+    return float(np.max(np.max(np.abs(replayed - recorded), axis=(-2, -1)) / scale))
+
+
+def _blocks(r: _Record, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The block starts (K,) and the filter's covariances there (K, 15, 15) with every stretch
+    longer than :data:`MAX_BLOCK_SAMPLES` cut into blocks of at most :data:`CHECKPOINT_SAMPLES`,
+    the covariances at the new starts replayed (without a record) from the stretch's start."""
+    ends = np.append(starts[1:], r.n - 1)
+    new_idx, new_P = [starts], [P_start]
+    buf = _Pass(1)
+    for k in np.flatnonzero(ends - starts > MAX_BLOCK_SAMPLES):
+        a, b = int(starts[k]), int(ends[k])
+        cuts = np.arange(a + CHECKPOINT_SAMPLES, b, CHECKPOINT_SAMPLES)
+        P = np.empty((cuts.size, 15, 15))
+        for m, c in enumerate(cuts):
+            P[m] = r.forward(int(cuts[m - 1]) if m else a, int(c), P[m - 1] if m else P_start[k], False, buf)
+        new_idx.append(cuts)
+        new_P.append(P)
+    idx = np.concatenate(new_idx)
+    order = np.argsort(idx, kind="stable")
+    return idx[order], np.concatenate(new_P)[order]
+
+
 def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
-         diag: dict) -> tuple[np.ndarray, list[float]]:
-    """RTS over the whole run (the sweep carried back across chunks of segments, :func:`_chunks`;
-    every chunk but the last is replayed first for the filter's covariance at its start, then
-    again with its record) or per segment. Returns the filter's last covariance as replayed and
-    the per-segment latencies (segmented only)."""
+         diag: dict) -> tuple[float, list[float]]:
+    """RTS over the whole run (the sweep carried back across blocks, each replayed once from the
+    filter's covariance at its start: :meth:`ForwardRecord.checkpoints`, :func:`_blocks`,
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.block_sweep`) or per segment. Returns the
+    covariance rebuild's relative error (:func:`_rebuild_error`: at the run's end, and the whole
+    run's at every block end) and the per-segment latencies (segmented only)."""
     failed = 0
     latencies: list[float] = []
     if not whole:
@@ -420,40 +490,35 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
             position_covariance(fw.Ps, b - a, out_var, a)
             latencies.append((time.perf_counter_ns() - t0) / 1e6)
         diag["rts_gain_failures"] = failed
-        return P, latencies
+        return _rebuild_error(P, r.P_end), latencies
     general = r.general_updates()
     forward = r.forward_record.sweep_arrays(r, general)
-    lam, Lam = np.zeros(15), np.zeros((15, 15))
     if forward is not None:  # the filter's own record: nothing to replay
-        diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward, lam,
-                                              Lam, out_x, out_var)
-        return r.P_end, latencies
-    chunks = _chunks(bounds, r.stance, general)
-    ckpt = [r.P0]  # the filter's covariance at each chunk start; the last chunk is replayed once
-    for a, b in chunks[:-1]:
-        ckpt.append(r.forward(a, b, ckpt[-1], False, _Pass(1)))
-    P_last = r.P0
-    for k in range(len(chunks) - 1, -1, -1):
-        a, b = chunks[k]
-        ns, ng = int(np.count_nonzero(r.stance[a + 1:b + 1])), int(np.count_nonzero(general[a + 1:b + 1]))
-        nk = int(np.count_nonzero((r.kept_idx > a) & (r.kept_idx <= b)))
-        store = (np.empty((b - a + 1, 120)), np.empty((b - a + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
-                 np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
-                 np.empty((nk, 15, 15)))
-        P_b, error = record_pass(r.hist_x[a], ckpt[k], r.memory(a), r.t, r.acc, r.gyro, r.stance, general, r.params,
-                                 a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, *store)
-        r.state_error = max(r.state_error, error)
-        if k == len(chunks) - 1:
-            P_last = P_b
-        failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, *store, lam, Lam, out_x, out_var)
+        diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward,
+                                              np.zeros(15), np.zeros((15, 15)), out_x, out_var)
+        return 0.0, latencies
+    starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
+    ends = np.append(starts[1:], r.n - 1)
+    # the store, sized for the largest block: per sample, stance sample, general update, kept correction
+    L = int(np.max(ends - starts))
+    ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][np.r_[starts, r.n - 1]]))) for f in (r.stance, general))
+    nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, np.r_[starts, r.n - 1], side="right"))))
+    P_replayed = np.empty_like(P_start)
+    failed, error = block_sweep(r.hist_x, r.t, r.acc, r.gyro, r.stance, general, r.params, r.ov_idx, r.ov_P,
+                                r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, starts, P_start, r.memory(starts),
+                                np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 5)),
+                                np.empty((ns, 15, 4)), np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)),
+                                np.zeros(ng, dtype=np.bool_), np.empty((nk, 15, 15)), P_replayed, out_x, out_var)
+    r.state_error = max(r.state_error, error)
     diag["rts_gain_failures"] = failed
-    return P_last, latencies
+    return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), latencies
 
 
 def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
-        diag: dict) -> tuple[np.ndarray, list[float]]:
+        diag: dict) -> tuple[float, list[float]]:
     """FB or FB-RTS segment by segment in time order (see the module docstring). Returns
-    the filter's last covariance as replayed and the per-segment latencies."""
+    the covariance rebuild's relative error at the run's end (:func:`_rebuild_error`) and the
+    per-segment latencies."""
     size = int(np.max(np.diff(bounds))) + 1
     fw, bw = _Pass(size), _Pass(size)
     fused_P = np.zeros((size, 15, 15))
@@ -478,7 +543,7 @@ def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_v
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
     diag["rts_gain_failures"] = gain_failures
     diag["fusion_failures"] = fusion_failures
-    return P, latencies
+    return _rebuild_error(P, r.P_end), latencies
 
 
 def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
@@ -504,12 +569,12 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
     out_x = r.hist_x.copy()
     out_var = np.zeros((r.n, 4))
     if cfg.kind == "rts":
-        P_last, latencies = _rts(r, bounds, not cfg.segmented, out_x, out_var, diag)
+        rebuild_error, latencies = _rts(r, bounds, not cfg.segmented, out_x, out_var, diag)
     else:
-        P_last, latencies = _fb(r, bounds, cfg.kind == "fb-rts", out_x, out_var, diag)
+        rebuild_error, latencies = _fb(r, bounds, cfg.kind == "fb-rts", out_x, out_var, diag)
     if latencies:
         diag["latency_ms"] = _latency(latencies)
-    diag["covariance_rebuild_rel_error"] = float(np.max(np.abs(P_last - r.P_end)) / max(np.max(np.abs(r.P_end)), 1e-300))
+    diag["covariance_rebuild_rel_error"] = rebuild_error
     diag["state_rebuild_max_abs_error"] = r.state_error
     if not np.all(np.isfinite(out_x)) or not np.all(np.isfinite(out_var)):
         return warn("smoother produced non-finite states")

@@ -11,7 +11,9 @@ Discrete Sequential Estimation, 1977): no covariance inverse but at those few sa
 process noise, and the transition rebuilt from the recorded state and the stored specific
 force. In exact arithmetic it is the textbook RTS sweep of
 :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`; in floating point it agrees
-to rounding. Scalar loops only (array expressions cost numba compile time).
+to rounding. :func:`block_sweep` runs the two block by block from the run's end, from the
+filter's covariance at each block start, so that the record holds one block. Scalar loops
+only (array expressions cost numba compile time).
 """
 
 from __future__ import annotations
@@ -246,7 +248,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
                 kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
                 gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray,
-                kept_P: np.ndarray) -> tuple[np.ndarray, float]:
+                kept_P: np.ndarray) -> tuple[np.ndarray, float, int, int, int]:
     """The ekf over i0 < i ≤ i1 as
     :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass` (from the filter's
     state, covariance and mechanisation memory at i0, its corrections outside the loop and its
@@ -265,7 +267,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
       there;
     * per kept correction (in order): ``kept_P`` (·, 15, 15) the covariance before it.
 
-    Returns the covariance at i1 and the largest |replayed − recorded| nominal state element."""
+    Returns the covariance at i1, the largest |replayed − recorded| nominal state element and
+    the entries written per stance sample, per general update and per kept correction."""
     q_diag = process_noise_diag(params)
     work = np.empty((15, 15))
     f_n = np.empty(3)
@@ -291,8 +294,9 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 for c in range(15):
                     P[r, c] += gap_dP[gptr, r, c]
             gptr += 1
+        # the prior only where it is stored (stance, general update)
         nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior,
-                       P_prior, None)
+                       P_prior if stance[i] or general[i] else no_phi, None)
         j = i - i0
         stanced = nis != NO_STANCE
         if stanced:
@@ -319,7 +323,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
             gen_a[ng, 1] = st_v[ns - 1, 4] if stanced else 0.0
             gen_kept[ng] = kept
             ng += 1
-    return P, error
+    return P, error, ns, ng, nk
 
 
 @numba.njit(cache=True)
@@ -409,3 +413,40 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
                 _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
         _transition_adjoint(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
     return failed
+
+
+@numba.njit(cache=True)
+def block_sweep(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
+                general: np.ndarray, params: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
+                kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, starts: np.ndarray, P_start: np.ndarray,
+                memory: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
+                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
+                P_replayed: np.ndarray, out_x: np.ndarray, out_var: np.ndarray) -> tuple[int, float]:
+    """The whole-run RTS block by block from the last: block k covers samples
+    ``starts[k]`` … ``starts[k + 1]`` (the last block to the run's last sample), replayed once
+    by :func:`record_pass` from the filter's covariance ``P_start[k]`` (15, 15) and mechanisation
+    memory ``memory[k]`` (6,) at its start into the store ``Pu`` … ``kept_P`` (sized for the
+    largest block), then swept back by :func:`mbf_sweep`, the adjoint carried into the block
+    before it: the sweep of the whole run, whose store holds one block. ``P_replayed[k]``
+    (15, 15) receives the replayed covariance at the end of block k (the filter's
+    ``P_start[k + 1]`` when the replay reproduces it). Returns the samples whose update could
+    not be undone and the largest |replayed − recorded| nominal state element."""
+    lam = np.zeros(15)
+    Lam = np.zeros((15, 15))
+    blocks = starts.shape[0]
+    failed = 0
+    error = 0.0
+    for k in range(blocks - 1, -1, -1):
+        a = starts[k]
+        b = starts[k + 1] if k + 1 < blocks else hist_x.shape[0] - 1
+        P_b, block_error, ns, ng, nk = record_pass(hist_x[a], P_start[k], memory[k], t, acc, gyro, stance, general,
+                                                   params, a, b, hist_x, ov_idx, ov_P, kept_idx, kept_x, gap_idx,
+                                                   gap_dP, Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept,
+                                                   kept_P)
+        error = max(error, block_error)
+        for r in range(15):
+            for c in range(15):
+                P_replayed[k, r, c] = P_b[r, c]
+        failed += mbf_sweep(hist_x, t, stance, general, params, a, b - a, Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng],
+                            gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk], lam, Lam, out_x, out_var)
+    return failed, error
