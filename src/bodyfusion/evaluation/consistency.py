@@ -25,7 +25,7 @@ import numpy as np
 
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import Trajectory
-from bodyfusion.evaluation.covariance_kernels import above_floor, symmetric_parts
+from bodyfusion.evaluation.covariance_kernels import covariance_parts
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 RTOL = 1e-9
@@ -66,7 +66,7 @@ def covariance_defects(P: np.ndarray, floor: float | None = None) -> tuple[np.nd
     covariances P (..., n, n) (see the module docstring); each of shape (...).
 
     With a ``floor``, the minimum eigenvalue of a covariance certified above it and positive
-    definite (:func:`~bodyfusion.evaluation.covariance_kernels.above_floor`) is not computed
+    definite (:func:`~bodyfusion.evaluation.covariance_kernels.covariance_parts`) is not computed
     but NaN: what a running minimum at ``floor`` needs (:class:`CovarianceHealth`), at a
     Cholesky factorisation's cost instead of an eigenvalue decomposition's."""
     P = np.asarray(P, dtype=float)
@@ -74,13 +74,12 @@ def covariance_defects(P: np.ndarray, floor: float | None = None) -> tuple[np.nd
     flat = np.ascontiguousarray(P.reshape(-1, n, n))
     sym = np.empty_like(flat)
     asym, flagged, lam_min = np.empty(len(flat)), np.empty(len(flat), dtype=bool), np.empty(len(flat))
-    symmetric_parts(flat, RTOL, sym, asym, flagged, lam_min)
+    certified = np.empty(len(flat), dtype=bool)
+    covariance_parts(flat, RTOL, np.nan if floor is None or n == 2 else float(floor), sym, asym, flagged, lam_min,
+                     certified)
     if n != 2:  # a 2 × 2 (a trajectory's east–north covariance) has its closed form: LAPACK costs 10×
-        exact = np.ones(len(flat), dtype=bool)
-        if floor is not None:
-            above_floor(sym, float(floor), exact)
-            np.logical_not(exact, out=exact)
-            lam_min.fill(np.nan)
+        lam_min.fill(np.nan)
+        exact = ~certified
         lam_min[exact] = np.linalg.eigvalsh(sym[exact])[:, 0]
     # the correlation form D⁻¹ sym D⁻¹ has the inertia of sym (Sylvester): only a covariance
     # with a negative eigenvalue can fail its test, and only those are decomposed again
