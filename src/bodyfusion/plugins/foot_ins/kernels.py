@@ -155,25 +155,25 @@ def record_posterior(P: np.ndarray, f_n: np.ndarray, j: int, Pu: np.ndarray, f_n
 
 
 @numba.njit(inline="always")
-def _pack(P: np.ndarray, out: np.ndarray) -> bool:
-    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
-    exactly symmetric (a NaN makes it not)."""
+def _pack(P: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows."""
     q = 0
-    symmetric = True
     for r in range(15):
         for c in range(r, 15):
             out[q] = P[r, c]
-            if P[c, r] != P[r, c]:
-                symmetric = False
             q += 1
-    return symmetric
 
 
 @numba.njit(cache=True)
 def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
     """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
-    exactly symmetric (then ``out`` holds all of it)."""
-    return _pack(P, out)
+    exactly symmetric (then ``out`` holds all of it; a NaN makes it not)."""
+    _pack(P, out)
+    for r in range(15):
+        for c in range(r, 15):
+            if P[c, r] != P[r, c]:
+                return False
+    return True
 
 
 @numba.njit(cache=True)
