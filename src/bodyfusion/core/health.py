@@ -9,7 +9,9 @@ outside the system — and, while it propagates, at its own sync times at most o
 :data:`STRIDE_S` and at its end: every system is checked at least about once a second. An
 advance is split at those times; splitting there changes nothing (the plugin contract asks that
 advancing in chunks at sync times gives the same bits, and the fuser itself syncs there).
-Checks are buffered and made in batches (one vectorised eigenvalue call).
+Checks are buffered and made in batches (:meth:`~bodyfusion.evaluation.consistency.CovarianceHealth.add_many`:
+compiled elementwise tests, and eigenvalue decompositions only of the covariances a Cholesky
+factorisation cannot certify above the smallest eigenvalue seen).
 """
 
 from __future__ import annotations
