@@ -16,6 +16,7 @@ from bodyfusion.nav.error_state import (
     P_GYRO_BIAS_DECAY,
     P_GYRO_RW,
     PARAMS_SIZE,
+    closed_loop_reset,
     decay_biases,
     error_between,
     inject,
@@ -261,6 +262,26 @@ def test_inject_small_angle_matches_documented_first_order_dcm():
     C0 = Rotation.from_quat(x[6:10], scalar_first=True).as_matrix()
     C1 = Rotation.from_quat(out[6:10], scalar_first=True).as_matrix()
     np.testing.assert_allclose(C1, (np.eye(3) + skew(dth)) @ C0, atol=1e-9)
+
+
+def test_closed_loop_reset_injects_and_takes_the_symmetric_part_even_in_place():
+    """The reset after an outside correction: x as :func:`inject` leaves it, P the symmetric part
+    ½ (P* + P*ᵀ) of the covariance handed in (an asymmetric one from a Joseph update in
+    floating point), the same when that covariance is the filter's own array."""
+    rng = np.random.default_rng(9)
+    x = random_nominal_state(rng)
+    dx = rng.normal(0, 1e-2, ERROR_SIZE)
+    A = rng.normal(size=(ERROR_SIZE, ERROR_SIZE))
+    P_new = A @ A.T + 1e-6 * rng.normal(size=(ERROR_SIZE, ERROR_SIZE))
+    x_reset, P = x.copy(), np.zeros((ERROR_SIZE, ERROR_SIZE))
+    closed_loop_reset(x_reset, P, dx, P_new)
+    x_injected = x.copy()
+    inject(x_injected, dx)
+    np.testing.assert_array_equal(x_reset, x_injected)
+    np.testing.assert_array_equal(P, 0.5 * (P_new + P_new.T))
+    own = P_new.copy()
+    closed_loop_reset(x.copy(), own, dx, own)
+    np.testing.assert_array_equal(own, P)
 
 
 def test_error_between_inverts_inject():
