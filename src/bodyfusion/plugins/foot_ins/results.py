@@ -105,13 +105,13 @@ class CovarianceLog:
     loop (fuser, position fix, gap policy), for the smoothers, kept compactly: a symmetric one
     (every one that went through the closed-loop reset, which symmetrises) as its upper
     triangle, 120 numbers instead of 225; any other's strict lower triangle beside it. The
-    same numbers come back (:meth:`covariances`)."""
+    same numbers come back (:meth:`covariances`). ``block``: rows allocated at a time (:class:`Rows`)."""
 
-    def __init__(self) -> None:
-        self.idx = Rows((), np.int64)
-        self.upper = Rows((_UPPER[0].size,))
-        self.lower_at = Rows((), np.int64)
-        self.lower = Rows((_LOWER[0].size,))
+    def __init__(self, block: int = 1024) -> None:
+        self.idx = Rows((), np.int64, block)
+        self.upper = Rows((_UPPER[0].size,), np.float64, block)
+        self.lower_at = Rows((), np.int64, block)
+        self.lower = Rows((_LOWER[0].size,), np.float64, block)
 
     def add(self, i: int, P: np.ndarray) -> None:
         """The covariance ``P`` (15, 15) left at sample ``i``."""
