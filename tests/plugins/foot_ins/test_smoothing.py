@@ -8,9 +8,11 @@ import pytest
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.nav.error_state import P_EARTH_RATE
 from bodyfusion.nav.strapdown import integrate
-from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, backward_prior, segment_bounds, smooth_record
-from bodyfusion.plugins.foot_ins.smoothing_kernels import fuse_block, rts_block
+from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing_kernels import (backward_prior, fb_segment, filter_pass, fuse_block,
+                                                           integrate_position, rts_block)
 from bodyfusion.sim import simulate
 from tests.paths import ROOT
 
@@ -149,7 +151,7 @@ def _replay(rec: dict) -> tuple[_Pass, np.ndarray]:
 def test_the_smoothers_replay_is_the_filter_bit_for_bit(walk):
     _, rec, _ = walk
     buf, P_end = _replay(rec)
-    assert np.array_equal(buf.xs, rec["hist_x"])
+    assert np.array_equal(buf.xs[0], rec["hist_x"])
     assert np.array_equal(P_end, rec["P_end"])
     for kind, cfg in KINDS.items():
         d = smooth_record(rec, cfg).diagnostics
@@ -177,14 +179,14 @@ def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(vi
         rec = res.systems[foot].smoothing_record()
         assert rec["override_idx"].size > 5
         buf, P_end = _replay(rec)
-        assert np.array_equal(buf.xs, rec["hist_x"]) and np.array_equal(P_end, rec["P_end"]), foot
+        assert np.array_equal(buf.xs[0], rec["hist_x"]) and np.array_equal(P_end, rec["P_end"]), foot
         assert res.systems[foot].diagnostics()["smoothing"]["warnings"] == 0
     rec = res.systems["left_foot"].smoothing_record()
     assert rec["gap_idx"].size == 1
     g, dP = int(rec["gap_idx"][0]), rec["gap_dP"][0]
     buf, _ = _replay(rec)
     # the inflation is process noise of the step across the gap, not uncertainty before it
-    assert buf.Ppost[g - 1, 0, 0] < 0.5 * dP[0, 0] < buf.Pprior[g, 0, 0]
+    assert buf.Ppost[0, g - 1, 0, 0] < 0.5 * dP[0, 0] < buf.Pprior[0, g, 0, 0]
 
 
 def test_the_filters_own_record_smooths_as_its_replay(vicon_cut):
@@ -214,15 +216,27 @@ def test_only_the_whole_run_rts_of_the_ekf_without_zaru_records_as_it_runs(walk)
 # --------------------------------------------------------------------------- backward navigation
 
 
+def _segment(r: _Record, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: _Pass, fused_P: np.ndarray,
+             out_x: np.ndarray, out_var: np.ndarray) -> tuple:
+    """FB (FB-RTS) of the segment a … b, the passes into ``buf`` (forward [0], backward [1])."""
+    params_bw = r.params.copy()
+    params_bw[P_EARTH_RATE] *= -1.0
+    return fb_segment(r.hist_x, r.t, r.acc, r.gyro, r.stance, r.params, params_bw, r.P0, r.ov_idx, r.ov_P, r.kept_idx,
+                      r.kept_x, r.gap_idx, r.gap_dP, a, b, P_a, r.memory([a])[0], with_rts, buf.xs, buf.xp,
+                      buf.Ppost, buf.Pprior, buf.Phi, buf.dx, buf.jump, buf.yaw_reset, buf.dxs, buf.Ps, buf.smoothed,
+                      fused_P, out_x, out_var)
+
+
 def test_backward_navigation_retraces_a_forward_trajectory(walk):
     _, rec, _ = walk
-    r = _Record(dict(rec, stance=np.zeros_like(rec["stance"])))
     a, b = 150, 650  # through a swing
+    r = _Record(dict(rec, stance=np.zeros_like(rec["stance"]), hist_x=rec["hist_x"].copy()))  # no update
     params = r.params
     fwd = integrate(r.hist_x[a].copy(), r.t[a:b + 1], r.acc[a:b + 1], r.gyro[a:b + 1], params[6], params[7:10].copy())
-    buf = _Pass(b - a + 1)
-    r.backward(a, b, fwd[-1], np.eye(15) * 1e-4, buf)
-    back = buf.xs[::-1]
+    r.hist_x[b] = fwd[-1]  # the backward pass starts from the forward nominal state at b
+    buf = _Pass(b - a + 1, 2)
+    _segment(r, a, b, r.P0, False, buf, np.zeros((b - a + 1, 3, 3)), r.hist_x.copy(), np.zeros((r.n, 4)))
+    back = buf.xs[1, ::-1]
     back[:, 3:6] *= -1.0  # backward form: velocity negated
     assert np.max(np.abs(back[:, 0:3] - fwd[:, 0:3])) < 2e-3  # m, over 5 s of free navigation
     np.testing.assert_allclose(back[:, 3:6], fwd[:, 3:6], atol=2e-3)
@@ -266,24 +280,84 @@ def test_fb_passes_are_independent_nothing_shrinks_at_segment_boundaries(walk):
     r = _Record(rec)
     bounds = segment_bounds(r.stance, r.rate_hz, 0.04, 10.0)
     size = int(np.max(np.diff(bounds))) + 1
-    fw, bw = _Pass(size), _Pass(size)
-    fused_x, fused_P = r.hist_x.copy(), np.zeros((size, 15, 15))
+    buf = _Pass(size, 2)
+    fused_x, fused_P, fused_var = r.hist_x.copy(), np.zeros((size, 15, 15)), np.zeros((r.n, 4))
+    P = r.P0.copy()
+    for k in range(bounds.size - 1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        L = b - a
+        P_b, _, _, failed = _segment(r, a, b, P, False, buf, fused_P, fused_x, fused_var)
+        assert failed == 0
+        Ppost = buf.Ppost[0]
+        yaw_f, yaw_g = np.sqrt(Ppost[:L + 1, 8, 8]), np.sqrt(fused_P[:L + 1, 8, 8])
+        assert np.all(yaw_g >= 0.99 * yaw_f)
+        assert np.all(yaw_g <= yaw_f * (1 + 1e-12))
+        sd = np.sqrt(np.diag(Ppost[L]))
+        assert np.max(np.abs(fused_P[L] - Ppost[L]) / np.outer(sd, sd)) < 0.02  # the fused end is the forward one
+        P = P_b
+    assert np.array_equal(P, r.P_end)
+    for kind in ("fb", "fb-rts"):
+        assert smooth_record(rec, KINDS[kind]).diagnostics["covariance_rebuild_rel_error"] == 0.0
+
+
+def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
+    """FB (FB-RTS) as the passes composed one kernel at a time: the backward navigation's
+    inputs reversed by numpy, both passes smoothed, the whole fused covariance formed."""
+    cfg = KINDS["fb-rts" if with_rts else "fb"]
+    r = _Record(rec)
+    bounds = segment_bounds(r.stance, r.rate_hz, cfg.min_stance_s, cfg.max_segment_s)
+    size = int(np.max(np.diff(bounds))) + 1
+    fw, bw, fused_P = _Pass(size), _Pass(size), np.zeros((size, 15, 15))
+    out_x, out_var = r.hist_x.copy(), np.zeros((r.n, 4))
+    params_bw = r.params.copy()
+    params_bw[P_EARTH_RATE] *= -1.0
+    sign = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
+    sign = np.outer(sign, sign)
     P = r.P0.copy()
     for k in range(bounds.size - 1):
         a, b = int(bounds[k]), int(bounds[k + 1])
         L = b - a
         P_b = r.forward(a, b, P, True, fw)
-        r.backward(a, b, r.hist_x[b], backward_prior(P_b, r.P0), bw)
-        assert fuse_block(fw.xs, fw.Ppost, bw.xp, bw.Pprior, L, fused_x, fused_P, a) == 0
-        yaw_f, yaw_g = np.sqrt(fw.Ppost[:L + 1, 8, 8]), np.sqrt(fused_P[:L + 1, 8, 8])
-        assert np.all(yaw_g >= 0.99 * yaw_f)
-        assert np.all(yaw_g <= yaw_f * (1 + 1e-12))
-        sd = np.sqrt(np.diag(fw.Ppost[L]))
-        assert np.max(np.abs(fused_P[L] - fw.Ppost[L]) / np.outer(sd, sd)) < 0.02  # the fused end is the forward one
+        i = b - np.arange(L + 1)
+        src = np.minimum(i + 1, b)
+        x0 = r.hist_x[b].copy()
+        x0[3:6] *= -1.0
+        x0[13:16] *= -1.0
+        gaps = (r.gap_idx > a) & (r.gap_idx <= b)
+        filter_pass(x0, backward_prior(P_b, r.P0) * sign, np.zeros(6), -r.t[i], r.acc[src], -r.gyro[src],
+                    np.ascontiguousarray(r.stance[i]), params_bw, 0, L, r.hist_x, np.empty(0, dtype=np.int64),
+                    np.empty((0, 15, 15)), np.empty(0, dtype=np.int64), np.empty((0, 16)),
+                    np.ascontiguousarray((b - r.gap_idx[gaps] + 1)[::-1]),
+                    np.ascontiguousarray((r.gap_dP[gaps] * sign)[::-1]), True, bw.xs[0], bw.xp[0], bw.Ppost[0],
+                    bw.Pprior[0], bw.Phi[0], bw.dx[0], bw.jump[0], bw.yaw_reset[0])
+        if with_rts:
+            fw.rts(L)
+            bw.rts(L)
+            fuse_block(fw.smoothed[0], fw.Ps[0], bw.smoothed[0], bw.Ps[0], L, out_x, fused_P, a)
+            Pp = fw.Ps[0, :L + 1]
+        else:
+            fuse_block(fw.xs[0], fw.Ppost[0], bw.xp[0], bw.Pprior[0], L, out_x, fused_P, a)
+            Pp = fused_P[:L + 1]
+        out_var[a:b + 1] = np.column_stack([Pp[:, 0, 0], Pp[:, 1, 1], Pp[:, 2, 2], Pp[:, 0, 1]])
+        integrate_position(out_x, r.t, a, b, out_x[a, 0:3].copy(), fw.jump[0])
         P = P_b
-    assert np.array_equal(P, r.P_end)
-    for kind in ("fb", "fb-rts"):
-        assert smooth_record(rec, KINDS[kind]).diagnostics["covariance_rebuild_rel_error"] == 0.0
+    return out_x, out_var
+
+
+@pytest.mark.parametrize("with_rts", [False, True])
+def test_fb_in_one_call_per_segment_is_the_passes_composed_bit_for_bit(walk, vicon_cut, with_rts):
+    """One compiled call per segment (fb_segment: the reversed inputs built in it, the fusion's
+    solve taking the position block's columns alone, or none) gives the numbers of the passes
+    composed kernel by kernel with the whole fused covariance, through the fuser's corrections
+    and a gap too."""
+    kind = "fb-rts" if with_rts else "fb"
+    recs = [walk[1]] + [vicon_cut.systems[foot].smoothing_record() for foot in ("left_foot", "right_foot")]
+    assert recs[1]["gap_idx"].size == 1 and recs[1]["kept_idx"].size > 5
+    for rec in recs:
+        res = smooth_record(rec, KINDS[kind])
+        x, var = _fb_composed(rec, with_rts)
+        assert np.array_equal(res.x, x) and np.array_equal(res.pos_var, var)
+        assert res.diagnostics["fusion_failures"] == 0 and res.diagnostics["state_rebuild_max_abs_error"] == 0.0
 
 
 def test_segments_split_at_stance_midpoints():

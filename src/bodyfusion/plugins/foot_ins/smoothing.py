@@ -44,9 +44,10 @@ Kinds:
   velocity and gyro bias negated, the same specific force) with its own error filter and
   ZUPTs, fused by covariance. The passes are independent. The backward pass starts at b
   from the forward nominal state — a linearisation point, not information: its prior
-  (:func:`backward_prior`) is diffuse on every state but the yaw, which it shares with the
-  forward pass (a foot INS cannot observe it; a diffuse yaw would only gather the EKF's
-  spurious yaw information), and the fusion removes that shared yaw error
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.backward_prior`) is diffuse on every
+  state but the yaw, which it shares with the forward pass (a foot INS cannot observe it; a
+  diffuse yaw would only gather the EKF's spurious yaw information), and the fusion removes
+  that shared yaw error
   (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fuse_block`). At each sample the
   forward posterior is fused with the backward prior (before its update at that sample), so
   no sample is counted twice: the two-filter form of the smoother given the data up to b. At
@@ -111,19 +112,14 @@ from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
 from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (YAW, apply_smoothed, boxminus, filter_pass, fuse_block,
-                                                           integrate_position, position_covariance, rts_block)
+from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, boxminus, fb_segment, filter_pass,
+                                                           position_covariance, rts_block)
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep
 
 log = logging.getLogger(__name__)
 
 MIN_SAMPLES = 10
 """Runs with fewer samples are not smoothed (warning)."""
-
-DIFFUSE_SCALE = 10.0
-"""The backward pass's prior σ of each state but the yaw: this many times the larger of the
-forward σ at the segment end and the filter's initial σ (information ≤ 1 % of the forward
-pass's)."""
 
 STORE_BYTES = 64 * 2**20
 """The largest record of the whole run the filter writes as it runs for the whole-run RTS
@@ -146,10 +142,6 @@ given by a replay of the filter without a record."""
 _UPPER = np.triu_indices(15)
 """The packed order of a symmetric 15×15 matrix (upper triangle by rows, as
 :func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior` writes it)."""
-
-_BACKWARD_SIGN = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
-"""Error-state signs of the backward form: velocity and gyro bias negated."""
-
 
 @dataclass
 class SmoothingResult:
@@ -194,40 +186,30 @@ def record_bytes(samples: int, stance: int, general: int = 0) -> int:
     return 8 * (123 * samples + 65 * stance + 242 * general)
 
 
-def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
-    """The backward pass's prior covariance (15, 15) at a segment end: diagonal, each σ
-    :data:`DIFFUSE_SCALE` times the larger of the forward pass's σ there (``P_end``) and the
-    filter's initial σ (``P0``) — diffuse around the forward nominal state, which is only the
-    backward pass's linearisation point — but the yaw's zero: the backward pass starts from
-    the forward yaw and shares its error, which the fusion removes
-    (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fuse_block`). Diagonal, so the
-    backward form needs no sign flips."""
-    var = DIFFUSE_SCALE**2 * np.maximum(np.diag(P_end), np.diag(P0))
-    var[YAW] = 0.0
-    return np.diag(var)
-
-
 class _Pass:
-    """Block buffers of one pass (see :mod:`~bodyfusion.plugins.foot_ins.smoothing_kernels`)."""
+    """Block buffers of ``passes`` passes, each array's first index the pass (see
+    :mod:`~bodyfusion.plugins.foot_ins.smoothing_kernels`); FB holds the forward pass at 0 and
+    the backward one at 1."""
 
-    def __init__(self, size: int) -> None:
-        self.xs = np.zeros((size, 16))
-        self.xp = np.zeros((size, 16))
-        self.Ppost = np.zeros((size, 15, 15))
-        self.Pprior = np.zeros((size, 15, 15))
-        self.Phi = np.zeros((size, 15, 15))
-        self.dx = np.zeros((size, 15))
-        self.jump = np.zeros((size, 3))
-        self.yaw_reset = np.zeros((size, 2))
-        self.dxs = np.zeros((size, 15))
-        self.Ps = np.zeros((size, 15, 15))
-        self.smoothed = np.zeros((size, 16))
+    def __init__(self, size: int, passes: int = 1) -> None:
+        self.xs = np.zeros((passes, size, 16))
+        self.xp = np.zeros((passes, size, 16))
+        self.Ppost = np.zeros((passes, size, 15, 15))
+        self.Pprior = np.zeros((passes, size, 15, 15))
+        self.Phi = np.zeros((passes, size, 15, 15))
+        self.dx = np.zeros((passes, size, 15))
+        self.jump = np.zeros((passes, size, 3))
+        self.yaw_reset = np.zeros((passes, size, 2))
+        self.dxs = np.zeros((passes, size, 15))
+        self.Ps = np.zeros((passes, size, 15, 15))
+        self.smoothed = np.zeros((passes, size, 16))
 
     def rts(self, L: int) -> int:
-        """Smooth the block on its own (RTS from its end); the states into ``smoothed``."""
-        failed = rts_block(self.Ppost, self.Pprior, self.Phi, self.dx, self.yaw_reset, L, np.zeros(15), self.Ppost[L].copy(),
-                           self.dxs, self.Ps)
-        apply_smoothed(self.xs, 0, L, self.dxs, self.smoothed, 0)
+        """Smooth the first pass's block on its own (RTS from its end); the states into
+        ``smoothed``."""
+        failed = rts_block(self.Ppost[0], self.Pprior[0], self.Phi[0], self.dx[0], self.yaw_reset[0], L, np.zeros(15),
+                           self.Ppost[0, L].copy(), self.dxs[0], self.Ps[0])
+        apply_smoothed(self.xs[0], 0, L, self.dxs[0], self.smoothed[0], 0)
         return failed
 
 
@@ -278,37 +260,17 @@ class _Record:
         return m
 
     def forward(self, a: int, b: int, P_a: np.ndarray, store: bool, buf: _Pass) -> np.ndarray:
-        """The filter over a < i ≤ b from its recorded state at a and the covariance P_a;
-        returns the covariance at b (with ``store``, :attr:`state_error` is updated)."""
+        """The filter over a < i ≤ b from its recorded state at a and the covariance P_a, with
+        ``store`` into the first pass of ``buf`` (and :attr:`state_error` updated); returns the
+        covariance at b."""
         P_b = filter_pass(self.hist_x[a], P_a, self.memory([a])[0], self.t, self.acc, self.gyro, self.stance,
                           self.params, a, b, self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x,
-                          self.gap_idx, self.gap_dP, store, buf.xs, buf.xp, buf.Ppost, buf.Pprior, buf.Phi, buf.dx,
-                          buf.jump, buf.yaw_reset)
+                          self.gap_idx, self.gap_dP, store, buf.xs[0], buf.xp[0], buf.Ppost[0], buf.Pprior[0],
+                          buf.Phi[0], buf.dx[0], buf.jump[0], buf.yaw_reset[0])
         if store:
-            self.state_error = max(self.state_error, float(np.max(np.abs(buf.xs[:b - a + 1] - self.hist_x[a:b + 1]))))
+            self.state_error = max(self.state_error,
+                                   float(np.max(np.abs(buf.xs[0, :b - a + 1] - self.hist_x[a:b + 1]))))
         return P_b
-
-    def backward(self, a: int, b: int, x_b: np.ndarray, P_b: np.ndarray, buf: _Pass) -> None:
-        """Backward navigation over b ≥ i ≥ a (j = b − i) from the state x_b and covariance P_b
-        at b (forward form; turned into the backward form here): the filter's step on the
-        time-reversed samples — step j covers (t_{i}, t_{i+1}] with sample i + 1's specific force
-        and negated rate, the stance update at j is sample i's."""
-        j = np.arange(b - a + 1)
-        i = b - j
-        src = np.minimum(i + 1, b)
-        params = self.params.copy()
-        params[P_EARTH_RATE] *= -1.0
-        x0 = x_b.copy()
-        x0[3:6] *= -1.0
-        x0[13:16] *= -1.0
-        sign = np.outer(_BACKWARD_SIGN, _BACKWARD_SIGN)
-        gaps = (self.gap_idx > a) & (self.gap_idx <= b)
-        gap_j = np.ascontiguousarray((b - self.gap_idx[gaps] + 1)[::-1])
-        gap_dP = np.ascontiguousarray((self.gap_dP[gaps] * sign)[::-1])
-        filter_pass(x0, P_b * sign, np.zeros(6), -self.t[i], self.acc[src], -self.gyro[src],
-                    np.ascontiguousarray(self.stance[i]), params, 0, b - a, self.hist_x, np.empty(0, dtype=np.int64),
-                    np.empty((0, 15, 15)), np.empty(0, dtype=np.int64), np.empty((0, 16)), gap_j, gap_dP, True, buf.xs, buf.xp, buf.Ppost, buf.Pprior, buf.Phi,
-                    buf.dx, buf.jump, buf.yaw_reset)
 
 
 class ForwardRecord:
@@ -486,8 +448,8 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
             t0 = time.perf_counter_ns()
             P = r.forward(a, b, P, True, fw)
             failed += fw.rts(b - a)
-            out_x[a:b + 1] = fw.smoothed[:b - a + 1]
-            position_covariance(fw.Ps, b - a, out_var, a)
+            out_x[a:b + 1] = fw.smoothed[0, :b - a + 1]
+            position_covariance(fw.Ps[0], b - a, out_var, a)
             latencies.append((time.perf_counter_ns() - t0) / 1e6)
         diag["rts_gain_failures"] = failed
         return _rebuild_error(P, r.P_end), latencies
@@ -516,31 +478,30 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
 
 def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
         diag: dict) -> tuple[float, list[float]]:
-    """FB or FB-RTS segment by segment in time order (see the module docstring). Returns
+    """FB or FB-RTS segment by segment in time order (see the module docstring), one compiled
+    call per segment (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fb_segment`). Returns
     the covariance rebuild's relative error at the run's end (:func:`_rebuild_error`) and the
     per-segment latencies."""
     size = int(np.max(np.diff(bounds))) + 1
-    fw, bw = _Pass(size), _Pass(size)
-    fused_P = np.zeros((size, 15, 15))
+    buf = _Pass(size, 2)
+    fused_P = np.zeros((size, 0, 0) if with_rts else (size, 3, 3))  # the fused position block (FB)
+    params_bw = r.params.copy()
+    params_bw[P_EARTH_RATE] *= -1.0
     gain_failures = fusion_failures = 0
     latencies: list[float] = []
     P = r.P0.copy()
     for k in range(bounds.size - 1):
         a, b = int(bounds[k]), int(bounds[k + 1])
-        L = b - a
         t0 = time.perf_counter_ns()
-        P_b = r.forward(a, b, P, True, fw)
-        r.backward(a, b, r.hist_x[b], backward_prior(P_b, r.P0), bw)
-        if with_rts:
-            gain_failures += fw.rts(L) + bw.rts(L)
-            fusion_failures += fuse_block(fw.smoothed, fw.Ps, bw.smoothed, bw.Ps, L, out_x, fused_P, a)
-            position_covariance(fw.Ps, L, out_var, a)
-        else:
-            fusion_failures += fuse_block(fw.xs, fw.Ppost, bw.xp, bw.Pprior, L, out_x, fused_P, a)
-            position_covariance(fused_P, L, out_var, a)
-        integrate_position(out_x, r.t, a, b, out_x[a, 0:3].copy(), fw.jump)
-        P = P_b
+        P, error, gains, fusions = fb_segment(r.hist_x, r.t, r.acc, r.gyro, r.stance, r.params, params_bw, r.P0,
+                                              r.ov_idx, r.ov_P, r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, a, b, P,
+                                              r.memory([a])[0], with_rts, buf.xs, buf.xp, buf.Ppost, buf.Pprior,
+                                              buf.Phi, buf.dx, buf.jump, buf.yaw_reset, buf.dxs, buf.Ps, buf.smoothed,
+                                              fused_P, out_x, out_var)
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
+        r.state_error = max(r.state_error, error)
+        gain_failures += gains
+        fusion_failures += fusions
     diag["rts_gain_failures"] = gain_failures
     diag["fusion_failures"] = fusion_failures
     return _rebuild_error(P, r.P_end), latencies
