@@ -414,6 +414,49 @@ def test_qp_variants_agree(seed, n, lever, kind):
         QpSolver(n, [c], start="somewhere")
 
 
+@pytest.mark.parametrize(
+    "seed, n, full, horizontal, lever, kind, ratio",
+    [
+        (262144, 3, True, True, False, "min", 0.6),  # Hessian at the solution ⪰ 0.09 I only
+        (2315959471, 4, True, False, True, "min", 0.6),  # 3-D: negative curvature on the way
+        (4272175087, 3, True, True, False, "fixed", 0.1),  # pushed apart from 0.07 m
+        (1547493211, 3, True, True, False, "min", 0.02),  # nearly coincident: a saddle near p̂
+    ],
+    ids=["weak_curvature_at_solution", "negative_curvature_3d", "fixed_pushed_apart", "saddle_near_p_hat"],
+)
+def test_qp_from_p_hat_keeps_min_curvature(seed, n, full, horizontal, lever, kind, ratio):
+    """The SQP from p̂ with pushing-apart limits (``min``, ``fixed`` inside) takes
+    Newton steps with the constraint's negative curvature, cut only where the
+    Hessian would drop below 0.01 I: it reaches the projection's (global) minimum
+    in a few QPs. Cutting it to keep ⪰ 0.1 I made these converge linearly or creep
+    along the constraint (20+ QPs, then the fallback), or stop at the saddle point
+    0.68 m from the solution (the last)."""
+    p_hat, sigma, c = pair_problem(seed, n, full, horizontal, lever, kind, ratio)
+    ref = solve_projection(p_hat, sigma, [c])
+    sol = QpSolver(n, [c], start="p_hat").solve(p_hat, sigma)
+    assert sol.converged and not sol.fallback and sol.iterations <= 10
+    assert np.max(np.abs(sol.p - ref.p)) <= TOL
+    check_kkt(sol, p_hat, sigma, [c])
+
+
+def test_qp_from_p_hat_is_a_local_method():
+    """What ``start="p_hat"`` guarantees for a ``min`` limit: a KKT point, not the
+    global minimum. Coincident systems separate along the hint (east) although
+    the pair is least certain north-south: a saddle point of the non-convex
+    problem (negative curvature along the limit) where the projection, whose
+    single-constraint solve is global, separates north. test_qp_variants_agree's
+    random problems are never so symmetric."""
+    p_hat = np.array([1.0, 2.0, 0.0, 1.0, 2.0, 0.0])
+    sigma = np.diag([0.01, 0.04, 0.01, 0.01, 0.04, 0.01])
+    c = DistanceConstraint(0, 1, "min", 0.4)
+    local = QpSolver(2, [c], start="p_hat").solve(p_hat, sigma)
+    ref = QpSolver(2, [c]).solve(p_hat, sigma)
+    assert local.converged and not local.fallback
+    check_kkt(local, p_hat, sigma, [c])
+    assert np.allclose(local.p[:3] - local.p[3:], [0.4, 0.0, 0.0], atol=TOL)
+    assert np.allclose(ref.p[:3] - ref.p[3:], [0.0, 0.4, 0.0], atol=TOL)
+
+
 def test_qp_certifies_with_osqp(monkeypatch):
     """Started at the projection, the QP still solves its own QP with OSQP: one solve
     when the start is the KKT point; from a start off by a millimetre that QP does

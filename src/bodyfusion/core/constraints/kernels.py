@@ -33,6 +33,7 @@ from bodyfusion.base.linalg_kernels import cholesky
 
 _DEGENERATE_M = 1e-12  # ‖r‖ below this (m) is "no direction"
 _SOLVED, _INACTIVE, _FAILED = 0, 1, 2  # status of _project_pair and _qp_start_pair
+_CURVATURE_FLOOR = 1e-2  # least eigenvalue of the SQP's whitened Hessian I + H (see _curvature_scale)
 
 # scalar loops only (array expressions cost numba compile time); the numpy error model
 # gives IEEE inf/nan instead of exceptions, results carry a status instead
@@ -363,21 +364,32 @@ def _secular_limits(tol_m: float, max_iter: int) -> tuple[float, int]:
 
 @_kernel
 def _curvature_scale(H: np.ndarray, neg: np.ndarray) -> float:
-    """The largest t in 1, ½, …, 2⁻²⁹ with I + H + t·neg ⪰ 0.1 I (a Cholesky
-    factorisation of 0.9 I + H + t·neg succeeds), else 0."""
+    """The largest t in [0, 1] with I + H + t·neg ⪰ _CURVATURE_FLOOR·I (a Cholesky
+    factorisation of (1 − floor) I + H + t·neg succeeds; H ⪰ 0), by bisection to 2⁻²⁰.
+
+    t = 1 while the whole negative curvature leaves that margin: Newton steps near
+    a ``min`` solution unless its Hessian is weaker than the floor (at the edge of
+    the degenerate case). Where it does not (a concave stretch of the constraint),
+    the model's least curvature is the floor: a large step out of it. Halving t to
+    keep ⪰ 0.1 I instead made the SQP from p̂ converge linearly or creep along the
+    constraint (up to 20 QPs, then the fallback) on 0.2–5 % of random ``min`` problems."""
     n = H.shape[0]
     work = np.empty((n, n))
     fac = np.empty((n, n))
-    t = 1.0
-    for _ in range(30):
+    lo, hi, t = 0.0, 1.0, 1.0  # t = 1 first, then bisection of [lo, hi]
+    for _ in range(21):
         for a in range(n):
             for b in range(n):
                 work[a, b] = H[a, b] + t * neg[a, b]
-            work[a, a] += 0.9
+            work[a, a] += 1.0 - _CURVATURE_FLOOR
         if cholesky(work, fac):
-            return t
-        t *= 0.5
-    return 0.0
+            if t == hi:
+                return t
+            lo = t
+        else:
+            hi = t
+        t = 0.5 * (lo + hi)
+    return lo
 
 
 @_kernel

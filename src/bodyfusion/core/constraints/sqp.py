@@ -10,7 +10,9 @@ and projecting again converges only linearly (the fixed-point scheme of
 curvature, which makes each a Newton step: P = I + Σ_k y_k Lᵀ ∇²‖r_k‖ L, y_k the
 previous QP's multipliers; the first QP's curvature is seeded with [KFSC2015]
 eq. 58's multipliers at p̂, or comes with the start point (the projection's).
-Negative curvature (active ``min``) is scaled down to keep P ⪰ 0.1 I. Iterated
+Negative curvature (active ``min``, ``fixed`` pushed apart) is kept whole while
+P ⪰ 0.01 I, else cut to that floor: Newton steps close to the degenerate case too,
+large steps out of concave stretches of the constraint. Iterated
 until the nonlinear constraints hold to the tolerance and the step is below it
 (or Newton's quadratic rate shows the next step would be).
 
@@ -93,7 +95,8 @@ def _sqp(
     multipliers in OSQP's sign (the projection's), whitened by
     :func:`_stationary_point`; the first QP is then the Newton step from there,
     its solution p0 itself. Negative curvature (active ``min`` constraints) is
-    scaled down so that I + H ⪰ 0.1 I.
+    scaled down only as far as I + H ⪰ 0.01 I needs
+    (:func:`~bodyfusion.core.constraints.kernels._curvature_scale`).
 
     ``backend(P, q, A, lo, hi, y_k, duals_k) -> (ok, y, duals)`` solves one QP,
     warm-started at the linearisation point. Converged: violations ≤ ``tol`` and
