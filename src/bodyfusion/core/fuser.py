@@ -253,6 +253,7 @@ class Fuser:
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
             self._sigma_ix = np.ix_(self._pos, self._pos)
             self._corrected = list(range(len(order) if self.joint.track else n_constrained))
+            self._truncating = self.config.inequality == "truncation"
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
         for t, kind, i, k in sorted(events):
@@ -312,7 +313,7 @@ class Fuser:
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
-        if self.config.inequality == "truncation":
+        if self._truncating:
             dx, P_new, tail = self._truncation.correct(P, pos, p_hat, sol)
             if not sol.active and not tail.any():
                 rep.constraint_log.record(t, p_hat, p_hat, sol)

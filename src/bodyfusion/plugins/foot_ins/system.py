@@ -428,9 +428,10 @@ class FootIns(SensorSystem):
     def _record_state(self, i: int) -> None:
         """History row i after a correction outside the compiled loop (fuser, fix, gap); the
         covariance left there is recorded for the smoothers."""
-        record_state(self.x, self.P, i, self.hist_x, self.hist_pos_cov)
-        if self.filter.smoothable:
-            self.corrections.add(i, self.P)
+        f, run = self.filter, self.run_data
+        record_state(f.x, f.P, i, run.hist_x, run.hist_pos_cov)
+        if f.smoothable:
+            self.corrections.add(i, f.P)
 
     def track_transition(self) -> None:
         if not self.filter.tracks_transition:
