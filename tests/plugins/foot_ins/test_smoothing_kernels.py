@@ -64,8 +64,8 @@ def _spd(rng: np.random.Generator, n: int, decades: float) -> np.ndarray:
 
 @pytest.mark.parametrize("n,m", [(15, 15), (15, 16), (11, 1), (11, 4), (11, 16), (6, 7)])
 def test_cholesky_solve_is_the_textbook_loops_bit_for_bit(n, m):
-    """Arranged for independent work (a column of L at a time, five columns of X in registers),
-    the solve keeps every element's operations in the textbook loops' order: the same bits."""
+    """The compiled solve keeps every element's operations in the textbook loops' order: the
+    same bits (a rearrangement for speed must keep them)."""
     rng = np.random.default_rng(n * 100 + m)
     for _ in range(5):
         A, B = _spd(rng, n, 8.0), rng.standard_normal((n, m))

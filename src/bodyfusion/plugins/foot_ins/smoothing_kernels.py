@@ -69,12 +69,7 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> b
     decades: diffuse and pinned states) before the Cholesky factorisation in ``Lw`` (n×n
     scratch). A tiny diagonal jitter is added when the factorisation meets a non-positive
     pivot; returns False if it still fails. (Sizes from the shapes, not arguments: integer
-    constants at the call sites would each compile a signature of their own.)
-
-    Every element of L and X takes the operations of the textbook row-by-row loops in their
-    order (its sum over k ascending); the loops are only arranged for independent work: L a
-    column at a time (the rows of a column are independent sums), X five columns at a time in
-    registers."""
+    constants at the call sites would each compile a signature of their own.)"""
     n, m = B.shape
     d = np.empty(n)
     for r in range(n):
@@ -84,52 +79,44 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> b
     for attempt in range(3):
         jitter = 0.0 if attempt == 0 else 1e-12 * (10.0 ** (4 * attempt))
         ok = True
-        for c in range(n):
-            s = A[c, c] * d[c] * d[c] + jitter
-            for k in range(c):
-                s -= Lw[c, k] * Lw[c, k]
-            if s <= 0.0:
-                ok = False
-                break
-            lcc = math.sqrt(s)
-            Lw[c, c] = lcc
-            for r in range(c + 1, n):
+        for r in range(n):
+            for c in range(r + 1):
                 s = A[r, c] * d[r] * d[c]
+                if r == c:
+                    s += jitter
                 for k in range(c):
                     s -= Lw[r, k] * Lw[c, k]
-                Lw[r, c] = s / lcc
+                if r == c:
+                    if s <= 0.0:
+                        ok = False
+                        break
+                    Lw[r, r] = math.sqrt(s)
+                else:
+                    Lw[r, c] = s / Lw[c, c]
+            if not ok:
+                break
         if ok:
-            # L Y = D B, then Lᵀ Z = Y, X = D Z; a block of five columns (the last ones repeated
-            # when m is not a multiple of five) at a time
-            for c0 in range(0, m, 5):
-                c1, c2, c3, c4 = min(c0 + 1, m - 1), min(c0 + 2, m - 1), min(c0 + 3, m - 1), min(c0 + 4, m - 1)
-                for r in range(n):
-                    dr = d[r]
-                    s0, s1, s2, s3, s4 = B[r, c0] * dr, B[r, c1] * dr, B[r, c2] * dr, B[r, c3] * dr, B[r, c4] * dr
-                    for k in range(r):
-                        lrk = Lw[r, k]
-                        s0 -= lrk * X[k, c0]
-                        s1 -= lrk * X[k, c1]
-                        s2 -= lrk * X[k, c2]
-                        s3 -= lrk * X[k, c3]
-                        s4 -= lrk * X[k, c4]
-                    lrr = Lw[r, r]
-                    X[r, c0], X[r, c1], X[r, c2], X[r, c3], X[r, c4] = s0 / lrr, s1 / lrr, s2 / lrr, s3 / lrr, s4 / lrr
-                for r in range(n - 1, -1, -1):
-                    s0, s1, s2, s3, s4 = X[r, c0], X[r, c1], X[r, c2], X[r, c3], X[r, c4]
-                    for k in range(r + 1, n):
-                        lkr = Lw[k, r]
-                        s0 -= lkr * X[k, c0]
-                        s1 -= lkr * X[k, c1]
-                        s2 -= lkr * X[k, c2]
-                        s3 -= lkr * X[k, c3]
-                        s4 -= lkr * X[k, c4]
-                    lrr = Lw[r, r]
-                    X[r, c0], X[r, c1], X[r, c2], X[r, c3], X[r, c4] = s0 / lrr, s1 / lrr, s2 / lrr, s3 / lrr, s4 / lrr
+            # L Y = D B, then Lᵀ Z = Y, X = D Z, a row of all m columns at a time: every element
+            # takes the same operations in the same order as one column at a time (vectorised)
             for r in range(n):
-                dr = d[r]
                 for col in range(m):
-                    X[r, col] *= dr
+                    X[r, col] = B[r, col] * d[r]
+                for k in range(r):
+                    lrk = Lw[r, k]
+                    for col in range(m):
+                        X[r, col] -= lrk * X[k, col]
+                for col in range(m):
+                    X[r, col] /= Lw[r, r]
+            for r in range(n - 1, -1, -1):
+                for k in range(r + 1, n):
+                    lkr = Lw[k, r]
+                    for col in range(m):
+                        X[r, col] -= lkr * X[k, col]
+                for col in range(m):
+                    X[r, col] /= Lw[r, r]
+            for r in range(n):
+                for col in range(m):
+                    X[r, col] *= d[r]
             return True
     return False
 
