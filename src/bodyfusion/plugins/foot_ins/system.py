@@ -347,7 +347,7 @@ class FootIns(SensorSystem):
         return float(self.stream.t[self._i])
 
     def advance(self, t: float) -> None:
-        i1 = int(np.searchsorted(self.stream.t, t, side="right"))
+        i1 = int(self.stream.t.searchsorted(t, side="right"))
         while self._next_fix < len(self._fix_index) and self._fix_index[self._next_fix] < i1:
             k = self._fix_index[self._next_fix]
             self._run_to(k + 1)

@@ -447,7 +447,7 @@ class HandPdr(SensorSystem):
                 self._reopen_heading()
             self._record()
             self._next += 1
-        i = int(np.searchsorted(self.t, t, side="right")) - 1
+        i = int(self.t.searchsorted(t, side="right")) - 1
         if i >= 0:
             self._propagate_to(float(self.t[i]), i)  # the state refers to the last sample at or before t
         if t >= self.t_end and self._last_record_t() < self._tc:
