@@ -29,8 +29,12 @@ STUDY = """\
 
 
 def start_study(study: Path, out: Path, workers: int) -> subprocess.Popen:
+    """The study in a new process, each run its own task and its row saved at once: when the
+    first rows are on disk the workers still have runs to do (with runs batched per task, a
+    fast worker could finish them all while the study writes the first batch's rows, and a
+    kill would then find it idle with nothing left to lose)."""
     code = (f"from bodyfusion.study import run_study; "
-            f"run_study({str(study)!r}, {str(out)!r}, workers={workers}, batch_rows=1)")
+            f"run_study({str(study)!r}, {str(out)!r}, workers={workers}, batch_rows=1, runs_per_task=1)")
     return subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
