@@ -1,8 +1,9 @@
 """Throughput of a constrained dual-foot run: both foot INS plus the fuser's epochs.
 
 Runs ``configs/dual_foot_vicon.yaml`` (2 × 7201 samples at 60 Hz, inter-foot limit
-0.6 m, constraints at stance starts) in-process, once to warm the compiled kernels, then
-``--repeats`` times, and prints per fuser method the median navigation time (heading
+0.6 m, constraints at stance starts) in-process, once per method to warm the compiled kernels,
+then ``--repeats`` rounds of every method in turn (so that a change of the shared machine's
+speed falls on all of them alike), and prints per fuser method the median navigation time (heading
 alignment + fuser loop) and samples/s per stream, and for the constrained methods what the
 fuser's event loop costs: their navigation time less that of ``none`` (the filters alone, with
 the same heading alignment), also as a multiple of it. Last line:
@@ -26,32 +27,35 @@ from bodyfusion.core.run import run_layout
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml"
 
 
+METHODS = ("none", "projection", "qp", "socp")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--epochs", default="events", choices=["events", "interval", "sample"])
     args = parser.parse_args()
-    summary = []
-    for method in ("none", "projection", "qp", "socp"):
-        loaded = load_layout(CONFIG, [f"fuser.method={method}", f"fuser.epochs={args.epochs}"])
-        run_layout(loaded)  # warm-up: kernels compiled or loaded from the cache, solver set up
-        times, navs = [], []
-        for _ in range(args.repeats):
+    loaded = {m: load_layout(CONFIG, [f"fuser.method={m}", f"fuser.epochs={args.epochs}"]) for m in METHODS}
+    results = {m: run_layout(layout) for m, layout in loaded.items()}  # warm-up: kernels, solvers
+    times: dict[str, list[float]] = {m: [] for m in METHODS}
+    navs: dict[str, list[float]] = {m: [] for m in METHODS}
+    for _ in range(args.repeats):  # the methods in turn: a change of the machine's speed falls on all alike
+        for m in METHODS:
             t0 = time.perf_counter()
-            result = run_layout(loaded)
-            times.append(time.perf_counter() - t0)
-            navs.append(result.timings_s["navigation_s"])
-        nav = float(np.median(navs))
-        wall = float(np.median(times))
+            results[m] = run_layout(loaded[m])
+            times[m].append(time.perf_counter() - t0)
+            navs[m].append(results[m].timings_s["navigation_s"])
+    filters = float(np.median(navs["none"]))
+    summary = []
+    for m in METHODS:
+        nav, wall, result = float(np.median(navs[m])), float(np.median(times[m])), results[m]
         per_stream = max(s.samples for s in result.systems.values()) / nav
-        loop = "" if method == "none" else (f", event loop {(nav - filters) * 1e3:.1f} ms = "
-                                            f"{(nav - filters) / filters:.2f}x the filters")
-        print(f"{method:<11} epochs={result.fuser.epochs:5d} activations={result.fuser.activations:4d} "
+        loop = "" if m == "none" else (f", event loop {(nav - filters) * 1e3:.1f} ms = "
+                                       f"{(nav - filters) / filters:.2f}x the filters")
+        print(f"{m:<11} epochs={result.fuser.epochs:5d} activations={result.fuser.activations:4d} "
               f"navigation {nav * 1e3:7.1f} ms, run {wall * 1e3:7.1f} ms, {per_stream:,.0f} samples/s per stream{loop}")
-        if method == "none":
-            filters = nav
-        else:
-            summary.append(f"{method}_samples_per_s={per_stream:.0f}")
+        if m != "none":
+            summary.append(f"{m}_samples_per_s={per_stream:.0f}")
     print(" ".join(summary))
 
 
