@@ -364,18 +364,15 @@ class FootIns(SensorSystem):
         i = self._i + 1
         if i1 <= i:
             return
-        g = self._gap_index  # sorted; the usual case, none, costs no search
-        if g.size == 0 or g[-1] < i:
-            self.filter.run(self.run_data, i, i1, self.phi)
-        else:
-            gaps = g[np.searchsorted(g, i):np.searchsorted(g, i1)].tolist()
-            for a, b in zip([i, *gaps], [*gaps, i1]):
-                if a in gaps:
-                    dP = np.zeros_like(self.P)
-                    dP[:15, :15] = self._gap_P[np.searchsorted(self._gap_index, a)]
-                    self._i = a - 1
-                    self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
-                self.filter.run(self.run_data, a, b, self.phi)
+        g = self._gap_index  # sorted; the usual case, none ahead, costs no search
+        gaps = g[g.searchsorted(i):g.searchsorted(i1)].tolist() if g.size and g[-1] >= i else []
+        for a, b in zip([i, *gaps], [*gaps, i1]):
+            if a in gaps:
+                dP = np.zeros_like(self.P)
+                dP[:15, :15] = self._gap_P[g.searchsorted(a)]
+                self._i = a - 1
+                self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
+            self.filter.run(self.run_data, a, b, self.phi)
         self._i = i1 - 1
         self._forward_record.capture(self._i, self.P)  # for a correction made here next
 
