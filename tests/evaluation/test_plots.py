@@ -79,6 +79,42 @@ def test_every_plot_returns_a_figure_and_draws_into_a_given_axes(scored, name):
     assert right.lines and not left.lines and len(panel.axes) == 2
 
 
+def _inside_the_figure(fig: Figure) -> bool:
+    """Every drawn artist (titles, labels, tick labels, legend) lies inside the figure, to 1 px."""
+    fig.canvas.draw()
+    tight = fig.get_tightbbox(fig.canvas.get_renderer())
+    width, height = fig.get_size_inches()
+    slack = 1.0 / fig.dpi
+    return tight.x0 >= -slack and tight.y0 >= -slack and tight.x1 <= width + slack and tight.y1 <= height + slack
+
+
+@pytest.mark.parametrize("name", ["trajectories", "methods", "error_vs_time", "error_cdf", "nees", "outage"])
+def test_every_plot_keeps_its_texts_and_legend_inside_the_figure_and_gives_the_axes_most_of_it(scored, name):
+    fig = every_plot(scored)[name]()
+    assert _inside_the_figure(fig)
+    box = fig.axes[0].get_position(original=True)
+    assert box.width > 0.5 and box.height > 0.6
+
+
+def test_wide_tick_labels_and_long_legend_entries_still_fit():
+    t = np.linspace(0.0, 10.0, 101)
+    far = Trajectory(t, np.column_stack([-123456.7 + t, 4567890.1 + t, 0 * t]), np.full((t.size, 3), 0.1))
+    fig = plot_trajectories({"a system named at length for its mounting and firmware": far})
+    assert _inside_the_figure(fig)
+    crowded = plot_trajectories({f"system {'x' * 70} {k}": walk(t, k) for k in range(3)})
+    assert _inside_the_figure(crowded)  # the Axes would get less than a quarter: constrained layout
+    assert fig.axes[0].get_position(original=True).width > 0.4 > crowded.axes[0].get_position(original=True).width
+
+
+def test_panels_of_a_new_figure_get_constrained_layout(scored):
+    panel = new_figure(12.0, 4.0)
+    left, right = panel.subplots(1, 2)
+    every_plot(scored)["nees"](ax=left)
+    every_plot(scored)["error_cdf"](ax=right)
+    assert _inside_the_figure(panel)
+    assert left.get_position().x1 < right.get_position().x0
+
+
 def test_plots_of_nothing_still_render(tmp_path):
     for fig in (plot_trajectories({}), plot_error_vs_time({}), plot_error_cdf({}), plot_nees({}),
                 plot_method_comparison({}), plot_against_outage_duration({}, "none")):
