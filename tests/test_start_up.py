@@ -1,5 +1,5 @@
 """What ``fusion run`` imports: the main command starts without the libraries only some runs
-need (scipy.stats and scipy.signal take over a second to import, pandas 0.3 s), and the
+need (scipy.stats and scipy.signal take over a second to import, pandas 0.3 s, osqp 50 ms), and the
 trajectory files are written without pandas (``pa.array`` would import it)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-NOT_AT_START = ("scipy.stats", "scipy.signal", "scipy.ndimage", "pandas", "matplotlib", "plotly")
+NOT_AT_START = ("scipy.stats", "scipy.signal", "scipy.ndimage", "pandas", "matplotlib", "plotly", "osqp")
 
 
 def _modules_after(code: str) -> set[str]:

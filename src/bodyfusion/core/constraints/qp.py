@@ -25,8 +25,6 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-import osqp
-import scipy.sparse as sp
 
 from bodyfusion.core.constraints.kernels import (_INACTIVE, _SOLVED, _qp_finish_pair, _qp_start_pair,
                                                  _secular_limits)
@@ -92,6 +90,9 @@ class QpSolver:
         self.max_iter = int(max_iter)
         self._hints = _hint_array(self._lay)
         self.fallbacks = 0
+        import osqp  # with scipy.sparse and jinja2 ~50 ms of every start otherwise: only QP runs load it
+        import scipy.sparse as sp
+
         n3 = 3 * self.n_systems
         m = self._lay.m
         # CSC of the upper triangle stores column by column: rows 0..j of column j
