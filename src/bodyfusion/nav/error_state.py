@@ -192,10 +192,12 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
         x[6 + k] = q[k]
 
 
-@numba.njit(cache=True)
+@numba.njit(inline="always")
 def closed_loop_reset(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray) -> None:
     """Closed-loop reset after a correction from outside the filter: :func:`inject` dx (≥ 15,)
-    into x (16,), and P (n, n) ← ½ (P_new + P_newᵀ) in place (P_new may be P)."""
+    into x (16,), and P (n, n) ← ½ (P_new + P_newᵀ) in place (P_new may be P). Inlined into the
+    kernel that records the state with it (:func:`bodyfusion.plugins.foot_ins.kernels.set_state`):
+    no compilation of its own."""
     inject(x, dx)
     n = P.shape[0]
     for a in range(n):

@@ -23,12 +23,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from bodyfusion.nav.error_state import closed_loop_reset, inv3_sym
+from bodyfusion.nav.error_state import inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
 from bodyfusion.plugins.foot_ins.ensemble import Ensemble
-from bodyfusion.plugins.foot_ins.kernels import C_CALL_RECORDS, no_record, run_foot_ins, run_foot_ins_coloured
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, NO_RESET, no_record, run_foot_ins,
+                                                 run_foot_ins_coloured, set_state)
 
 
 @dataclass
@@ -81,10 +82,14 @@ class Estimator:
         run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
                      self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters, *data.record)
 
-    def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
-        """Closed-loop reset: inject dx (n,) into the nominal state, take ½ (P + Pᵀ) (n, n)."""
-        closed_loop_reset(self.x, self.P, np.ascontiguousarray(dx, dtype=np.float64),
-                          np.ascontiguousarray(P, dtype=np.float64))
+    def reset_and_record(self, dx: np.ndarray, P: np.ndarray, data: RunData, i: int, packed: np.ndarray) -> bool:
+        """Closed-loop reset: inject dx (n,) into the nominal state, take ½ (P + Pᵀ) (n, n); then
+        record the state as sample i's and pack the covariance into ``packed`` unless it is empty
+        (:func:`~bodyfusion.plugins.foot_ins.kernels.set_state`, one compiled call; dx, P as
+        :data:`~bodyfusion.plugins.foot_ins.kernels.NO_RESET`: record the state as it is). Returns
+        whether the covariance is exactly symmetric."""
+        return set_state(self.x, self.P, np.ascontiguousarray(dx, dtype=np.float64),
+                         np.ascontiguousarray(P, dtype=np.float64), i, data.hist_x, data.hist_pos_cov, packed)
 
     def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
                      phi: np.ndarray) -> None:
@@ -135,7 +140,13 @@ class EnsembleEkf(Estimator):
                           data.hist_pos_cov, data.counters)
         self._sync()
 
-    def correct(self, dx: np.ndarray, P: np.ndarray) -> None:
+    def reset_and_record(self, dx: np.ndarray, P: np.ndarray, data: RunData, i: int, packed: np.ndarray) -> bool:
+        if dx.shape[0] > 0:
+            self._correct(dx, P)
+        return super().reset_and_record(*NO_RESET, data, i, packed)
+
+    def _correct(self, dx: np.ndarray, P: np.ndarray) -> None:
+        """Move the mean by dx (n,) and map the deviations to the covariance ½ (P + Pᵀ) (n, n)."""
         P = 0.5 * (P + P.T)
         self.ensemble.correct(np.asarray(dx, dtype=np.float64), P)
         self.x = self.ensemble.mean[:NOMINAL_SIZE].copy()
@@ -144,7 +155,7 @@ class EnsembleEkf(Estimator):
     def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
                      phi: np.ndarray) -> None:
         """The Kalman update of the mean and the sample covariance (H selects δp), gated,
-        carried to the members by :meth:`correct`."""
+        carried to the members by :meth:`_correct`."""
         y = z_n - self.x[0:3]
         r_var = sigma_m**2
         P = self.P
@@ -155,7 +166,7 @@ class EnsembleEkf(Estimator):
         K = np.linalg.solve(S, P[0:3, :]).T
         IKH = np.eye(P.shape[0])
         IKH[:, 0:3] -= K
-        self.correct(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
+        self._correct(K @ y, IKH @ P @ IKH.T + r_var * K @ K.T)
         counts.accepted += 1
 
 

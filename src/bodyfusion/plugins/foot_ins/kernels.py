@@ -28,8 +28,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, bias_decay, decay_biases,
-                                       process_noise_diag, propagate_covariance, transition_left)
+from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, bias_decay,
+                                       closed_loop_reset, decay_biases, process_noise_diag, propagate_covariance,
+                                       transition_left)
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
@@ -164,10 +165,10 @@ def _pack(P: np.ndarray, out: np.ndarray) -> None:
             q += 1
 
 
-@numba.njit(cache=True)
-def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
-    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
-    exactly symmetric (then ``out`` holds all of it; a NaN makes it not)."""
+@numba.njit(inline="always")
+def _pack_symmetric(P: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`_pack`; whether P is exactly symmetric (then ``out`` holds all of it; a NaN makes
+    it not)."""
     _pack(P, out)
     for r in range(15):
         for c in range(r, 15):
@@ -177,10 +178,32 @@ def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
 
 
 @numba.njit(cache=True)
-def record_state(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
-    """Row i of ``hist_x`` (N, 16) ← x and of ``hist_pos_cov`` (N, 4) ← P's position variances
-    east, north, up and east–north covariance (m²): a state set outside the compiled loop."""
+def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
+    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
+    exactly symmetric (then ``out`` holds all of it; a NaN makes it not)."""
+    return _pack_symmetric(P, out)
+
+
+NO_RESET = (np.empty(0), np.empty((0, 0)))
+"""The ``dx``, ``P_new`` of :func:`set_state` for a state already set (no closed-loop reset)."""
+NOT_PACKED = np.empty(0)
+"""The ``packed`` of :func:`set_state` when the covariance is not kept (no smoother rebuilds it)."""
+
+
+@numba.njit(cache=True)
+def set_state(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray, i: int, hist_x: np.ndarray,
+              hist_pos_cov: np.ndarray, packed: np.ndarray) -> bool:
+    """A state set outside the compiled loop, at sample i, in one call: the closed-loop reset by
+    dx (15,) and P_new (n, n) (:func:`bodyfusion.nav.error_state.closed_loop_reset`; both empty,
+    :data:`NO_RESET`: none, x (16,) and P (n, n) already set); row i of ``hist_x`` (N, 16) ← x and
+    of ``hist_pos_cov`` (N, 4) ← P's position variances east, north, up and east–north covariance
+    (m²); unless ``packed`` is empty (:data:`NOT_PACKED`), ``packed`` (:data:`PACKED_SIZE`,) ← the
+    upper triangle of P (15, 15) by rows. Returns whether P is exactly symmetric (then ``packed``
+    holds all of it; a NaN makes it not); True when nothing is packed."""
+    if dx.shape[0] > 0:
+        closed_loop_reset(x, P, dx, P_new)
     _record_row(x, P, i, hist_x, hist_pos_cov)
+    return packed.shape[0] == 0 or _pack_symmetric(P, packed)
 
 
 @numba.njit(inline="always")

@@ -115,10 +115,21 @@ class CovarianceLog:
 
     def add(self, i: int, P: np.ndarray) -> None:
         """The covariance ``P`` (15, 15) left at sample ``i``."""
-        if not pack_covariance(P, self.upper.next_row()):  # NaN ≠ NaN: kept whole, as array_equal would
-            self.lower_at.append(len(self.idx))
-            self.lower.append(P[_LOWER])
+        if not pack_covariance(P, self.row(i)):  # NaN ≠ NaN: kept whole, as array_equal would
+            self.keep_lower(P)
+
+    def row(self, i: int) -> np.ndarray:
+        """The row (:data:`~bodyfusion.plugins.foot_ins.kernels.PACKED_SIZE`,) to write the upper
+        triangle (by rows) of the covariance left at sample ``i`` into; when that covariance is not
+        exactly symmetric, :meth:`keep_lower` it next."""
         self.idx.append(i)
+        return self.upper.next_row()
+
+    def keep_lower(self, P: np.ndarray) -> None:
+        """The strict lower triangle of the covariance ``P`` (15, 15) whose upper triangle was
+        written last (:meth:`row`)."""
+        self.lower_at.append(len(self.idx) - 1)
+        self.lower.append(P[_LOWER])
 
     def __len__(self) -> int:
         return len(self.idx)

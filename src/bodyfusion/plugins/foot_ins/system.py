@@ -29,7 +29,7 @@ from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                                 NO_STANCE, no_record, record_state, run_foot_ins)
+                                                 NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
@@ -304,7 +304,7 @@ class FootIns(SensorSystem):
                                 np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
                                 np.zeros(COUNTERS_SIZE))
         self.run_data.record = self._forward_record.restart(self._P0, self.run_data.counters)
-        record_state(self.x, self.P, 0, self.hist_x, self.hist_pos_cov)
+        self.filter.reset_and_record(*NO_RESET, self.run_data, 0, NOT_PACKED)
         self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
         self.fix_counts = GateCounts()
@@ -412,8 +412,7 @@ class FootIns(SensorSystem):
         return self.P.copy()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
-        self.filter.correct(dx, P)
-        self._record_state(self._i)
+        self._record_state(self._i, dx, P)
 
     def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """As :meth:`apply_correction`; the smoothers keep it as made (the state before it kept)."""
@@ -422,13 +421,14 @@ class FootIns(SensorSystem):
             self.run_data.kept_x.append(self.x.copy())
         self.apply_correction(dx, P)
 
-    def _record_state(self, i: int) -> None:
-        """History row i after a correction outside the compiled loop (fuser, fix, gap); the
-        covariance left there is recorded for the smoothers."""
-        f, run = self.filter, self.run_data
-        record_state(f.x, f.P, i, run.hist_x, run.hist_pos_cov)
-        if f.smoothable:
-            self.corrections.add(i, f.P)
+    def _record_state(self, i: int, dx: np.ndarray = NO_RESET[0], P: np.ndarray = NO_RESET[1]) -> None:
+        """History row i after a state set outside the compiled loop: the closed-loop reset by dx
+        (n,) and P (n, n) (a fuser correction, the gap policy's inflation) or, without them, a
+        position fix the estimator made; the covariance left there is recorded for the smoothers."""
+        f, log = self.filter, self.corrections
+        packed = log.row(i) if f.smoothable else NOT_PACKED
+        if not f.reset_and_record(dx, P, self.run_data, i, packed):
+            log.keep_lower(f.P)
 
     def track_transition(self) -> None:
         if not self.filter.tracks_transition:
