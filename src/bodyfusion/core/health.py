@@ -47,8 +47,9 @@ class CovarianceMonitor:
         self.system = system
         self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
         self._next = 0  # index of the first stride time after the system's time
-        self._t: list[float] = []
-        self._covs: list[np.ndarray] = []
+        self._t = np.empty(BATCH)  # the buffered checks' times (s) ...
+        self._covs: np.ndarray | None = None  # ... and covariances (BATCH, n, n), from the first check
+        self._n = 0  # checks buffered
 
     def __getattr__(self, name: str):
         value = getattr(self.system, name)
@@ -86,13 +87,18 @@ class CovarianceMonitor:
         self._check()
 
     def _check(self) -> None:
-        self._t.append(self.system.t_now)
-        self._covs.append(self.system.covariance())
-        if len(self._covs) >= BATCH:
+        P = self.system.covariance()
+        if self._covs is None:
+            self._covs = np.empty((BATCH, *P.shape))
+        k = self._n
+        self._t[k] = self.system.t_now
+        self._covs[k] = P
+        self._n = k + 1
+        if self._n == BATCH:
             self.flush()
 
     def flush(self) -> None:
         """Check the buffered covariances into the system's ``covariance_health``."""
-        if self._covs:
-            self.system.covariance_health.add_many(np.stack(self._covs), np.asarray(self._t))
-        self._t, self._covs = [], []
+        if self._n:
+            self.system.covariance_health.add_many(self._covs[:self._n], self._t[:self._n])
+        self._n = 0
