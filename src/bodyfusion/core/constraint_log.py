@@ -63,8 +63,8 @@ class ConstraintLog:
         self.p_before[e] = p_hat
         self.p_after[e] = p_after
         self.multiplier[e] = solution.multipliers
-        if solution.active:
-            self.active[e, solution.active] = True
+        for k in solution.active:  # a few: scalar stores cost less than a fancy index
+            self.active[e, k] = True
         if tail_truncated is not None:
             self.tail_truncated[e] = tail_truncated
         self.n += 1

@@ -186,9 +186,11 @@ class JointState:
 
     def covariance(self) -> np.ndarray:
         """Stacked covariance: each system's own blocks, the tracked cross-covariances (one
-        buffer, rewritten at each call)."""
+        buffer, rewritten at each call; its blocks between systems stay zero when they are not
+        tracked)."""
         P = self._P
-        np.copyto(P, self.cross)
+        if self.track:
+            np.copyto(P, self.cross)
         for b, s in zip(self.blocks, self.systems):
             P[b, b] = s.covariance()
         return P
@@ -253,6 +255,7 @@ class Fuser:
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
             self._sigma_ix = np.ix_(self._pos, self._pos)
             self._corrected = list(range(len(order) if self.joint.track else n_constrained))
+            self._positions = [s.position_n for s in members]  # bound once: called at every epoch
             self._truncating = self.config.inequality == "truncation"
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
@@ -260,7 +263,7 @@ class Fuser:
             if kind == 0:
                 self._measurement(sources[i], k, t)
             else:
-                self._constraint_epoch(t, n_constrained)
+                self._constraint_epoch(t)
         for system in self.systems.values():
             system.advance(system.t_end)
         self.report.wall_s = time.perf_counter() - t_begin
@@ -298,13 +301,14 @@ class Fuser:
         else:
             measured[0].apply_correction(dx, P_new)
 
-    def _constraint_epoch(self, t: float, n: int) -> None:
-        """Solve the active constraints among the first n joint systems at time t and
-        spread the correction (to every joint system when cross-covariances are tracked)."""
+    def _constraint_epoch(self, t: float) -> None:
+        """Solve the active constraints among the constrained systems (the first joint ones) at
+        time t and spread the correction (to every joint system when cross-covariances are
+        tracked)."""
         joint, rep, pos = self.joint, self.report, self._pos
         joint.advance(t)
         P = joint.covariance()
-        p_hat = np.concatenate([s.position_n() for s in joint.systems[:n]])
+        p_hat = np.concatenate([position() for position in self._positions])
         t0 = time.perf_counter_ns()
         sol = self._solver.solve(p_hat, P[self._sigma_ix])
         rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)

@@ -46,6 +46,7 @@ class CovarianceMonitor:
     def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
         self.system = system
         self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
+        self._t_end = system.t_end  # s; the fuser asks at every epoch
         self._next = 0  # index of the first stride time after the system's time
         self._t = np.empty(BATCH)  # the buffered checks' times (s) ...
         self._covs: np.ndarray | None = None  # ... and covariances (BATCH, n, n), from the first check
@@ -73,7 +74,7 @@ class CovarianceMonitor:
             else:
                 at_stride = True
         s.advance(t)
-        if at_stride or t >= s.t_end:
+        if at_stride or t >= self._t_end:
             self._check()
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
