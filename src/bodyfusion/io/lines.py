@@ -86,9 +86,11 @@ def scan_text(path: Path) -> tuple[int, bool]:
     ends = 0
     plain = True
     for k, block in enumerate(_blocks(path)):
-        _decoded(path, block, k == 0, ends + 1)
+        if not block.isascii():  # ASCII text is UTF-8 without a byte order mark: nothing to check
+            _decoded(path, block, k == 0, ends + 1)
         ends += block.count(b"\n")
-        plain = plain and block.count(b"\r") == block.count(b"\r\n")
+        if plain and b"\r" in block:
+            plain = block.count(b"\r") == block.count(b"\r\n")
     return ends + 1, plain
 
 
