@@ -15,8 +15,10 @@ import pytest
 
 import bodyfusion
 from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.core import exports
 from bodyfusion.core.exports import (
     GEOJSON_STEP_S,
+    _json_floats,
     read_trajectories,
     write_geojson,
     write_trajectories_csv,
@@ -178,6 +180,28 @@ def test_geojson_gives_surveyed_truth_as_timed_points_and_2d_positions_without_h
     lon, lat = points[1]["geometry"]["coordinates"]
     e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, *ORIGIN)
     assert abs(e - 10.0) < 1e-3 and abs(n) < 1e-3
+
+
+def test_geojson_numbers_are_printed_as_json_dumps_prints_them():
+    """Arrow's text of a float (the shortest round-trip digits) turned into Python's, at every
+    magnitude, whole numbers, signed zeros, NaN and the infinities included."""
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(1.0, 10.0, 50) * 10.0**e for e in range(-323, 308)])
+    x = np.concatenate([x, -x, np.round(x, 6), np.floor(x), rng.integers(-2**62, 2**62, 5000).view(np.float64),
+                        [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-4, 9.999999999999999e-5, 1e9, 999999999.9999999,
+                         2.0**53, 5e-324]])
+    assert _json_floats(x).to_pylist() == [json.dumps(v) for v in x.tolist()]
+
+
+def test_geojson_is_the_text_json_dumps_gives_of_the_document(tmp_path, monkeypatch):
+    """The writer's pieces (Arrow-printed numbers, written a piece at a time) add up to
+    ``json.dumps`` of the whole document."""
+    monkeypatch.setattr(exports, "ROWS", 64)
+    truth = TruthTrack(np.arange(400) * 0.05, np.random.default_rng(4).normal(size=(400, 3)))
+    trajs = synthetic()
+    write_geojson(tmp_path / "track.geojson", trajs, {"foot": truth}, ORIGIN)
+    text = (tmp_path / "track.geojson").read_text()
+    assert text == json.dumps(json.loads(text)) + "\n"
 
 
 def test_the_csv_prints_each_number_rounded_to_its_unit_and_quotes_names_only_where_csv_needs_it(tmp_path):

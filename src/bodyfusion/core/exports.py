@@ -297,19 +297,62 @@ def map_epochs(t: np.ndarray, decimate: int = 1, step_s: float = GEOJSON_STEP_S)
     return idx[keep]
 
 
-def _lon_lat_h(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool) -> list[list[float]]:
-    """GeoJSON positions ``[lon, lat, h]`` (deg, deg, m above the ellipsoid; 1e-9 deg and 0.1 mm
-    printed); ``[lon, lat]`` for a track without heights (``flat``: NaN up throughout)."""
+def _lon_lat_h_columns(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool) -> list[np.ndarray]:
+    """The coordinates of GeoJSON positions ``[lon, lat, h]`` (deg, deg, m above the ellipsoid;
+    rounded to 1e-9 deg and 0.1 mm); ``[lon, lat]`` for a track without heights (``flat``: NaN
+    up throughout)."""
     llh = enu_to_geodetic(np.nan_to_num(pos_n, nan=0.0), origin)
-    cols = [np.round(llh[:, 1], 9), np.round(llh[:, 0], 9)] + ([] if flat else [np.round(llh[:, 2], 4)])
-    return np.column_stack(cols).tolist()
+    return [np.round(llh[:, 1], 9), np.round(llh[:, 0], 9)] + ([] if flat else [np.round(llh[:, 2], 4)])
+
+
+def _lon_lat_h(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool) -> list[list[float]]:
+    """GeoJSON positions (:func:`_lon_lat_h_columns`) as lists."""
+    return np.column_stack(_lon_lat_h_columns(pos_n, origin, flat)).tolist()
+
+
+def _mask(flags: np.ndarray) -> pa.Array:
+    """A boolean Arrow array of ``flags`` (see :func:`_numbers`)."""
+    return pa.Array.from_buffers(pa.bool_(), len(flags), [None, pa.py_buffer(np.packbits(flags, bitorder="little"))])
+
+
+def _json_floats(values: np.ndarray) -> pa.Array:
+    """``json.dumps`` of each of the float ``values``, as Arrow strings. Arrow prints the same
+    shortest round-trip digits as Python's ``repr``, and in the same positional notation for
+    1e-4 ≤ |x| < 1e9 and 0, only without the ``.0`` of a whole number; the other values
+    (exponent notation, NaN, infinities) are printed by ``json.dumps``."""
+    x = np.array(values, dtype=np.float64)
+    text = pc.cast(_numbers(x), pa.string())
+    magnitude = np.abs(x)
+    with np.errstate(invalid="ignore"):
+        python = ~(((magnitude >= 1e-4) & (magnitude < 1e9)) | (x == 0.0))  # NaN too
+        whole = ~python & (x == np.floor(x))
+    if whole.any():
+        text = pc.if_else(_mask(whole), pc.binary_join_element_wise(text, ".0", ""), text)
+    if python.any():
+        text = pc.replace_with_mask(text, _mask(python), _strings([json.dumps(v) for v in x[python].tolist()]))
+    return text
+
+
+def _json_elements(elements: pa.Array) -> str:
+    """The text of JSON array elements (strings, each an element's JSON), ``", "``-separated
+    as ``json.dumps`` separates them."""
+    bounds = _numbers(np.array([0, len(elements)], dtype=np.int32))
+    return pc.binary_join(pa.ListArray.from_arrays(bounds, elements), ", ")[0].as_py()
+
+
+def _json_positions(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool) -> str:
+    """The text of GeoJSON positions (:func:`_lon_lat_h_columns`) as array elements, as
+    ``json.dumps`` prints the lists of :func:`_lon_lat_h`."""
+    columns = [_json_floats(c) for c in _lon_lat_h_columns(pos_n, origin, flat)]
+    parts = [p for c in columns for p in (", ", c)][1:]
+    return _json_elements(pc.binary_join_element_wise("[", *parts, "]", ""))
 
 
 class _JsonArray:
-    """A JSON array :func:`_write_json` writes a piece at a time: ``pieces()`` yields lists, its
-    consecutive elements (the same text as the whole list through ``json.dumps``)."""
+    """A JSON array :func:`_write_json` writes a piece at a time: ``pieces()`` yields the text of
+    its consecutive elements (as ``json.dumps`` prints them, ``", "``-separated)."""
 
-    def __init__(self, pieces: Callable[[], Iterator[list]]) -> None:
+    def __init__(self, pieces: Callable[[], Iterator[str]]) -> None:
         self.pieces = pieces
 
 
@@ -321,7 +364,7 @@ def _write_json(fh: TextIO, value: object) -> None:
         sep = ""
         for piece in value.pieces():
             if piece:
-                fh.write(sep + json.dumps(piece)[1:-1])
+                fh.write(sep + piece)
                 sep = ", "
         fh.write("]")
     elif isinstance(value, dict):
@@ -351,12 +394,13 @@ def _line_feature(properties: dict, t: np.ndarray, pos_n: np.ndarray, sd: np.nda
     flat = bool(np.isnan(pos_n[k, 2]).all())
 
     def column(values: np.ndarray, decimals: int) -> _JsonArray:
-        return _JsonArray(lambda: (np.round(values[k[p]], decimals).tolist() for p in _pieces(k.size, 1)))
+        return _JsonArray(lambda: (_json_elements(_json_floats(np.round(values[k[p]], decimals)))
+                                   for p in _pieces(k.size, 1)))
 
     properties = {**properties, "times": column(t, 6)}
     if sd is not None:
         properties.update({f"sd_{axis}_m": column(sd[:, j], 5) for j, axis in enumerate(("east", "north", "up"))})
-    coordinates = _JsonArray(lambda: (_lon_lat_h(pos_n[k[p]], origin, flat) for p in _pieces(k.size, 1)))
+    coordinates = _JsonArray(lambda: (_json_positions(pos_n[k[p]], origin, flat) for p in _pieces(k.size, 1)))
     return _feature(properties, "LineString", coordinates)
 
 
