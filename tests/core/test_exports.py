@@ -133,6 +133,31 @@ def test_tum_files_are_eight_columns_increasing_times_unit_quaternions_and_the_p
         np.testing.assert_array_equal(rows[:, 4:8], attitude.get(name, identity))
 
 
+def test_tum_text_is_what_the_csv_writer_prints_of_the_float64_columns(tmp_path, monkeypatch):
+    """Times a truth shares with its system and the identity quaternion are printed once and
+    reused: every file holds the bytes Arrow's CSV writer gives of its float64 columns."""
+    import pyarrow.csv as pacsv
+
+    monkeypatch.setattr(exports, "ROWS", 16)  # several pieces a file
+    rng = np.random.default_rng(9)
+    t = np.cumsum(rng.uniform(0.001, 0.02, 50))
+    trajs = {"foot": Trajectory(t, rng.normal(scale=1e3, size=(50, 3)), np.ones((50, 3))),
+             "hand": Trajectory(t[::2], rng.normal(size=(25, 3)), np.ones((25, 3)))}
+    truths = {"foot": TruthTrack(t.copy(), rng.normal(size=(50, 3))),  # its system's times
+              "hand": TruthTrack(t[::-1] * -1e-6, rng.normal(size=(50, 3)))}
+    q = rng.normal(size=(50, 4))
+    write_tum(tmp_path, trajs, truths, attitudes={"foot": q})
+    for name, (tt, pos, quat) in {"foot": (t, trajs["foot"].pos_n, q), "hand": (t[::2], trajs["hand"].pos_n, None),
+                                  "foot_truth": (t, truths["foot"].pos_n, None),
+                                  "hand_truth": (truths["hand"].t, truths["hand"].pos_n, None)}.items():
+        quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(tt), 1)) if quat is None else quat
+        table = pa.table({k: v for k, v in zip(("t", "x", "y", "z", "qx", "qy", "qz", "qw"),
+                                               (tt, *pos.T, *quat[:, [1, 2, 3, 0]].T))})
+        pacsv.write_csv(table, tmp_path / "expected.txt",
+                        pacsv.WriteOptions(include_header=False, delimiter=" ", quoting_style="none"))
+        assert (tmp_path / f"{name}.txt").read_bytes() == (tmp_path / "expected.txt").read_bytes()
+
+
 def test_tum_writes_a_truth_without_heights_at_zero_height(tmp_path):
     t = np.arange(5.0)
     truth = TruthTrack(t, np.column_stack([t, 2 * t, np.full(5, np.nan)]), sparse=True)

@@ -243,12 +243,21 @@ class SystemAttitudes(Mapping[str, np.ndarray]):
 _TUM_COLUMNS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 
 
-def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None) -> pa.Table:
-    """TUM columns; the identity orientation without a quaternion, NaN heights as 0."""
-    q = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1)) if q_wxyz is None else q_wxyz
-    cols = {"timestamp": t, "tx": pos_n[:, 0], "ty": pos_n[:, 1], "tz": np.nan_to_num(pos_n[:, 2], nan=0.0),
-            "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "qw": q[:, 0]}
-    return pa.table({k: _numbers(v) for k, v in cols.items()})
+def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None, times: dict[bytes, pa.Array]) -> pa.Table:
+    """TUM columns as text, each number as Arrow's CSV writer prints a float64 (its cast to
+    string); the identity orientation without a quaternion, NaN heights as 0. Times printed
+    before (``times``: their float64 bytes → text; a truth's times are its system's) and the
+    identity's constant columns are not printed again."""
+    key = t.tobytes()
+    if key not in times:
+        times[key] = pc.cast(_numbers(t), pa.string())
+    if q_wxyz is None:
+        identity = pc.cast(_numbers(np.array([0.0, 0.0, 0.0, 1.0])), pa.string())
+        q = [pa.repeat(identity[j], len(t)) for j in range(4)]
+    else:
+        q = [pc.cast(_numbers(q_wxyz[:, j]), pa.string()) for j in (1, 2, 3, 0)]
+    xyz = [pc.cast(_numbers(v), pa.string()) for v in (pos_n[:, 0], pos_n[:, 1], np.nan_to_num(pos_n[:, 2], nan=0.0))]
+    return pa.table(dict(zip(_TUM_COLUMNS, [times[key], *xyz, *q])))
 
 
 def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapping[str, TruthTrack],
@@ -267,14 +276,15 @@ def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapp
         tracks[f"{name}_truth"] = (tr.t, tr.pos_n, 1 if tr.sparse else decimate, None)
     folder.mkdir(parents=True, exist_ok=True)
     options = pacsv.WriteOptions(include_header=False, delimiter=" ", quoting_style="none")
-    schema = pa.schema([(c, pa.float64()) for c in _TUM_COLUMNS])
+    schema = pa.schema([(c, pa.string()) for c in _TUM_COLUMNS])
     written = []
+    times: dict[bytes, pa.Array] = {}
     for name, (t, pos, step, system) in tracks.items():
         written.append(folder / f"{name}.txt")
         q = None if system is None else attitudes.get(system)
         with pacsv.CSVWriter(written[-1], schema, write_options=options) as writer:
             for epochs in _pieces(len(t), step):
-                writer.write_table(_tum_table(t[epochs], pos[epochs], None if q is None else q[epochs]))
+                writer.write_table(_tum_table(t[epochs], pos[epochs], None if q is None else q[epochs], times))
         del q
     return written
 
