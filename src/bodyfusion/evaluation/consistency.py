@@ -245,9 +245,13 @@ def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
     cov = np.asarray(cov, dtype=float)
     out = np.full(len(err), np.nan)
     ok = np.all(np.isfinite(err), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
-    ok[ok] = np.linalg.det(cov[ok]) > 0.0
+    err_ok, cov_ok = (err, cov) if ok.all() else (err[ok], cov[ok])  # no copies in the usual case
+    regular = np.linalg.det(cov_ok) > 0.0
+    if not regular.all():
+        ok[ok] = regular
+        err_ok, cov_ok = err_ok[regular], cov_ok[regular]
     if ok.any():
-        out[ok] = np.einsum("ni,ni->n", err[ok], np.linalg.solve(cov[ok], err[ok][..., None])[..., 0])
+        out[ok] = np.einsum("ni,ni->n", err_ok, np.linalg.solve(cov_ok, err_ok[..., None])[..., 0])
     return out
 
 
