@@ -213,6 +213,36 @@ def test_score_interpolates_estimate_to_truth_epochs_and_skips_truth_outside_spa
     assert sc.metrics["scored_epochs"] == len(sc.t)
 
 
+def test_score_holds_views_of_the_truth_not_copies():
+    # The truth's epochs inside the estimate's span are consecutive: the score's truth times and
+    # positions are read-only views of the truth's arrays (an hour's truth is not copied per system).
+    t_tr = np.arange(0.0, 10.0 + 1e-9, 0.25)
+    truth = TruthTrack(t_tr, _curvy_walk(t_tr))
+    t_est = np.arange(2.0, 8.0 + 1e-9, 0.5)
+    _, scores = score_systems({"a": _traj(t_est, _curvy_walk(t_est))}, {"a": truth}, alignment="none")
+    sc = scores["a"]
+    inside = (t_tr >= 2.0) & (t_tr <= 8.0)
+    np.testing.assert_array_equal(sc.t, t_tr[inside])
+    np.testing.assert_array_equal(sc.pos_truth, truth.pos_n[inside])
+    assert np.shares_memory(sc.t, truth.t) and np.shares_memory(sc.pos_truth, truth.pos_n)
+    assert not sc.t.flags.writeable and not sc.pos_truth.flags.writeable
+    assert truth.t.flags.writeable and truth.pos_n.flags.writeable
+
+
+def test_score_of_truth_epochs_not_consecutive_in_span_copies_them():
+    # Times not increasing (as a TruthTrack built in code may have them): the epochs inside are
+    # picked one by one, as before.
+    t_tr = np.array([0.0, 3.0, 9.0, 4.0, 5.0])
+    pos = np.column_stack([t_tr, np.ones_like(t_tr), np.zeros_like(t_tr)])
+    t_est = np.arange(2.0, 6.0 + 1e-9, 1.0)
+    est = np.column_stack([t_est, np.zeros_like(t_est), np.zeros_like(t_est)])
+    _, scores = score_systems({"a": _traj(t_est, est)}, {"a": TruthTrack(t_tr, pos)}, alignment="none")
+    sc = scores["a"]
+    np.testing.assert_array_equal(sc.t, [3.0, 4.0, 5.0])
+    np.testing.assert_array_equal(sc.pos_truth, pos[[1, 3, 4]])
+    np.testing.assert_allclose(sc.horizontal_error_m, 1.0, atol=1e-12)
+
+
 def test_interpolate_truth_linear_and_nan_outside():
     truth = TruthTrack(np.array([0.0, 2.0]), np.array([[0.0, 0.0, 0.0], [2.0, 4.0, 6.0]]))
     p = interpolate_truth(truth, np.array([-1.0, 0.5, 2.0, 3.0]))

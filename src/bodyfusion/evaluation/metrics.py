@@ -107,6 +107,14 @@ def _in_span(t: np.ndarray, t_span: np.ndarray) -> np.ndarray:
     return (t >= t_span[0]) & (t <= t_span[-1])
 
 
+def _rows(mask: np.ndarray) -> slice | np.ndarray:
+    """The rows ``mask`` (N,) selects: a slice when they are consecutive (as at increasing
+    times inside a span), so that indexing by it gives a view, not a copy; else the mask."""
+    first = int(np.argmax(mask))
+    stop = mask.size - int(np.argmax(mask[::-1]))
+    return slice(first, stop) if mask[first] and np.count_nonzero(mask) == stop - first else mask
+
+
 def _cumulative_horizontal(pos_n: np.ndarray) -> np.ndarray:
     """(N,) cumulative horizontal path length from the first row, m (NaN steps count as 0)."""
     pos = np.asarray(pos_n, dtype=float)
@@ -287,7 +295,9 @@ class SystemScore:
 
     t: (M,) s.  pos_est_aligned, pos_truth: (M, 3) ENU m (estimate after the evaluation
     transform).  horizontal_error_m: (M,) east-north distance, m.  vertical_error_m: (M,)
-    absolute up difference, m.  metrics: the per-system block of metrics.json without
+    absolute up difference, m.  ``t`` and ``pos_truth`` are read-only, views of the truth's
+    arrays where its epochs inside the span are consecutive (always, for increasing truth
+    times), not copies.  metrics: the per-system block of metrics.json without
     "samples" (see ``score_systems``).
     """
 
@@ -309,8 +319,9 @@ def _score_one(
             f"scoring {name}: truth ({_span(t_truth)}) does not overlap the estimate "
             f"({_span(np.asarray(est.t, dtype=float))}) in time"
         )
-    t = t_truth[inside]
-    p_truth = np.asarray(truth.pos_n, dtype=float)[inside]
+    rows = _rows(inside)
+    t, p_truth = t_truth[rows], np.asarray(truth.pos_n, dtype=float)[rows]
+    t.flags.writeable = p_truth.flags.writeable = False  # views of the truth's arrays, as a rule
     p_est = transform.apply(_interp_track(est.t, est.pos_n, t))
     d = p_est - p_truth
     h_err = np.hypot(d[:, 0], d[:, 1])
