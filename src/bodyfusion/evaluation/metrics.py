@@ -110,9 +110,11 @@ def _in_span(t: np.ndarray, t_span: np.ndarray) -> np.ndarray:
 def _rows(mask: np.ndarray) -> slice | np.ndarray:
     """The rows ``mask`` (N,) selects: a slice when they are consecutive (as at increasing
     times inside a span), so that indexing by it gives a view, not a copy; else the mask."""
+    if not mask.any():
+        return mask
     first = int(np.argmax(mask))
     stop = mask.size - int(np.argmax(mask[::-1]))
-    return slice(first, stop) if mask[first] and np.count_nonzero(mask) == stop - first else mask
+    return slice(first, stop) if np.count_nonzero(mask) == stop - first else mask
 
 
 def _cumulative_horizontal(pos_n: np.ndarray) -> np.ndarray:
