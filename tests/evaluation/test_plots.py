@@ -115,6 +115,21 @@ def test_panels_of_a_new_figure_get_constrained_layout(scored):
     assert left.get_position().x1 < right.get_position().x0
 
 
+def test_nees_axis_labels_its_decades_in_plain_text_and_its_minor_ticks_when_narrow():
+    """10ᵏ with Unicode superscripts, no mathtext ($...$, whose first use costs a process
+    ~0.2 s); a Monte-Carlo NEES spanning under a decade still gets numbers between decades."""
+    fig = plot_nees(nees_tracks())
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    major = [label.get_text() for label in ax.get_yticklabels() if label.get_text()]
+    assert "10⁰" in major and "10¹" in major and not any("$" in text for text in major)
+    t = np.linspace(0.0, 100.0, 500)
+    narrow = plot_nees({"mc": NeesTrack(t, np.random.default_rng(0).chisquare(400, t.size) / 200, runs=200)})
+    narrow.canvas.draw()
+    minor = [label.get_text() for label in narrow.axes[0].get_yticklabels(minor=True) if label.get_text()]
+    assert "2" in minor and not any("$" in text for text in minor)
+
+
 def test_plots_of_nothing_still_render(tmp_path):
     for fig in (plot_trajectories({}), plot_error_vs_time({}), plot_error_cdf({}), plot_nees({}),
                 plot_method_comparison({}), plot_against_outage_duration({}, "none")):
