@@ -187,12 +187,12 @@ class DecadeLabels(LogFormatter):
         return f"{x:g}"
 
 
-def _log_axis(axis: Axis) -> None:
-    """``axis`` on a base-10 log scale, labelled by :class:`DecadeLabels` (minor ticks as
-    matplotlib labels them: only when the axis spans few decades)."""
-    axis.axes.set_yscale("log") if axis.axis_name == "y" else axis.axes.set_xscale("log")
-    axis.set_major_formatter(DecadeLabels())
-    axis.set_minor_formatter(DecadeLabels(labelOnlyBase=False))
+def _log_y(ax: Axes) -> None:
+    """The vertical axis of ``ax`` on a base-10 log scale, labelled by :class:`DecadeLabels`
+    (minor ticks as matplotlib labels them: only when the axis spans few decades)."""
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(DecadeLabels())
+    ax.yaxis.set_minor_formatter(DecadeLabels(labelOnlyBase=False))
 
 
 def _colours(names: Sequence[str]) -> dict[str, str]:
@@ -399,7 +399,7 @@ def plot_nees(tracks: Mapping[str, NeesTrack], title: str = "Horizontal position
     ax.set_title(title + (f" (frame fitted: {', '.join(fitted)})" if fitted else ""))
     ax.set_xlabel("time [s]")
     ax.set_ylabel("NEES [-]")
-    _log_axis(ax.yaxis)
+    _log_y(ax)
     ax.grid(True, which="major", alpha=0.3)
     if tracks:
         _legend_outside(ax)
