@@ -62,9 +62,8 @@ class MeasuredMargins(ConstrainedLayoutEngine):
     :func:`_legend_outside` places it), ``w_pad`` and ``h_pad`` (inches) from the edges: each
     text is measured once, without the trial drawings of every tick and artist that
     constrained layout makes (a run's four figures draw and save in about three quarters of
-    its CPU time). Any
-    other figure, and one whose Axes would be left less than a quarter of the width or height,
-    gets matplotlib's constrained layout."""
+    its CPU time). Any other figure, and one whose Axes would be left less than a quarter of
+    the width or height, gets matplotlib's constrained layout."""
 
     MIN_FRACTION = 0.25
     """Smallest share of the figure's width and height left to the Axes by measured margins."""
