@@ -59,7 +59,8 @@ class FuserReport:
     at least one was active; tail_truncations: epochs where none was, but the estimate's
     density crossed a limit and was truncated there (``inequality: truncation``,
     :mod:`bodyfusion.core.constraints.truncation`); multipliers: λ of every activation (m⁻² scale, see
-    :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs.
+    :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs (with
+    ``inequality: truncation``, of the solve and the truncation together).
     """
 
     method: str
@@ -310,7 +311,10 @@ class Fuser:
         P = joint.covariance()
         p_hat = np.concatenate([position() for position in self._positions])
         t0 = time.perf_counter_ns()
-        sol = self._solver.solve(p_hat, P[self._sigma_ix])
+        if self._truncating:
+            sol, dx, P_new, tail = self._truncation.solve_and_correct(self._solver, P, pos, p_hat)
+        else:
+            sol = self._solver.solve(p_hat, P[self._sigma_ix])
         rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
         rep.epochs += 1
         rep.solver_fallbacks += int(sol.fallback)
@@ -318,7 +322,6 @@ class Fuser:
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
         if self._truncating:
-            dx, P_new, tail = self._truncation.correct(P, pos, p_hat, sol)
             if not sol.active and not tail.any():
                 rep.constraint_log.record(t, p_hat, p_hat, sol)
                 return
