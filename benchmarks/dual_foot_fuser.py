@@ -6,7 +6,11 @@ then ``--repeats`` rounds of every method in turn (so that a change of the share
 speed falls on all of them alike), and prints per fuser method the median navigation time (heading
 alignment + fuser loop) and samples/s per stream, and for the constrained methods what the
 fuser's event loop costs: their navigation time less that of ``none`` (the filters alone, with
-the same heading alignment), also as a multiple of it. Last line:
+the same heading alignment), also as a multiple of it. The shared machine's speed swings by tens
+of per cent between those runs, so the loop is also timed inside one run, in CPU time: each
+constraint epoch (``Fuser._constraint_epoch``) less the systems' advances within it
+(``JointState.advance``), per epoch, the least and the median over the repeats (``--epochs``
+other than ``events`` skip it). Last line:
 
     projection_samples_per_s=<per stream> qp_samples_per_s=<...> socp_samples_per_s=<...>
 
@@ -21,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyfusion.core import fuser
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run_layout
 
@@ -28,6 +33,32 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml
 
 
 METHODS = ("none", "projection", "qp", "socp")
+
+
+def epoch_overhead_us(loaded, repeats: int) -> tuple[float, float]:
+    """CPU µs per constraint epoch spent outside the systems' advances: (least, median) over
+    ``repeats`` runs of ``loaded``. Times the fuser's own methods by wrapping them for the
+    duration (instrumentation of ~0.2 µs per epoch included)."""
+    spent = {"epochs": 0, "advances": 0}
+    epoch, advance = fuser.Fuser._constraint_epoch, fuser.JointState.advance
+
+    def timed(method, key):
+        def call(self, t):
+            t0 = time.process_time_ns()
+            method(self, t)
+            spent[key] += time.process_time_ns() - t0
+        return call
+
+    per_epoch = []
+    fuser.Fuser._constraint_epoch, fuser.JointState.advance = timed(epoch, "epochs"), timed(advance, "advances")
+    try:
+        for _ in range(repeats):
+            spent["epochs"] = spent["advances"] = 0
+            result = run_layout(loaded)
+            per_epoch.append((spent["epochs"] - spent["advances"]) / result.fuser.epochs / 1e3)
+    finally:
+        fuser.Fuser._constraint_epoch, fuser.JointState.advance = epoch, advance
+    return min(per_epoch), float(np.median(per_epoch))
 
 
 def main() -> None:
@@ -56,6 +87,10 @@ def main() -> None:
               f"navigation {nav * 1e3:7.1f} ms, run {wall * 1e3:7.1f} ms, {per_stream:,.0f} samples/s per stream{loop}")
         if m != "none":
             summary.append(f"{m}_samples_per_s={per_stream:.0f}")
+    if args.epochs == "events":
+        least, median = epoch_overhead_us(loaded["projection"], args.repeats)
+        print(f"projection: the event loop outside the advances {least:.1f} us CPU per epoch at the least, "
+              f"{median:.1f} us median")
     print(" ".join(summary))
 
 
