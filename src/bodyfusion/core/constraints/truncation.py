@@ -23,10 +23,9 @@ every other inequality whose bound the estimate's density crosses within :data:`
 estimate's tail says it might not, and the truncation takes that information too, as
 [Simon2010] truncates wherever the density crosses a bound.
 
-The usual epoch — one constraint, the projection by Newton's method — goes straight to the two
-compiled kernels, the pair's projection and the truncation
-(:meth:`DensityTruncation.solve_and_correct`): the same numbers as the solver's solve followed
-by :meth:`DensityTruncation.correct`, without their general checks and solution paths.
+The usual epoch — one constraint, the projection by Newton's method — is solved by the pair's
+projection kernel straight, without the solver's general checks and solution paths
+(:meth:`DensityTruncation.solve_and_correct`): the same numbers as the solver's solve.
 """
 
 from __future__ import annotations
@@ -36,8 +35,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _FAILED, _SOLVED, _all_finite, _kernel,
-                                                _project_pair, _secular_limits, _separation)
+from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _FAILED, _all_finite, _kernel, _project_pair,
+                                                _secular_limits, _separation)
 from bodyfusion.core.constraints.model import ConstraintSolution, DistanceConstraint, _layout, _remember
 from bodyfusion.core.constraints.projection import ProjectionSolver, pair_solution
 
@@ -204,28 +203,31 @@ class DensityTruncation:
         """``solver``'s solution on p̂ and Σ = P[pos][:, pos], then :meth:`correct` at it: (solution,
         δx, P*, tails), arguments as :meth:`correct`'s. A single constraint projected by Newton's
         method (the usual case: a :class:`~bodyfusion.core.constraints.projection.ProjectionSolver`
-        at its defaults) goes straight to the two compiled kernels: the same numbers as the two
-        steps."""
+        at its defaults) is solved by the pair's kernel straight (:meth:`_project_pair`): the same
+        numbers as the solver's."""
+        solution = None
         if (type(solver) is ProjectionSolver and solver.scheme == "newton" and solver.max_iter > 0
                 and self._idx.shape[0] == 1):
-            n, n3 = P.shape[0], p_hat.shape[0]
-            others, sigma_index = self._state_layout(n, pos)
-            sigma = P.take(sigma_index).reshape(n3, n3)
-            if _all_finite(p_hat, sigma):  # else the solver's checks below report it
-                p, gain, jac = np.empty(n3), np.empty((n3, n3)), np.empty((1, n3))
-                out = _project_pair(p_hat, sigma, self._idx, self._geo, 0, solver.hints,
-                                    *_secular_limits(solver.tol_m, solver.max_iter), p, gain, jac)
-                if out[0] != _FAILED:
-                    active = np.zeros(1 if out[0] == _SOLVED else 0, dtype=np.int64)
-                    if out[0] != _SOLVED:
-                        p[:] = p_hat  # inactive: the tails' bounds at p̂
-                    P_new = np.array(P, dtype=float, order="C")
-                    dx = np.zeros(n)
-                    tail = np.zeros(1, dtype=bool)
-                    _truncate(P_new, pos, p_hat, jac[:active.shape[0]], p, active, self._idx, self._geo, TAIL_BETA,
-                              others, dx, tail)
-                    solution, direction = pair_solution(p_hat, solver.layout, 0, solver.tol_m, out, p, gain, jac)
-                    _remember(solver.hints, direction)
-                    return solution, dx, P_new, tail
-        solution = solver.solve(p_hat, P[np.ix_(pos, pos)])
+            solution = self._project_pair(solver, P, pos, p_hat)
+        if solution is None:
+            solution = solver.solve(p_hat, P[np.ix_(pos, pos)])
         return (solution, *self.correct(P, pos, p_hat, solution))
+
+    def _project_pair(self, solver: ProjectionSolver, P: np.ndarray, pos: np.ndarray,
+                      p_hat: np.ndarray) -> ConstraintSolution | None:
+        """The solution ``solver.solve`` gives for the layout's only constraint, from the pair's
+        projection kernel without the solver's general checks and paths (its hint remembered as
+        the solver remembers it); None when the kernel fails or p̂ or Σ is not finite (the solver
+        then solves, and reports it)."""
+        n3 = p_hat.shape[0]
+        sigma = P.take(self._state_layout(P.shape[0], pos)[1]).reshape(n3, n3)
+        if not _all_finite(p_hat, sigma):
+            return None
+        p, gain, jac = np.empty(n3), np.empty((n3, n3)), np.empty((1, n3))
+        out = _project_pair(p_hat, sigma, self._idx, self._geo, 0, solver.hints,
+                            *_secular_limits(solver.tol_m, solver.max_iter), p, gain, jac)
+        if out[0] == _FAILED:
+            return None
+        solution, direction = pair_solution(p_hat, solver.layout, 0, solver.tol_m, out, p, gain, jac)
+        _remember(solver.hints, direction)
+        return solution
