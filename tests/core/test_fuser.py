@@ -257,50 +257,6 @@ def test_a_limit_far_beyond_the_estimates_density_is_not_truncated():
     np.testing.assert_array_equal(P, Sigma)  # 0.45 m and more from either limit, σ 0.045 m: β ≥ 10
 
 
-@pytest.mark.parametrize("kind, separation_sd, positions_only", [
-    ("max", 1.0, False),  # broken: projected, then truncated at the solution
-    ("max", -2.0, False),  # held, the estimate's tail across the limit: truncated in the tail
-    ("max", -10.0, False),  # held far inside: nothing taken
-    ("min", 1.0, True),  # broken ``min``, positions only
-    ("fixed", -2.0, False),  # an equality: always active
-])
-def test_the_compiled_pair_epoch_is_the_solve_then_the_truncation(kind, separation_sd, positions_only):
-    """A single constraint projected by Newton's method is solved and truncated in one compiled
-    call (:meth:`DensityTruncation.solve_and_correct`): the same bits as the solver's solution
-    and :meth:`DensityTruncation.correct` at it, and the same hint remembered for the next epoch."""
-    rng = np.random.default_rng(11)
-    A = rng.normal(size=(12, 12))
-    P = 0.02 * A @ A.T + 0.01 * np.eye(12)
-    pos = np.array([0, 1, 2, 6, 7, 8])
-    p_hat = np.array([0.0, 0.0, 0.0, 1.0, 0.2, 0.1])
-    sign = -1.0 if kind == "min" else 1.0
-    h_p = sign * np.concatenate([-p_hat[3:] / np.linalg.norm(p_hat[3:]), p_hat[3:] / np.linalg.norm(p_hat[3:])])
-    s = float(np.sqrt(h_p @ P[np.ix_(pos, pos)] @ h_p))
-    cons = [DistanceConstraint(0, 1, kind, float(np.linalg.norm(p_hat[3:]) - sign * separation_sd * s))]
-    two_step, one_call = ProjectionSolver(2, cons), ProjectionSolver(2, cons)
-    truncation = DensityTruncation(cons, 2, positions_only)
-    sol = two_step.solve(p_hat, P[np.ix_(pos, pos)])
-    expected = (sol, *truncation.correct(P, pos, p_hat, sol))
-    got = truncation.solve_and_correct(one_call, P, pos, p_hat)
-    assert got[0].active == expected[0].active == ([0] if separation_sd > 0 or kind == "fixed" else [])
-    for a, b in zip((got[0].p, got[0].multipliers, got[0].gain, got[0].jacobian, *got[1:]),
-                    (sol.p, sol.multipliers, sol.gain, sol.jacobian, *expected[1:])):
-        np.testing.assert_array_equal(a, b)
-    assert (got[0].violation_before_m, got[0].violation_after_m, got[0].converged, got[0].iterations) == (
-        sol.violation_before_m, sol.violation_after_m, sol.converged, sol.iterations)
-    assert bool(got[3].any()) == (kind == "max" and separation_sd == -2.0)
-    assert bool(got[1].any()) == (separation_sd > -10.0)
-    np.testing.assert_array_equal(one_call.hints, two_step.hints)
-
-
-def test_the_compiled_pair_epoch_reports_a_non_finite_estimate_as_the_solver_does():
-    cons = [DistanceConstraint(0, 1, "max", 0.5)]
-    P = np.eye(6)
-    P[4, 4] = np.nan
-    with pytest.raises(ValueError, match="finite"):
-        DensityTruncation(cons, 2).solve_and_correct(ProjectionSolver(2, cons), P, np.arange(6), np.ones(6))
-
-
 def test_truncated_moments_are_stable_in_both_tails():
     mean, var = truncated_moments(40.0)  # nothing cut
     assert mean == pytest.approx(0.0, abs=1e-12) and var == pytest.approx(1.0)

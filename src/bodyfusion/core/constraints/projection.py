@@ -39,14 +39,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import _FAILED, _INACTIVE, _SOLVED, _project_pair, _secular_limits
+from bodyfusion.core.constraints.kernels import _FAILED, _INACTIVE, _project_pair, _secular_limits
 from bodyfusion.core.constraints.linearisation import _finish
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, _check_inputs, _direction,
                                                _hint_array, _layout, _Layout, _max_violation, _remember,
                                                _unconstrained_solution)
 from bodyfusion.core.constraints.sqp import QpBackend, _sqp, _sqrt_cov
 
-__all__ = ["solve_projection", "ProjectionSolver", "project", "fallback_solution", "pair_solution"]
+__all__ = ["solve_projection", "ProjectionSolver", "project", "fallback_solution"]
 
 
 # ---------------------------------------------------------------------------
@@ -155,32 +155,6 @@ def _dense_qp_backend(lay: _Layout, tol: float) -> QpBackend:
 # ---------------------------------------------------------------------------
 
 
-def pair_solution(
-    p_hat: np.ndarray,
-    lay: _Layout,
-    k: int,
-    tol_m: float,
-    out: tuple[int, float, float, float, int, float, float, float],
-    p: np.ndarray,
-    gain: np.ndarray,
-    jac: np.ndarray,
-) -> tuple[ConstraintSolution, dict[int, list[float]]]:
-    """Constraint k's solution from :func:`_project_pair`'s returned tuple ``out`` (status
-    _INACTIVE or _SOLVED) and the buffers it wrote, p (3n,), gain (3n, 3n), jac (1, 3n):
-    (solution, {k: direction} when active)."""
-    status, viol0, viol1, lam, its, u0, u1, u2 = out
-    if status == _INACTIVE:
-        return _unconstrained_solution(p_hat, lay, "projection", 0.0), {}
-    lam_full = np.zeros(lay.m)
-    lam_full[k] = lam
-    sol = ConstraintSolution(
-        p=p, active=[k], multipliers=lam_full, gain=gain,
-        violation_before_m=viol0, violation_after_m=viol1,
-        iterations=its, converged=viol1 <= tol_m, method="projection", jacobian=jac,
-    )
-    return sol, {k: [u0, u1, u2][: lay.dims[k]]}
-
-
 def _pair_solution(
     p_hat: np.ndarray,
     sigma: np.ndarray,
@@ -202,15 +176,28 @@ def _pair_solution(
     p = np.empty(n3)
     mu = np.empty((n3, n3))
     G = np.empty((1, n3))
-    out = _project_pair(p_hat, sigma, lay.idx, lay.geo, k, hints, *_secular_limits(tol_m, max_iter), p, mu, G)
-    if out[0] == _FAILED:
+    status, viol0k, viol1, lam, its, u0, u1, u2 = _project_pair(
+        p_hat, sigma, lay.idx, lay.geo, k, hints, *_secular_limits(tol_m, max_iter), p, mu, G
+    )
+    if status == _INACTIVE:
+        return _unconstrained_solution(p_hat, lay, "projection", 0.0), {}
+    if status == _FAILED:
         return None
-    if out[0] == _SOLVED and viol0 is not None:
+    if viol0 is None:
+        viol0 = viol0k
+    else:
         g1, _ = lay.g_all(p.tolist())
         if any(g1[q] > tol_m for q in range(lay.m) if q != k):
             return None
-        out = (out[0], viol0, _max_violation(lay, g1), *out[3:])
-    return pair_solution(p_hat, lay, k, tol_m, out, p, mu, G)
+        viol1 = _max_violation(lay, g1)
+    lam_full = np.zeros(lay.m)
+    lam_full[k] = lam
+    sol = ConstraintSolution(
+        p=p, active=[k], multipliers=lam_full, gain=mu,
+        violation_before_m=viol0, violation_after_m=viol1,
+        iterations=its, converged=viol1 <= tol_m, method="projection", jacobian=G,
+    )
+    return sol, {k: [u0, u1, u2][: lay.dims[k]]}
 
 
 def project(
@@ -370,15 +357,14 @@ class ProjectionSolver:
     ) -> None:
         self.n_systems = int(n_systems)
         self.constraints = tuple(constraints)
-        self.layout = _Layout(self.n_systems, self.constraints)
+        self._lay = _Layout(self.n_systems, self.constraints)
         self.tol_m = float(tol_m)
         self.max_iter = int(max_iter)
         self.scheme = _check_scheme(scheme)
-        self.hints = _hint_array(self.layout)
-        """(m, 3): each constraint's direction at the last solve that made it active (east at first)."""
+        self._hints = _hint_array(self._lay)
 
     def solve(self, p_hat: Any, sigma: Any) -> ConstraintSolution:
         p, s = _check_inputs(p_hat, sigma, self.n_systems)
-        sol, dirs = project(p, s, self.layout, self.hints, self.tol_m, self.max_iter, self.scheme)
-        _remember(self.hints, dirs)
+        sol, dirs = project(p, s, self._lay, self._hints, self.tol_m, self.max_iter, self.scheme)
+        _remember(self._hints, dirs)
         return sol

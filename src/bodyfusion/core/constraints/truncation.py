@@ -22,27 +22,16 @@ every other inequality whose bound the estimate's density crosses within :data:`
 σ (β = −g_k(p̂)/s_k), linearised at p̂ (b_k = J_k p̂ − g_k(p̂)): the limit holds although the
 estimate's tail says it might not, and the truncation takes that information too, as
 [Simon2010] truncates wherever the density crosses a bound.
-
-The usual epoch — one constraint, the projection by Newton's method — is solved by the pair's
-projection kernel straight, without the solver's general checks and solution paths
-(:meth:`DensityTruncation.solve_and_correct`): the same numbers as the solver's solve.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _FAILED, _all_finite, _kernel, _project_pair,
-                                                _secular_limits, _separation)
-from bodyfusion.core.constraints.model import ConstraintSolution, DistanceConstraint, _layout, _remember
-from bodyfusion.core.constraints.projection import ProjectionSolver, pair_solution
-
-if TYPE_CHECKING:
-    from bodyfusion.core.constraints.qp import QpSolver
-    from bodyfusion.core.constraints.socp import SocpSolver
+from bodyfusion.core.constraints.kernels import _DEGENERATE_M, _kernel, _separation
+from bodyfusion.core.constraints.model import ConstraintSolution, DistanceConstraint, _layout
 
 TAIL_BETA = 4.0
 """An inactive inequality is truncated where its bound lies within this many σ of the
@@ -167,18 +156,7 @@ class DensityTruncation:
         lay = _layout(n_systems, constraints)
         self._idx, self._geo = lay.idx, lay.geo
         self.positions_only = positions_only
-        self._state_layouts: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
-
-    def _state_layout(self, n: int, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For a joint state of n with its positions at ``pos``: the rows kept out of the correction
-        (n,) bool, and the flat indices of Σ = P[pos][:, pos] in its covariance (9 n_sys²,)."""
-        key = (n, pos.tobytes())
-        layout = self._state_layouts.get(key)
-        if layout is None:
-            others = np.full(n, self.positions_only)
-            others[pos] = False
-            layout = self._state_layouts[key] = (others, (pos[:, None] * n + pos[None, :]).ravel())
-        return layout
+        self._others: dict[tuple[int, bytes], np.ndarray] = {}  # the rows kept out, per state layout
 
     def correct(self, P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray,
                 solution: ConstraintSolution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -193,41 +171,11 @@ class DensityTruncation:
         P_new = np.array(P, dtype=float, order="C")
         dx = np.zeros(n)
         tail = np.zeros(self._idx.shape[0], dtype=bool)
+        key = (n, pos.tobytes())
+        others = self._others.get(key)
+        if others is None:
+            others = self._others[key] = np.full(n, self.positions_only)
+            others[pos] = False
         _truncate(P_new, pos, p_hat, solution.jacobian.reshape(len(solution.active), p_hat.shape[0]), solution.p,
-                  np.array(solution.active, dtype=np.int64), self._idx, self._geo, TAIL_BETA,
-                  self._state_layout(n, pos)[0], dx, tail)
+                  np.array(solution.active, dtype=np.int64), self._idx, self._geo, TAIL_BETA, others, dx, tail)
         return dx, P_new, tail
-
-    def solve_and_correct(self, solver: ProjectionSolver | QpSolver | SocpSolver, P: np.ndarray, pos: np.ndarray,
-                          p_hat: np.ndarray) -> tuple[ConstraintSolution, np.ndarray, np.ndarray, np.ndarray]:
-        """``solver``'s solution on p̂ and Σ = P[pos][:, pos], then :meth:`correct` at it: (solution,
-        δx, P*, tails), arguments as :meth:`correct`'s. A single constraint projected by Newton's
-        method (the usual case: a :class:`~bodyfusion.core.constraints.projection.ProjectionSolver`
-        at its defaults) is solved by the pair's kernel straight (:meth:`_project_pair`): the same
-        numbers as the solver's."""
-        solution = None
-        if (type(solver) is ProjectionSolver and solver.scheme == "newton" and solver.max_iter > 0
-                and self._idx.shape[0] == 1):
-            solution = self._project_pair(solver, P, pos, p_hat)
-        if solution is None:
-            solution = solver.solve(p_hat, P[np.ix_(pos, pos)])
-        return (solution, *self.correct(P, pos, p_hat, solution))
-
-    def _project_pair(self, solver: ProjectionSolver, P: np.ndarray, pos: np.ndarray,
-                      p_hat: np.ndarray) -> ConstraintSolution | None:
-        """The solution ``solver.solve`` gives for the layout's only constraint, from the pair's
-        projection kernel without the solver's general checks and paths (its hint remembered as
-        the solver remembers it); None when the kernel fails or p̂ or Σ is not finite (the solver
-        then solves, and reports it)."""
-        n3 = p_hat.shape[0]
-        sigma = P.take(self._state_layout(P.shape[0], pos)[1]).reshape(n3, n3)
-        if not _all_finite(p_hat, sigma):
-            return None
-        p, gain, jac = np.empty(n3), np.empty((n3, n3)), np.empty((1, n3))
-        out = _project_pair(p_hat, sigma, self._idx, self._geo, 0, solver.hints,
-                            *_secular_limits(solver.tol_m, solver.max_iter), p, gain, jac)
-        if out[0] == _FAILED:
-            return None
-        solution, direction = pair_solution(p_hat, solver.layout, 0, solver.tol_m, out, p, gain, jac)
-        _remember(solver.hints, direction)
-        return solution
