@@ -300,9 +300,34 @@ def test_fb_passes_are_independent_nothing_shrinks_at_segment_boundaries(walk):
         assert smooth_record(rec, KINDS[kind]).diagnostics["covariance_rebuild_rel_error"] == 0.0
 
 
+def test_the_sweep_after_position_is_the_whole_sweeps_on_those_states(walk):
+    """No state, ZUPT or heading reset depends on position: where nothing measures it (the
+    simulated walk's filter, like every backward pass) the RTS of the other twelve states is the
+    whole sweep's on them, to rounding, and leaves position unsmoothed."""
+    r = _Record(walk[1])
+    bounds = segment_bounds(r.stance, r.rate_hz, KINDS["fb-rts"].min_stance_s, KINDS["fb-rts"].max_segment_s)
+    whole, reduced = _Pass(int(np.max(np.diff(bounds))) + 1), _Pass(int(np.max(np.diff(bounds))) + 1)
+    P = r.P0.copy()
+    for k in range(min(bounds.size - 1, 12)):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        P_b = r.forward(a, b, P, True, whole)
+        r.forward(a, b, P, True, reduced)
+        L = b - a
+        assert whole.rts(L) == 0 and reduced.rts(L, position=False) == 0
+        S = slice(3, 15)
+        sd = np.sqrt(np.einsum("jkk->jk", whole.Ps[0, :L + 1, S, S]))
+        np.testing.assert_allclose(reduced.Ps[0, :L + 1, S, S] / (sd[:, :, None] * sd[:, None, :]),
+                                   whole.Ps[0, :L + 1, S, S] / (sd[:, :, None] * sd[:, None, :]), rtol=0, atol=1e-10)
+        np.testing.assert_allclose(reduced.dxs[0, :L + 1, S] / sd, whole.dxs[0, :L + 1, S] / sd, rtol=0, atol=1e-10)
+        assert not np.any(reduced.dxs[0, :L + 1, 0:3])
+        assert not np.allclose(whole.dxs[0, :L, 0:3], 0.0)  # the whole sweep does move position
+        P = P_b
+
+
 def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
     """FB (FB-RTS) as the passes composed one kernel at a time: the backward navigation's
-    inputs reversed by numpy, both passes smoothed, the whole fused covariance formed."""
+    inputs reversed by numpy, both passes smoothed (the backward one's states after position),
+    the whole fused covariance formed."""
     cfg = KINDS["fb-rts" if with_rts else "fb"]
     r = _Record(rec)
     bounds = segment_bounds(r.stance, r.rate_hz, cfg.min_stance_s, cfg.max_segment_s)
@@ -332,7 +357,7 @@ def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
                     bw.Pprior[0], bw.Phi[0], bw.dx[0], bw.jump[0], bw.yaw_reset[0])
         if with_rts:
             fw.rts(L)
-            bw.rts(L)
+            bw.rts(L, position=False)
             fuse_block(fw.smoothed[0], fw.Ps[0], bw.smoothed[0], bw.Ps[0], L, out_x, fused_P, a)
             Pp = fw.Ps[0, :L + 1]
         else:

@@ -113,7 +113,8 @@ from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
 from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, boxminus, fb_segment, filter_pass,
-                                                           position_covariance, rts_block)
+                                                           position_covariance, rts_block,
+                                                           rts_block_after_position)
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep
 
 log = logging.getLogger(__name__)
@@ -204,11 +205,13 @@ class _Pass:
         self.Ps = np.zeros((passes, size, 15, 15))
         self.smoothed = np.zeros((passes, size, 16))
 
-    def rts(self, L: int) -> int:
-        """Smooth the first pass's block on its own (RTS from its end); the states into
-        ``smoothed``."""
-        failed = rts_block(self.Ppost[0], self.Pprior[0], self.Phi[0], self.dx[0], self.yaw_reset[0], L, np.zeros(15),
-                           self.Ppost[0, L].copy(), self.dxs[0], self.Ps[0])
+    def rts(self, L: int, position: bool = True) -> int:
+        """Smooth the first pass's block on its own (RTS from its end; without ``position``, the
+        states after it: :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block_after_position`);
+        the states into ``smoothed``."""
+        sweep = rts_block if position else rts_block_after_position
+        failed = sweep(self.Ppost[0], self.Pprior[0], self.Phi[0], self.dx[0], self.yaw_reset[0], L, np.zeros(15),
+                       self.Ppost[0, L].copy(), self.dxs[0], self.Ps[0])
         apply_smoothed(self.xs[0], 0, L, self.dxs[0], self.smoothed[0], 0)
         return failed
 

@@ -37,6 +37,10 @@ FUSED = np.array([3, 4, 5, 6, 7, 9, 10, 11, 12, 13, 14], dtype=np.int64)
 """States the backward pass informs and the fusion takes from it: δv, roll and pitch,
 δb_a, δb_g. Not position (no dynamics or update of the pass depends on it, so it learns
 nothing of it) nor the shared yaw."""
+AFTER_POSITION = 3
+"""The first error state after position (δv): the backward pass's RTS sweeps the states from
+here (:func:`rts_block_after_position`); no other state depends on position, nothing measures it
+in that pass, and the fusion does not take the backward pass's."""
 
 
 @numba.njit(cache=True)
@@ -238,11 +242,14 @@ def replay_corrections(i: int, x: np.ndarray, P: np.ndarray, x_prior: np.ndarray
     return ptr, kptr
 
 
-@numba.njit(cache=True)
-def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, yaw_reset: np.ndarray, L: int,
-              dx_end: np.ndarray, P_end: np.ndarray, dxs: np.ndarray, Ps: np.ndarray) -> int:
+@numba.njit(inline="always")
+def _rts_sweep(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, yaw_reset: np.ndarray, L: int,
+               dx_end: np.ndarray, P_end: np.ndarray, first: int, dxs: np.ndarray, Ps: np.ndarray) -> int:
     """Rauch–Tung–Striebel backward sweep over a block of a closed-loop error-state filter
-    ([Shen2025] §3.2).
+    ([Shen2025] §3.2), of the error states ``first`` … 14 (0: all; :data:`AFTER_POSITION`: all
+    but position, which no other state, stance update or heading reset depends on: where nothing
+    measures position either, as in the backward pass, the sweep of the others is the whole
+    model's on them, to rounding).
 
     The filter's own error estimates are zero after every injection, so with dxs[j] the
     smoothed error relative to the posterior nominal at j:
@@ -255,13 +262,15 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
     its own). A stance update's heading reset G_{j+1} = I + a e_ψᵀ (``yaw_reset``, see
     :func:`filter_pass`) changed the coordinates of the error after it: dxs_{j+1} and
     Ps_{j+1} are taken back to the update's by G⁻¹ = I − a e_ψᵀ (e_ψᵀ a = 0) before the
-    step. Returns the number of steps whose gain could not be formed (then
-    dxs_j = 0, Ps_j = P⁺_j)."""
-    M = np.empty((15, 15))
-    Kt = np.empty((15, 15))
-    Lw = np.empty((15, 15))
-    D = np.empty((15, 15))
-    KD = np.empty((15, 15))
+    step. Of the states before ``first``, dxs is zero and Ps left unwritten below L. Returns
+    the number of steps whose gain could not be formed (then dxs_j = 0, Ps_j = P⁺_j)."""
+    n = 15 - first
+    A = np.empty((n, n))
+    M = np.empty((n, n))
+    Kt = np.empty((n, n))
+    Lw = np.empty((n, n))
+    KD = np.empty((n, n))
+    D = np.zeros((15, 15))  # the states before first stay zero: the heading reset leaves them so
     e = np.empty(15)
     failed = 0
     for k in range(15):
@@ -271,59 +280,68 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
     # Every product below runs a row at a time over contiguous columns (vectorised); each element
     # still sums its terms in the index order of the textbook loop, so the result is that loop's.
     for j in range(L - 1, -1, -1):
-        # M = Φ_{j+1} P⁺_j over the non-zero entries of Φ (block-sparse: a zero term adds nothing);
-        # P⁻ Kᵀ = M
-        for r in range(15):
-            for c in range(15):
+        for r in range(15):  # the states before first stay zero, and all where the gain fails
+            dxs[j, r] = 0.0
+        # M = Φ_{j+1} P⁺_j over the non-zero entries of Φ (block-sparse: a zero term adds nothing;
+        # no state after first depends on one before it); P⁻ Kᵀ = M
+        for r in range(n):
+            for c in range(n):
                 M[r, c] = 0.0
-            for k in range(15):
-                f = Phi[j + 1, r, k]
+            for k in range(first, 15):
+                f = Phi[j + 1, first + r, k]
                 if f != 0.0:
-                    for c in range(15):
-                        M[r, c] += f * Ppost[j, k, c]
-        if not chol_solve(Pprior[j + 1], M, Kt, Lw):
+                    for c in range(n):
+                        M[r, c] += f * Ppost[j, k, first + c]
+        if first > 0:  # the block of the states swept, contiguous
+            for r in range(n):
+                for c in range(n):
+                    A[r, c] = Pprior[j + 1, first + r, first + c]
+        if not chol_solve(Pprior[j + 1] if first == 0 else A, M, Kt, Lw):
             failed += 1
-            for r in range(15):
-                dxs[j, r] = 0.0
-                for c in range(15):
+            for r in range(first, 15):
+                for c in range(first, 15):
                     Ps[j, r, c] = Ppost[j, r, c]
             continue
         a0, a1 = yaw_reset[j + 1, 0], yaw_reset[j + 1, 1]
-        for r in range(15):
-            for c in range(15):
+        for r in range(first, 15):
+            for c in range(first, 15):
                 D[r, c] = Ps[j + 1, r, c]
         if a0 != 0.0 or a1 != 0.0:  # G⁻¹ Ps G⁻ᵀ
             congruence_by_yaw_reset(D, -a0, -a1)
-        for k in range(15):
+        for k in range(first, 15):
             e[k] = dxs[j + 1, k] + dx[j + 1, k]
         e[3] -= a0 * dxs[j + 1, 8]
         e[4] -= a1 * dxs[j + 1, 8]
-        for r in range(15):
-            dxs[j, r] = 0.0
-        for k in range(15):
-            ek = e[k]
-            for r in range(15):
-                dxs[j, r] += Kt[k, r] * ek
-        for r in range(15):
-            for c in range(15):
+        for k in range(n):
+            ek = e[first + k]
+            for r in range(n):
+                dxs[j, first + r] += Kt[k, r] * ek
+        for r in range(first, 15):
+            for c in range(first, 15):
                 D[r, c] -= Pprior[j + 1, r, c]
         # KD = K D, then Ps = P⁺ + (K D) Kᵀ (upper triangle mirrored): five columns at a time
-        # in registers
-        for r in range(15):
-            for c0 in range(0, 15, 5):
+        # in registers, the n % 5 last ones (two of 12) one at a time
+        wide = n - n % 5
+        for r in range(n):
+            for c0 in range(0, wide, 5):
                 s0 = s1 = s2 = s3 = s4 = 0.0
-                for k in range(15):
+                for k in range(n):
                     kr = Kt[k, r]
-                    s0 += kr * D[k, c0]
-                    s1 += kr * D[k, c0 + 1]
-                    s2 += kr * D[k, c0 + 2]
-                    s3 += kr * D[k, c0 + 3]
-                    s4 += kr * D[k, c0 + 4]
+                    s0 += kr * D[first + k, first + c0]
+                    s1 += kr * D[first + k, first + c0 + 1]
+                    s2 += kr * D[first + k, first + c0 + 2]
+                    s3 += kr * D[first + k, first + c0 + 3]
+                    s4 += kr * D[first + k, first + c0 + 4]
                 KD[r, c0], KD[r, c0 + 1], KD[r, c0 + 2], KD[r, c0 + 3], KD[r, c0 + 4] = s0, s1, s2, s3, s4
-        for r in range(15):
-            for c0 in range(5 * (r // 5), 15, 5):
+            for c in range(wide, n):
+                s0 = 0.0
+                for k in range(n):
+                    s0 += Kt[k, r] * D[first + k, first + c]
+                KD[r, c] = s0
+        for r in range(n):
+            for c0 in range(5 * (r // 5), wide, 5):
                 s0 = s1 = s2 = s3 = s4 = 0.0
-                for k in range(15):
+                for k in range(n):
                     kdr = KD[r, k]
                     s0 += kdr * Kt[k, c0]
                     s1 += kdr * Kt[k, c0 + 1]
@@ -331,11 +349,32 @@ def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nda
                     s3 += kdr * Kt[k, c0 + 3]
                     s4 += kdr * Kt[k, c0 + 4]
                 M[r, c0], M[r, c0 + 1], M[r, c0 + 2], M[r, c0 + 3], M[r, c0 + 4] = s0, s1, s2, s3, s4
-            for c in range(r, 15):
-                v = Ppost[j, r, c] + M[r, c]
-                Ps[j, r, c] = v
-                Ps[j, c, r] = v
+            for c in range(max(r, wide), n):
+                s0 = 0.0
+                for k in range(n):
+                    s0 += KD[r, k] * Kt[k, c]
+                M[r, c] = s0
+            for c in range(r, n):
+                v = Ppost[j, first + r, first + c] + M[r, c]
+                Ps[j, first + r, first + c] = v
+                Ps[j, first + c, first + r] = v
     return failed
+
+
+@numba.njit(cache=True)
+def rts_block(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, yaw_reset: np.ndarray, L: int,
+              dx_end: np.ndarray, P_end: np.ndarray, dxs: np.ndarray, Ps: np.ndarray) -> int:
+    """:func:`_rts_sweep` of all the error states."""
+    return _rts_sweep(Ppost, Pprior, Phi, dx, yaw_reset, L, dx_end, P_end, 0, dxs, Ps)
+
+
+@numba.njit(cache=True)
+def rts_block_after_position(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray,
+                             yaw_reset: np.ndarray, L: int, dx_end: np.ndarray, P_end: np.ndarray, dxs: np.ndarray,
+                             Ps: np.ndarray) -> int:
+    """:func:`_rts_sweep` of the error states from :data:`AFTER_POSITION` (a kernel of its own:
+    the sizes constant in each, 12³ products instead of 15³)."""
+    return _rts_sweep(Ppost, Pprior, Phi, dx, yaw_reset, L, dx_end, P_end, AFTER_POSITION, dxs, Ps)
 
 
 @numba.njit(cache=True)
@@ -497,7 +536,8 @@ def fb_segment(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndar
        ``params_bw`` with the Earth rate negated, the stance update at j sample i's, the gaps'
        inflations in the backward form) from the forward nominal state at b (velocity and gyro
        bias negated) and the prior of :func:`backward_prior`;
-    3. with ``with_rts`` both passes RTS-smoothed over the segment (:func:`rts_block`);
+    3. with ``with_rts`` both passes RTS-smoothed over the segment (:func:`rts_block`; the backward
+       one :func:`rts_block_after_position`);
     4. the fusion (:func:`fuse_block`, the fused covariance's leading block into ``fused_P``
        (·, m, m)): of the smoothed passes, the reported position covariance the forward RTS one
        (m = 0: none formed); without RTS of the forward posterior and the backward prior, the
@@ -561,8 +601,12 @@ def fb_segment(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndar
     if with_rts:
         zeros = np.zeros(15)
         for p in range(2):
-            gain_failures += rts_block(Ppost[p], Pprior[p], Phi[p], dx[p], yaw_reset[p], L, zeros, Ppost[p, L].copy(),
-                                       dxs[p], Ps[p])
+            if p == 0:
+                gain_failures += rts_block(Ppost[0], Pprior[0], Phi[0], dx[0], yaw_reset[0], L, zeros,
+                                           Ppost[0, L].copy(), dxs[0], Ps[0])
+            else:  # the backward pass's position is not wanted
+                gain_failures += rts_block_after_position(Ppost[1], Pprior[1], Phi[1], dx[1], yaw_reset[1], L, zeros,
+                                                          Ppost[1, L].copy(), dxs[1], Ps[1])
             apply_smoothed(xs[p], 0, L, dxs[p], smoothed[p], 0)
     fusion_failures = fuse_block(smoothed[0] if with_rts else xs[0], Ps[0] if with_rts else Ppost[0],
                                  smoothed[1] if with_rts else xp[1], Ps[1] if with_rts else Pprior[1], L, out_x,
