@@ -28,14 +28,25 @@ distance each estimate walked against the truth's (a check that both did the wor
 the last line the ratio of the project's forward + RTS to gaitmap's RtsKalman,
 ``rts_vs_gaitmap=<ratio>`` (``rts_vs_gaitmap=n/a`` when gaitmap is not installed).
 
-Run: python benchmarks/peers.py [--laps 4] [--repeats 7] [--seed 0]
+With ``--cold`` the first call is timed too, each side in a fresh process on an empty numba
+cache (``NUMBA_CACHE_DIR`` a new folder), so that it compiles everything it runs: the project
+builds the system from the simulated files (reading, stance detection, alignment) and runs
+forward + RTS; gaitmap runs ``RtsKalman().estimate`` on the same samples (the DataFrame built
+before). Printed: each side's CPU and wall seconds of that first call, and their ratio
+gaitmap / project.
+
+Run: python benchmarks/peers.py [--laps 4] [--repeats 7] [--seed 0] [--cold]
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
+import json
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -152,18 +163,69 @@ def gaitmap_jobs(foot: FootIns) -> dict[str, Callable[[], np.ndarray]]:
     return {"gaitmap RtsKalman.estimate": estimate, "gaitmap core (no detector, no DataFrames)": core}
 
 
+def cold_child(side: str, config: Path, samples: Path) -> None:
+    """In this fresh process (empty numba cache): the first call of one side, printed as JSON
+    (CPU and wall seconds of the call)."""
+    if side == "gaitmap":
+        import pandas as pd
+        from gaitmap.trajectory_reconstruction import RtsKalman
+        data = np.load(samples)
+        frame = pd.DataFrame(np.column_stack([data["acc"], data["gyro_dps"]]),
+                             columns=["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"])
+        c0, w0 = time.process_time(), time.perf_counter()
+        RtsKalman().estimate(frame, sampling_rate_hz=float(RATE_HZ))
+    else:
+        loaded = load_layout(config)
+        c0, w0 = time.process_time(), time.perf_counter()
+        cfg = SmootherConfig(kind="rts")
+        foot = build_systems(loaded, layout_context(loaded))["foot"]
+        foot.plan_smoothing(cfg)
+        foot.restart()
+        foot.advance(foot.t_end)
+        smooth_system(foot, cfg)
+    print(json.dumps({"cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - w0}))
+
+
+def cold_first_calls(config: Path, foot: FootIns, folder: Path) -> None:
+    """Each side's first call in a fresh process on an empty numba cache (:func:`cold_child`)."""
+    samples = folder / "samples.npz"
+    np.savez(samples, acc=foot.stream.acc_b, gyro_dps=np.rad2deg(foot.stream.gyro_b))
+    result = {}
+    for side in ("project", "gaitmap"):
+        with tempfile.TemporaryDirectory() as cache:
+            proc = subprocess.run([sys.executable, __file__, "--cold-child", side, str(config), str(samples)],
+                                  env=dict(os.environ, NUMBA_CACHE_DIR=cache), capture_output=True, text=True)
+        if proc.returncode != 0:
+            print(f"cold {side}: failed ({proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ''})")
+            continue
+        result[side] = json.loads(proc.stdout.strip().splitlines()[-1])
+        r = result[side]
+        what = "build + forward + RTS" if side == "project" else "RtsKalman().estimate"
+        print(f"cold {side} ({what}, fresh process, empty numba cache): first call {r['cpu_s']:.2f} CPU-s "
+              f"({r['wall_s']:.2f} s wall)")
+    if len(result) == 2:
+        print(f"cold first call gaitmap / project: {result['gaitmap']['cpu_s'] / result['project']['cpu_s']:.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--laps", type=int, default=4, help="laps of the 125 m rectangle (about 99 s each)")
     ap.add_argument("--repeats", type=int, default=7, help="timed calls per job (median)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cold", action="store_true", help="also time each side's first call in a fresh process")
+    ap.add_argument("--cold-child", nargs=3, metavar=("SIDE", "CONFIG", "SAMPLES"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.cold_child:
+        cold_child(args.cold_child[0], Path(args.cold_child[1]), Path(args.cold_child[2]))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         scn = Path(tmp) / "peers.yaml"
         scn.write_text(yaml.safe_dump(scenario(args.laps)))
         sim = simulate(scn, Path(tmp) / "sim", seed=args.seed)
         loaded = load_layout(sim.config_path)
         foot = build_systems(loaded, layout_context(loaded))["foot"]
+        if args.cold:
+            cold_first_calls(sim.config_path, foot, Path(tmp))
     n = foot.samples
     jobs = {**project_jobs(foot), **gaitmap_jobs(foot)}
     print(f"stream: {n} samples at {RATE_HZ} Hz ({n / RATE_HZ / 60:.1f} min), stance fraction "

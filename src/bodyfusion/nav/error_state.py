@@ -107,7 +107,7 @@ def transition_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da
                 M[r, q] *= d
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def transition_transpose_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt: float, da: float, dg: float,
                               lower: bool) -> None:
     """M ← Φᵀ M in place (M (15, m)) for the transition Φ = I + E of :func:`transition_left`,
@@ -115,8 +115,9 @@ def transition_transpose_left(M: np.ndarray, C: np.ndarray, f_n: np.ndarray, dt:
     in the navigation frame, dt s, the bias decay da, dg): the adjoint of the smoothers'
     backward sweep. Row c of Φᵀ M is M[c] + Σ_k E[k, c] M[k] over k < c (then k = c) in
     increasing k, the order of a dense product; rows are done from the last, so each reads
-    rows not yet changed. With ``lower`` only M[c, :c + 1] of each row changes. Inlined into
-    its callers (their constant ``lower`` then costs no compilation of its own)."""
+    rows not yet changed. With ``lower`` only M[c, :c + 1] of each row changes. A kernel of its
+    own, ``lower`` passed as np.bool_ (one signature): inlined at its three call sites it made
+    their kernel take 3.6 s to compile."""
     m = M.shape[1]
     for k in range(2, -1, -1):  # gyro bias rows 12 + k: from δθ (rows 6:9)
         c = 12 + k

@@ -40,14 +40,16 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
     Φᵀ Lam Φ."""
     da = (1.0 - dt * q_diag[Q_DECAY]) - 1.0
     dg = (1.0 - dt * q_diag[Q_DECAY + 1]) - 1.0
-    transition_transpose_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, False)
-    transition_transpose_left(Lam, C, f_n, dt, da, dg, False)
+    # np.bool_, not a bare True/False: numba types a constant argument as a literal, one
+    # compilation per value
+    transition_transpose_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, np.bool_(False))
+    transition_transpose_left(Lam, C, f_n, dt, da, dg, np.bool_(False))
     for r in range(15):
         for c in range(r + 1, 15):
             v = Lam[r, c]
             Lam[r, c] = Lam[c, r]
             Lam[c, r] = v
-    transition_transpose_left(Lam, C, f_n, dt, da, dg, True)
+    transition_transpose_left(Lam, C, f_n, dt, da, dg, np.bool_(True))
     for r in range(15):
         for c in range(r + 1, 15):
             Lam[r, c] = Lam[c, r]
