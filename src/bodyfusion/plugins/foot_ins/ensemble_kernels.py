@@ -112,7 +112,7 @@ def ensemble_covariance(ens: np.ndarray, mean: np.ndarray, P: np.ndarray) -> Non
     M = ens.shape[0]
     n = P.shape[0]
     D = np.empty((M, n))
-    ensemble_deviations(ens, mean, D, True)
+    ensemble_deviations(ens, mean, D, np.bool_(True))  # not a literal: the signature Python calls
     for r in range(n):
         for c in range(r, n):
             s = 0.0
@@ -305,16 +305,19 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
                 for k in range(3):
                     ens[j, 16 + k] = alpha * ens[j, 16 + k] + zupt_sigma * nz[j, 12 + k]
         if stance[i]:
+            # np.int64, not bare integers: numba types a constant argument as a literal, one
+            # compilation per value (three of this kernel, 1.8 s more of a cold start)
             if coloured:
-                nis = ensemble_analysis(ens, 3, 16, zero, 0.0, nz, 15)
+                nis = ensemble_analysis(ens, np.int64(3), np.int64(16), zero, 0.0, nz, np.int64(15))
             else:
-                nis = ensemble_analysis(ens, 3, -1, zero, zupt_sigma * zupt_sigma, nz, 15)
+                nis = ensemble_analysis(ens, np.int64(3), np.int64(-1), zero, zupt_sigma * zupt_sigma, nz,
+                                        np.int64(15))
             counters[C_NIS_SUM] += nis
             counters[C_ZUPTS] += 1
             if zaru_sigma > 0:
                 for k in range(3):
                     z[k] = gyro_b[i, k]
-                ensemble_analysis(ens, 13, -1, z, zaru_sigma * zaru_sigma, nz, 18)
+                ensemble_analysis(ens, np.int64(13), np.int64(-1), z, zaru_sigma * zaru_sigma, nz, np.int64(18))
                 counters[C_ZARUS] += 1
         ensemble_mean(ens, mean)
         for k in range(16):

@@ -292,11 +292,10 @@ def _rts_sweep(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nd
                 if f != 0.0:
                     for c in range(n):
                         M[r, c] += f * Ppost[j, k, first + c]
-        if first > 0:  # the block of the states swept, contiguous
-            for r in range(n):
-                for c in range(n):
-                    A[r, c] = Pprior[j + 1, first + r, first + c]
-        if not chol_solve(Pprior[j + 1] if first == 0 else A, M, Kt, Lw):
+        for r in range(n):  # the block of the states swept, contiguous
+            for c in range(n):
+                A[r, c] = Pprior[j + 1, first + r, first + c]
+        if not chol_solve(A, M, Kt, Lw):
             failed += 1
             for r in range(first, 15):
                 for c in range(first, 15):
@@ -319,41 +318,26 @@ def _rts_sweep(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nd
         for r in range(first, 15):
             for c in range(first, 15):
                 D[r, c] -= Pprior[j + 1, r, c]
-        # KD = K D, then Ps = P⁺ + (K D) Kᵀ (upper triangle mirrored): five columns at a time
-        # in registers, the n % 5 last ones (two of 12) one at a time
-        wide = n - n % 5
+        # KD = K D, then Ps = P⁺ + (K D) Kᵀ (upper triangle mirrored): three columns at a time in
+        # registers (n is 15 or 12)
         for r in range(n):
-            for c0 in range(0, wide, 5):
-                s0 = s1 = s2 = s3 = s4 = 0.0
+            for c0 in range(0, n, 3):
+                s0 = s1 = s2 = 0.0
                 for k in range(n):
                     kr = Kt[k, r]
                     s0 += kr * D[first + k, first + c0]
                     s1 += kr * D[first + k, first + c0 + 1]
                     s2 += kr * D[first + k, first + c0 + 2]
-                    s3 += kr * D[first + k, first + c0 + 3]
-                    s4 += kr * D[first + k, first + c0 + 4]
-                KD[r, c0], KD[r, c0 + 1], KD[r, c0 + 2], KD[r, c0 + 3], KD[r, c0 + 4] = s0, s1, s2, s3, s4
-            for c in range(wide, n):
-                s0 = 0.0
-                for k in range(n):
-                    s0 += Kt[k, r] * D[first + k, first + c]
-                KD[r, c] = s0
+                KD[r, c0], KD[r, c0 + 1], KD[r, c0 + 2] = s0, s1, s2
         for r in range(n):
-            for c0 in range(5 * (r // 5), wide, 5):
-                s0 = s1 = s2 = s3 = s4 = 0.0
+            for c0 in range(3 * (r // 3), n, 3):
+                s0 = s1 = s2 = 0.0
                 for k in range(n):
                     kdr = KD[r, k]
                     s0 += kdr * Kt[k, c0]
                     s1 += kdr * Kt[k, c0 + 1]
                     s2 += kdr * Kt[k, c0 + 2]
-                    s3 += kdr * Kt[k, c0 + 3]
-                    s4 += kdr * Kt[k, c0 + 4]
-                M[r, c0], M[r, c0 + 1], M[r, c0 + 2], M[r, c0 + 3], M[r, c0 + 4] = s0, s1, s2, s3, s4
-            for c in range(max(r, wide), n):
-                s0 = 0.0
-                for k in range(n):
-                    s0 += KD[r, k] * Kt[k, c]
-                M[r, c] = s0
+                M[r, c0], M[r, c0 + 1], M[r, c0 + 2] = s0, s1, s2
             for c in range(r, n):
                 v = Ppost[j, first + r, first + c] + M[r, c]
                 Ps[j, first + r, first + c] = v

@@ -20,6 +20,16 @@ import numpy as np
 
 
 @numba.njit(inline="always")
+def _assign(M: np.ndarray, work: np.ndarray) -> None:
+    """M ← work element by element (n, n): a slice assignment would compile numba's
+    shape-mismatch error message with it, string formatting that cost ~3 s of a cold start."""
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            M[i, j] = work[i, j]
+
+
+@numba.njit(inline="always")
 def _left_multiply(A: np.ndarray, M: np.ndarray, work: np.ndarray) -> None:
     """M ← A M in place (n, n), through ``work`` (n, n); zero entries of A skipped."""
     n = M.shape[0]
@@ -31,7 +41,7 @@ def _left_multiply(A: np.ndarray, M: np.ndarray, work: np.ndarray) -> None:
             if a != 0.0:
                 for j in range(n):
                     work[i, j] += a * M[k, j]
-    M[:, :] = work
+    _assign(M, work)
 
 
 @numba.njit(inline="always")
@@ -60,7 +70,7 @@ def transition(P: np.ndarray, F: np.ndarray, Q: np.ndarray, phi: np.ndarray) -> 
                 if f != 0.0:
                     s += P[i, k] * f
             work[i, j] = s + Q[i, j]
-    P[:, :] = work
+    _assign(P, work)
     _symmetrise(P)
     if phi.shape[0] == n:
         _left_multiply(F, phi, work)
@@ -162,7 +172,7 @@ def kalman_update(P: np.ndarray, H: np.ndarray, R: np.ndarray, y: np.ndarray, ga
             for b in range(m):
                 r += KR[i, b] * K[j, b]
             work[i, j] = s + r
-    P[:, :] = work
+    _assign(P, work)
     _symmetrise(P)
     if phi.shape[0] == n:
         _left_multiply(A, phi, work)
