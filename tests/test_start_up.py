@@ -1,9 +1,11 @@
 """What ``fusion run`` imports: the main command starts without the libraries only some runs
 need (scipy.stats and scipy.signal take over a second to import, pandas 0.3 s, osqp 50 ms), and the
-trajectory files are written without pandas (``pa.array`` would import it)."""
+trajectory files are written without pandas (``pa.array`` would import it); what it compiles: one
+signature per kernel."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -85,3 +87,41 @@ def test_arrow_arrays_are_those_pa_array_makes():
     assert _numbers(codes).equals(pa.array(codes))
     names = ["left_foot", "hand", "füße"]
     assert _strings(names).equals(pa.array(names, pa.string()))
+
+
+SIGNATURE_PROBE = """
+import json, sys
+import numba
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.run import run_layout
+from bodyfusion.sim import simulate
+layouts = [(VICON, ["smoother.kind=fb-rts"]), (VICON, ["smoother.kind=rts", "fuser.method=qp"]),
+           (VICON, ["systems.left_foot.filter.kind=enekf", "systems.right_foot.filter.kind=ckf"])]
+for scenario in SCENARIOS:
+    layouts.append((simulate(scenario, OUT / scenario.stem, seed=0).config_path, []))
+for config, sets in layouts:
+    run_layout(load_layout(config, sets))
+multi = {}
+for name, module in list(sys.modules.items()):
+    if name.startswith("bodyfusion"):
+        for obj in vars(module).values():
+            if isinstance(obj, numba.core.registry.CPUDispatcher) and len(obj.overloads) > 1:
+                multi[f"{obj.py_func.__module__}.{obj.py_func.__qualname__}"] = [str(s) for s in obj.signatures]
+print(json.dumps(multi))
+"""
+
+
+def test_every_kernel_compiles_one_signature_whatever_the_layout(tmp_path):
+    """A kernel called with an integer or boolean constant, or with arrays of another layout, is
+    compiled again for those types (a literal 3 is a type of its own): seconds of a cold start
+    each. Foot INS filters of three kinds, FB-RTS and the whole-run RTS, the QP, a phone with
+    GNSS and UWB ranges, run in one process: every compiled kernel holds one signature."""
+    from tests.paths import ROOT
+
+    configs = ROOT / "configs"
+    probe = (f"from pathlib import Path\nVICON = Path({str(configs / 'dual_foot_vicon.yaml')!r})\n"
+             f"OUT = Path({str(tmp_path)!r})\n"
+             f"SCENARIOS = [Path({str(configs / 'dual_foot_hand_gnss.yaml')!r}), "
+             f"Path({str(configs / 'sim_dual_foot_uwb.yaml')!r})]\n" + SIGNATURE_PROBE)
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == {}
