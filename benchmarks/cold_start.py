@@ -11,6 +11,10 @@ exit (wall clock), with ``NUMBA_CACHE_DIR`` pointing at a new empty folder:
    compiling it, not counting the kernels it compiled in turn (nested compilations) — and,
    after the run, how many compiled signatures each kernel holds.
 
+``--config`` runs another layout the same way (``--simulate``: a scenario, which ``fusion
+simulate`` writes out first, untimed, and whose layout runs): the way to survey what each kind
+of layout compiles.
+
 Prints the cold and warm wall and CPU times (median of ``--repeats`` pairs, each pair on a
 new cache; the CPU time, user + system, is the figure to compare on a shared machine), the
 time a process takes to import ``bodyfusion.cli`` alone (the floor of a warm start), the kernels by compile time (seconds, signatures; kernels with more than one
@@ -18,7 +22,7 @@ signature are the ones the call sites feed different types), the totals, and as 
 line ``cold_s=<s> warm_s=<s> kernels=<n> signatures=<n> compile_s=<s>`` (wall seconds, the
 project's kernels and their signatures, all compile seconds of the instrumented run).
 
-Run: python benchmarks/cold_start.py [--repeats 1] [--top 25] [--set KEY=VALUE ...]
+Run: python benchmarks/cold_start.py [--repeats 1] [--top 25] [--set KEY=VALUE ...] [--config PATH [--simulate]]
 """
 
 from __future__ import annotations
@@ -38,10 +42,11 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "dual_foot_vicon.yaml"
 
 
-def fusion_run(out: Path, overrides: list[str]) -> list[str]:
-    """The README's main command (``fusion run CONFIG --out DIR``) with ``--set`` overrides."""
+def fusion_run(config: Path, out: Path, overrides: list[str]) -> list[str]:
+    """``fusion run CONFIG --out DIR`` with ``--set`` overrides (the README's main command with
+    the default ``config``)."""
     sets = [arg for kv in overrides for arg in ("--set", kv)]
-    return ["run", str(CONFIG), "--out", str(out), *sets]
+    return ["run", str(config), "--out", str(out), *sets]
 
 
 def timed_process(argv: list[str], cache: Path) -> tuple[float, float]:
@@ -105,6 +110,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1, help="cold/warm pairs, each on a new cache (median)")
     ap.add_argument("--top", type=int, default=25, help="kernels listed")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="layout override KEY=VALUE")
+    ap.add_argument("--config", type=Path, default=CONFIG, help="the layout to run (default: the main command's)")
+    ap.add_argument("--simulate", action="store_true", help="--config is a scenario: simulate it first (untimed)")
     ap.add_argument("--child", type=Path, help=argparse.SUPPRESS)
     if len(sys.argv) > 2 and sys.argv[1] == "--child":  # the command follows the record's path as is
         child(Path(sys.argv[2]), sys.argv[3:])
@@ -113,7 +120,12 @@ def main() -> None:
     cold, warm = [], []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        command = fusion_run(folder / "out", args.overrides)
+        config = args.config.resolve()
+        if args.simulate:
+            subprocess.run([sys.executable, "-m", "bodyfusion", "simulate", str(config), "--out", str(folder / "sim")],
+                           check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            config = folder / "sim" / "config.yaml"
+        command = fusion_run(config, folder / "out", args.overrides)
         imports = timed_process(["-c", "import bodyfusion.cli"], folder / "cache_imports")
         for k in range(args.repeats):
             cache = folder / f"cache{k}"
