@@ -292,10 +292,11 @@ def _rts_sweep(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nd
                 if f != 0.0:
                     for c in range(n):
                         M[r, c] += f * Ppost[j, k, first + c]
-        for r in range(n):  # the block of the states swept, contiguous
-            for c in range(n):
-                A[r, c] = Pprior[j + 1, first + r, first + c]
-        if not chol_solve(A, M, Kt, Lw):
+        if first > 0:  # the block of the states swept, contiguous (all of them: the prior itself)
+            for r in range(n):
+                for c in range(n):
+                    A[r, c] = Pprior[j + 1, first + r, first + c]
+        if not chol_solve(Pprior[j + 1] if first == 0 else A, M, Kt, Lw):
             failed += 1
             for r in range(first, 15):
                 for c in range(first, 15):
