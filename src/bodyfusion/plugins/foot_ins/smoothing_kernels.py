@@ -38,9 +38,8 @@ FUSED = np.array([3, 4, 5, 6, 7, 9, 10, 11, 12, 13, 14], dtype=np.int64)
 δb_a, δb_g. Not position (no dynamics or update of the pass depends on it, so it learns
 nothing of it) nor the shared yaw."""
 AFTER_POSITION = 3
-"""The first error state after position (δv): the backward pass's RTS sweeps the states from
-here (:func:`rts_block_after_position`); no other state depends on position, nothing measures it
-in that pass, and the fusion does not take the backward pass's."""
+"""The first error state after position (δv), where the backward pass's RTS starts
+(:func:`rts_block_after_position`: nothing depends on or measures position in that pass)."""
 
 
 @numba.njit(cache=True)
