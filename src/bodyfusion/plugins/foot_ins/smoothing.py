@@ -36,9 +36,9 @@ Kinds:
   default) carries the backward sweep across the blocks — the fixed-interval smoother of the
   whole run, swept in the modified Bryson–Frazier form, which needs no covariance inverse
   (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`; the same smoother, equal
-  to the textbook sweep to rounding); ``span: segment`` smooths every segment on its own
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`) — the paper's segmented
-  RTS, which at a segment's end is the filter.
+  to the textbook sweep to rounding); ``span: segment`` smooths every segment on its own —
+  the paper's segmented RTS, which at a segment's end is the filter: the segment replayed into
+  the record and the same sweep started from zero adjoints at its end.
 * ``fb`` (§3.1, §3.3): per segment a–b, the forward pass (the filter) and a backward
   navigation (the filter's step on the time-reversed samples: angular rates, Earth rate,
   velocity and gyro bias negated, the same specific force) with its own error filter and
@@ -78,8 +78,8 @@ relative correction — one the fuser derived from another system's estimate as 
 constraint, a measurement spread by the cross-covariances) — is kept as the filter made it:
 a known input that holds no information for this foot's smoother. The whole-run RTS passes
 its adjoint through it unchanged (the jump stays where the filter made it, and before it the
-smoothed error is taken with the covariance the filter had before it); the segmented kinds
-step through it with the recorded covariance. Smoothed as a measurement of this foot it would
+smoothed error is taken with the covariance the filter had before it), and so does the
+segmented RTS within each segment; FB and FB-RTS step through it with the recorded covariance. Smoothed as a measurement of this foot it would
 be counted in each foot's smoother against the other's *filtered* estimate, and an
 inequality constraint, recorded only where it acted, would be spread back over the samples
 where it held without the information that it held: on a simulated dual-foot walk (6 seeds)
@@ -112,10 +112,8 @@ from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
 from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, boxminus, fb_segment, filter_pass,
-                                                           position_covariance, rts_block,
-                                                           rts_block_after_position)
-from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep
+from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, fb_segment, filter_pass
+from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep, record_pass
 
 log = logging.getLogger(__name__)
 
@@ -204,16 +202,6 @@ class _Pass:
         self.dxs = np.zeros((passes, size, 15))
         self.Ps = np.zeros((passes, size, 15, 15))
         self.smoothed = np.zeros((passes, size, 16))
-
-    def rts(self, L: int, position: bool = True) -> int:
-        """Smooth the first pass's block on its own (RTS from its end; without ``position``, the
-        states after it: :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block_after_position`);
-        the states into ``smoothed``."""
-        sweep = rts_block if position else rts_block_after_position
-        failed = sweep(self.Ppost[0], self.Pprior[0], self.Phi[0], self.dx[0], self.yaw_reset[0], L, np.zeros(15),
-                       self.Ppost[0, L].copy(), self.dxs[0], self.Ps[0])
-        apply_smoothed(self.xs[0], 0, L, self.dxs[0], self.smoothed[0], 0)
-        return failed
 
 
 class _Record:
@@ -434,6 +422,18 @@ def _blocks(r: _Record, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.nda
     return idx[order], np.concatenate(new_P)[order]
 
 
+def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The record :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes
+    (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[k + 1]``: its
+    samples, stance samples, general updates (``general`` (n,)) and kept corrections."""
+    L = int(np.max(np.diff(bounds)))
+    ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][bounds]))) for f in (r.stance, general))
+    nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, bounds, side="right"))))
+    return (np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
+            np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
+            np.empty((nk, 15, 15)))
+
+
 def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
          diag: dict) -> tuple[float, list[float]]:
     """RTS over the whole run (the sweep carried back across blocks, each replayed once from the
@@ -443,37 +443,33 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     run's at every block end) and the per-segment latencies (segmented only)."""
     failed = 0
     latencies: list[float] = []
-    if not whole:
-        fw = _Pass(int(np.max(np.diff(bounds))) + 1)
+    general = r.general_updates()
+    if not whole:  # each segment replayed into the record and swept back from zero adjoints at its end
+        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general)
         P = r.P0.copy()
         for k in range(bounds.size - 1):
             a, b = int(bounds[k]), int(bounds[k + 1])
             t0 = time.perf_counter_ns()
-            P = r.forward(a, b, P, True, fw)
-            failed += fw.rts(b - a)
-            out_x[a:b + 1] = fw.smoothed[0, :b - a + 1]
-            position_covariance(fw.Ps[0], b - a, out_var, a)
+            P, error, ns, ng, nk = record_pass(r.hist_x[a], P, r.memory([a])[0], r.t, r.acc, r.gyro, r.stance, general,
+                                               r.params, a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x,
+                                               r.gap_idx, r.gap_dP, *store)
+            r.state_error = max(r.state_error, error)
+            failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, Pu, f_ns, st_v[:ns], st_P[:ns],
+                                gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk], np.zeros(15),
+                                np.zeros((15, 15)), out_x, out_var)
             latencies.append((time.perf_counter_ns() - t0) / 1e6)
         diag["rts_gain_failures"] = failed
         return _rebuild_error(P, r.P_end), latencies
-    general = r.general_updates()
     forward = r.forward_record.sweep_arrays(r, general)
     if forward is not None:  # the filter's own record: nothing to replay
         diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward,
                                               np.zeros(15), np.zeros((15, 15)), out_x, out_var)
         return 0.0, latencies
     starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
-    ends = np.append(starts[1:], r.n - 1)
-    # the store, sized for the largest block: per sample, stance sample, general update, kept correction
-    L = int(np.max(ends - starts))
-    ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][np.r_[starts, r.n - 1]]))) for f in (r.stance, general))
-    nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, np.r_[starts, r.n - 1], side="right"))))
     P_replayed = np.empty_like(P_start)
     failed, error = block_sweep(r.hist_x, r.t, r.acc, r.gyro, r.stance, general, r.params, r.ov_idx, r.ov_P,
                                 r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, starts, P_start, r.memory(starts),
-                                np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 5)),
-                                np.empty((ns, 15, 4)), np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)),
-                                np.zeros(ng, dtype=np.bool_), np.empty((nk, 15, 15)), P_replayed, out_x, out_var)
+                                *_sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed, out_x, out_var)
     r.state_error = max(r.state_error, error)
     diag["rts_gain_failures"] = failed
     return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), latencies
