@@ -216,9 +216,9 @@ def test_the_filters_own_record_smooths_as_its_replay(vicon_cut):
 def test_segmented_rts_is_the_textbook_sweep_of_each_segment(walk, vicon_cut):
     """span: segment sweeps each replayed segment back in the Bryson–Frazier form from zero
     adjoints at its end: the textbook RTS of the segment (rts_block from the filter at its end)
-    to rounding. Where the fuser corrected the foot inside a segment the two
-    differ by design (the sweep takes the relative correction as a known input, as the
-    whole-run sweep does): those segments are left out here."""
+    to rounding. Where the fuser corrected the foot inside a segment the two differ by design
+    (the sweep takes the relative correction as a known input, as the whole-run sweep does):
+    those segments are left out here."""
     cfg = KINDS["rts-segment"]
     checked = skipped = 0
     for rec in [walk[1]] + [vicon_cut.systems[foot].smoothing_record() for foot in ("left_foot", "right_foot")]:

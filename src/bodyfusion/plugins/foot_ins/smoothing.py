@@ -79,11 +79,12 @@ constraint, a measurement spread by the cross-covariances) — is kept as the fi
 a known input that holds no information for this foot's smoother. The whole-run RTS passes
 its adjoint through it unchanged (the jump stays where the filter made it, and before it the
 smoothed error is taken with the covariance the filter had before it), and so does the
-segmented RTS within each segment; FB and FB-RTS step through it with the recorded covariance. Smoothed as a measurement of this foot it would
-be counted in each foot's smoother against the other's *filtered* estimate, and an
-inequality constraint, recorded only where it acted, would be spread back over the samples
-where it held without the information that it held: on a simulated dual-foot walk (6 seeds)
-that made the smoothed feet 40–55 % worse than the constrained filter. The gap policy's
+segmented RTS within each segment; FB and FB-RTS step through it with the recorded covariance.
+Smoothed as a measurement of this foot it would be counted in each foot's smoother against the
+other's *filtered* estimate, and an inequality constraint, recorded only where it acted, would
+be spread back over the samples where it held without the information that it held: on a
+simulated dual-foot walk (6 seeds) that made the smoothed feet 40–55 % worse than the
+constrained filter. The gap policy's
 inflation is process noise of the step across the gap. ``smoother.constrain_smoothed`` (by
 default wherever the fuser enforces them) has the core apply the constraints again to the
 smoothed tracks (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
