@@ -200,15 +200,16 @@ def test_replay_through_fuser_corrections_and_a_gap_is_the_filter_bit_for_bit(vi
     assert buf.Ppost[0, g - 1, 0, 0] < 0.5 * dP[0, 0] < buf.Pprior[0, g, 0, 0]
 
 
-def test_the_filters_own_record_smooths_as_its_replay(vicon_cut):
-    """Planned for the whole-run RTS, the ekf records what the sweep needs as it runs
-    (ForwardRecord, completed at the fuser's corrections): the smoothed states and covariances
-    equal those smoothed from the replay of the filter, which is not run."""
+@pytest.mark.parametrize("kind", ["rts", "rts-segment"])
+def test_the_filters_own_record_smooths_as_its_replay(vicon_cut, kind):
+    """Planned for the RTS, the ekf records what the sweep needs as it runs (ForwardRecord,
+    completed at the fuser's corrections): the smoothed states and covariances, of the whole run
+    or of each segment, equal those smoothed from the replay of the filter, which is not run."""
     for foot in ("left_foot", "right_foot"):
         rec = vicon_cut.systems[foot].smoothing_record()
         assert rec["forward_record"].active and rec["kept_idx"].size > 5, foot
-        own = smooth_record(rec, KINDS["rts"])
-        replayed = smooth_record({**rec, "forward_record": None}, KINDS["rts"])
+        own = smooth_record(rec, KINDS[kind])
+        replayed = smooth_record({**rec, "forward_record": None}, KINDS[kind])
         assert np.array_equal(own.x, replayed.x) and np.array_equal(own.pos_var, replayed.pos_var), foot
         assert own.diagnostics["rts_gain_failures"] == replayed.diagnostics["rts_gain_failures"] == 0
 
@@ -248,8 +249,8 @@ def test_segmented_rts_is_the_textbook_sweep_of_each_segment(walk, vicon_cut):
     assert checked > 30 and skipped > 30
 
 
-def test_only_the_whole_run_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):
-    for overrides, cfg, records in (([], KINDS["rts"], True), ([], KINDS["rts-segment"], False),
+def test_only_the_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):
+    for overrides, cfg, records in (([], KINDS["rts"], True), ([], KINDS["rts-segment"], True),
                                     ([], KINDS["fb-rts"], False), ([], SmootherConfig(kind="none"), False),
                                     (["systems.foot.filter.kind=ckf"], KINDS["rts"], False),
                                     (["systems.foot.filter.zaru_sigma_radps=0.01"], KINDS["rts"], False)):

@@ -22,8 +22,8 @@ covariance checkpoints the filter keeps as it runs (:class:`ForwardRecord`: 120 
 without any is cut by a replay without a record (:func:`_blocks`). When the system knows
 before its run that it will be smoothed so
 (:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.plan_smoothing`) and the record of the
-whole run fits :data:`STORE_BYTES`, the ekf writes that record itself as it runs, and the
-whole-run RTS replays nothing: its record is the filter's, not a replay of it.
+whole run fits :data:`STORE_BYTES`, the ekf writes that record itself as it runs, and the RTS
+(either span) replays nothing: its record is the filter's, not a replay of it.
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
 ``min_stance_s`` are ignored so a one-sample detector flicker does not cut a stride; gaps
@@ -37,8 +37,9 @@ Kinds:
   whole run, swept in the modified Bryson–Frazier form, which needs no covariance inverse
   (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`; the same smoother, equal
   to the textbook sweep to rounding); ``span: segment`` smooths every segment on its own —
-  the paper's segmented RTS, which at a segment's end is the filter: the segment replayed into
-  the record and the same sweep started from zero adjoints at its end.
+  the paper's segmented RTS, which at a segment's end is the filter: the same sweep of the
+  segment's part of the record (the filter's own, or the segment replayed into one) started
+  from zero adjoints at its end (:func:`_segmented_rts`).
 * ``fb`` (§3.1, §3.3): per segment a–b, the forward pass (the filter) and a backward
   navigation (the filter's step on the time-reversed samples: angular rates, Earth rate,
   velocity and gyro bias negated, the same specific force) with its own error filter and
@@ -291,13 +292,13 @@ class ForwardRecord:
         self.kept = 0
 
     def plan(self, cfg: SmootherConfig, filter_kind: str, params: np.ndarray, stance: np.ndarray) -> bool:
-        """Active for the whole-run RTS (``kind: rts``, ``span: whole``) of an ``ekf`` without
-        the ZARU (whose every stance update the sweep takes in general form) whose record of
-        the run with these ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other
-        whole-run RTS. True when either changed."""
+        """Active for the RTS (``kind: rts``, either span) of an ``ekf`` without the ZARU (whose
+        every stance update the sweep takes in general form) whose record of the run with these
+        ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other whole-run RTS.
+        True when either changed."""
         samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
         whole = cfg.kind == "rts" and not cfg.segmented
-        active = (whole and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
+        active = (cfg.kind == "rts" and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
                   and record_bytes(samples, n_stance) <= STORE_BYTES)
         checkpointing = whole and not active
         if (active, checkpointing) == (self.active, self.checkpointing):
@@ -435,6 +436,41 @@ def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> tuple[n
             np.empty((nk, 15, 15)))
 
 
+def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward: tuple[np.ndarray, ...] | None,
+                   out_x: np.ndarray, out_var: np.ndarray, diag: dict) -> tuple[float, list[float]]:
+    """The RTS of each segment on its own (``span: segment``): the segment's part of the filter's
+    own record (``forward``, :meth:`ForwardRecord.sweep_arrays`), or, without one, the segment
+    replayed into the record (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
+    swept back from zero adjoints at its end. Returns as :func:`_rts`."""
+    failed = 0
+    latencies: list[float] = []
+    if forward is not None:  # entries per stance sample, general update, kept correction up to each bound
+        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = forward
+        counts = np.column_stack([np.r_[0, np.cumsum(f[1:])][bounds] for f in (r.stance, general)] +
+                                 [np.searchsorted(r.kept_idx, bounds, side="right")])
+    else:
+        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general)
+    P = r.P0.copy()
+    for k in range(bounds.size - 1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        t0 = time.perf_counter_ns()
+        if forward is not None:
+            (s0, g0, k0), (s1, g1, k1) = counts[k], counts[k + 1]
+            record = (Pu[a:b + 1], f_ns[a:b + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
+                      gen_a[g0:g1], gen_kept[g0:g1], kept_P[k0:k1])
+        else:
+            P, error, ns, ng, nk = record_pass(r.hist_x[a], P, r.memory([a])[0], r.t, r.acc, r.gyro, r.stance, general,
+                                               r.params, a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x,
+                                               r.gap_idx, r.gap_dP, *store)
+            r.state_error = max(r.state_error, error)
+            record = (Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk])
+        failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, *record, np.zeros(15),
+                            np.zeros((15, 15)), out_x, out_var)
+        latencies.append((time.perf_counter_ns() - t0) / 1e6)
+    diag["rts_gain_failures"] = failed
+    return (0.0 if forward is not None else _rebuild_error(P, r.P_end)), latencies
+
+
 def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
          diag: dict) -> tuple[float, list[float]]:
     """RTS over the whole run (the sweep carried back across blocks, each replayed once from the
@@ -445,23 +481,9 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     failed = 0
     latencies: list[float] = []
     general = r.general_updates()
-    if not whole:  # each segment replayed into the record and swept back from zero adjoints at its end
-        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general)
-        P = r.P0.copy()
-        for k in range(bounds.size - 1):
-            a, b = int(bounds[k]), int(bounds[k + 1])
-            t0 = time.perf_counter_ns()
-            P, error, ns, ng, nk = record_pass(r.hist_x[a], P, r.memory([a])[0], r.t, r.acc, r.gyro, r.stance, general,
-                                               r.params, a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x,
-                                               r.gap_idx, r.gap_dP, *store)
-            r.state_error = max(r.state_error, error)
-            failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, Pu, f_ns, st_v[:ns], st_P[:ns],
-                                gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk], np.zeros(15),
-                                np.zeros((15, 15)), out_x, out_var)
-            latencies.append((time.perf_counter_ns() - t0) / 1e6)
-        diag["rts_gain_failures"] = failed
-        return _rebuild_error(P, r.P_end), latencies
     forward = r.forward_record.sweep_arrays(r, general)
+    if not whole:  # each segment swept back from zero adjoints at its end
+        return _segmented_rts(r, bounds, general, forward, out_x, out_var, diag)
     if forward is not None:  # the filter's own record: nothing to replay
         diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward,
                                               np.zeros(15), np.zeros((15, 15)), out_x, out_var)
