@@ -85,10 +85,10 @@ Smoothed as a measurement of this foot it would be counted in each foot's smooth
 other's *filtered* estimate, and an inequality constraint, recorded only where it acted, would
 be spread back over the samples where it held without the information that it held: on a
 simulated dual-foot walk (6 seeds) that made the smoothed feet 40–55 % worse than the
-constrained filter. The gap policy's
-inflation is process noise of the step across the gap. ``smoother.constrain_smoothed`` (by
-default wherever the fuser enforces them) has the core apply the constraints again to the
-smoothed tracks (:func:`bodyfusion.core.smoothing.constrain_trajectories`).
+constrained filter. The gap policy's inflation is process noise of the step across the gap.
+``smoother.constrain_smoothed`` (by default wherever the fuser enforces them) has the core
+apply the constraints again to the smoothed tracks
+(:func:`bodyfusion.core.smoothing.constrain_trajectories`).
 
 Streaming. FB, FB-RTS and the segmented RTS run segment by segment in time order and need
 only the segment's samples and the filter's state and covariance at its start: a segment's
@@ -478,8 +478,6 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.block_sweep`) or per segment. Returns the
     covariance rebuild's relative error (:func:`_rebuild_error`: at the run's end, and the whole
     run's at every block end) and the per-segment latencies (segmented only)."""
-    failed = 0
-    latencies: list[float] = []
     general = r.general_updates()
     forward = r.forward_record.sweep_arrays(r, general)
     if not whole:  # each segment swept back from zero adjoints at its end
@@ -487,7 +485,7 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     if forward is not None:  # the filter's own record: nothing to replay
         diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward,
                                               np.zeros(15), np.zeros((15, 15)), out_x, out_var)
-        return 0.0, latencies
+        return 0.0, []
     starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
     P_replayed = np.empty_like(P_start)
     failed, error = block_sweep(r.hist_x, r.t, r.acc, r.gyro, r.stance, general, r.params, r.ov_idx, r.ov_P,
@@ -495,7 +493,7 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
                                 *_sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed, out_x, out_var)
     r.state_error = max(r.state_error, error)
     diag["rts_gain_failures"] = failed
-    return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), latencies
+    return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), []
 
 
 def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
