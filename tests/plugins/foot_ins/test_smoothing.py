@@ -215,8 +215,9 @@ def test_the_filters_own_record_smooths_as_its_replay(vicon_cut, kind):
 
 
 def test_segmented_rts_is_the_textbook_sweep_of_each_segment(walk, vicon_cut):
-    """span: segment sweeps each replayed segment back in the Bryson–Frazier form from zero
-    adjoints at its end: the textbook RTS of the segment (rts_block from the filter at its end)
+    """span: segment sweeps each segment's part of the record (the filter's own, or the segment
+    replayed) back in the Bryson–Frazier form from zero adjoints at its end: the textbook RTS of
+    the segment (rts_block from the filter at its end)
     to rounding. Where the fuser corrected the foot inside a segment the two differ by design
     (the sweep takes the relative correction as a known input, as the whole-run sweep does):
     those segments are left out here."""
