@@ -85,13 +85,20 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         set_: SetOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
     """Run a layout and write metrics.json, trajectories.csv and plots."""
-    from rich.console import Console
-    from rich.table import Table
+    from bodyfusion.evaluation.figure_process import FigureProcess
 
-    from bodyfusion.core.run import run as run_layout
+    figure_process = FigureProcess.start()  # first: matplotlib loads there while this process runs
+    try:
+        from rich.console import Console
+        from rich.table import Table
 
-    with _bar("fusing", "s of data") as progress:
-        result, out_dir = run_layout(config, set_ or [], out, seed, progress)
+        from bodyfusion.core.run import run as run_layout
+
+        with _bar("fusing", "s of data") as progress:
+            result, out_dir = run_layout(config, set_ or [], out, seed, progress, figure_process)
+    finally:
+        if figure_process is not None:
+            figure_process.close()
     if CONSOLE.quiet:
         return
     console = Console(stderr=False)

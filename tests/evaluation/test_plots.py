@@ -16,6 +16,7 @@ from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run
 from bodyfusion.evaluation.consistency import NeesTrack
+from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
 from bodyfusion.evaluation.plots import (
     new_figure,
@@ -155,6 +156,41 @@ def test_a_runs_plots_keep_their_png_names_and_take_the_layouts_formats(scored, 
     figures = FiguresConfig(formats=["pdf", "svg"], dpi=80)
     written = write_run_plots(tmp_path / "b", estimates, None, transform, None, {}, figures)
     assert [p.name for p in written] == ["trajectory.pdf", "trajectory.svg"]
+
+
+def test_the_figure_process_writes_the_files_this_process_would(scored, tmp_path):
+    estimates, scores, transform, truths = scored
+    here = write_run_plots(tmp_path / "here", estimates, scores, transform, truths, nees_tracks())
+    with FigureProcess() as beside:  # forked in two halves: the files in the same order, the same bytes
+        beside.submit(out_dir=tmp_path / "beside", estimates=estimates, scores=scores, transform=transform,
+                      truths=truths, nees=nees_tracks(), figures=None)
+        written = beside.written()
+    assert [p.name for p in written] == [p.name for p in here]
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(here, written, strict=True))
+
+
+def test_a_drawing_error_in_the_figure_process_is_raised_here_with_its_traceback(scored, tmp_path):
+    estimates, scores, transform, truths = scored
+    (tmp_path / "a_file").write_text("")
+    with FigureProcess() as beside:
+        beside.submit(out_dir=tmp_path / "a_file" / "plots", estimates=estimates, scores=scores, transform=transform,
+                      truths=truths, nees=nees_tracks(), figures=None)
+        with pytest.raises(NotADirectoryError) as raised:
+            beside.written()
+    assert "in save_figure" in raised.value.__notes__[-1]
+
+
+def test_the_figure_process_is_not_forked_beside_other_threads():
+    import threading
+
+    gate = threading.Event()
+    other = threading.Thread(target=gate.wait)
+    other.start()
+    try:
+        assert FigureProcess.start() is None
+    finally:
+        gate.set()
+        other.join()
 
 
 def test_error_vs_time_shades_the_2drms_band_behind_and_follows_the_errors(scored):

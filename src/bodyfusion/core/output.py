@@ -19,6 +19,7 @@ from bodyfusion.core.exports import (
     write_tum,
 )
 from bodyfusion.core.result import RunResult
+from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
 
 log = logging.getLogger(__name__)
@@ -119,13 +120,20 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     return doc
 
 
-def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float) -> None:
-    """metrics.json, the trajectory files and (unless switched off) the PNG plots."""
+def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
+                  figure_process: FigureProcess | None = None) -> None:
+    """metrics.json, the trajectory files and (unless switched off) the PNG plots; the plots by
+    ``figure_process`` while the rest is written, when given one."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     output = result.loaded.layout.output
+    figures = dict(out_dir=out_dir, estimates=result.trajectories, scores=result.scores, transform=result.transform,
+                   truths=result.truths, nees=result.nees, figures=output.figures)
+    if output.plots and figure_process is not None:
+        log.info("plotting beside the other outputs")
+        figure_process.submit(**figures)
     log.info("writing the outputs to %s", out_dir)
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
@@ -137,9 +145,10 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
                       output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
-    if output.plots:
+    if output.plots and figure_process is not None:
+        figure_process.written()
+    elif output.plots:
         from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
         log.info("plotting")
-        plots.write_run_plots(out_dir, result.trajectories, result.scores, result.transform, result.truths,
-                              result.nees, output.figures)
+        plots.write_run_plots(**figures)

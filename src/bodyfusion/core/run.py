@@ -26,6 +26,7 @@ from bodyfusion.core.smoothing import (
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
 from bodyfusion.core.truth import read_truth
 from bodyfusion.evaluation.consistency import horizontal_nees
+from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
 from bodyfusion.nav.earth import normal_gravity
 
@@ -148,13 +149,14 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
-        seed: int = 0, progress: ProgressCallback | None = None) -> tuple[RunResult, Path]:
-    """Load, run (``progress`` as :func:`run_layout` takes it), and write outputs; returns the
-    result and the output folder."""
+        seed: int = 0, progress: ProgressCallback | None = None,
+        figure_process: FigureProcess | None = None) -> tuple[RunResult, Path]:
+    """Load, run (``progress`` as :func:`run_layout` takes it), and write outputs (the plots by
+    ``figure_process`` when given one); returns the result and the output folder."""
     t0 = time.perf_counter()
     log.info("loading %s", config_path)
     loaded = load_layout(config_path, overrides)
     result = run_layout(loaded, seed, progress)
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
-    write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0)
+    write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0, figure_process=figure_process)
     return result, out

@@ -456,18 +456,27 @@ def plot_against_outage_duration(curves: Mapping[str, Mapping[float, Sequence[fl
 # --------------------------------------------------------------------------- a run's set
 
 
+RUN_FIGURES = ("trajectory", "error_vs_time", "error_cdf", "nees")
+"""A run's figures, in the order :func:`write_run_plots` writes them; all but the trajectory only
+where something was scored."""
+
+
+def run_figure_names(scores: Mapping[str, SystemScore] | None) -> list[str]:
+    """The figures of :data:`RUN_FIGURES` a run with these ``scores`` draws."""
+    return list(RUN_FIGURES) if scores else ["trajectory"]
+
+
 def write_run_plots(out_dir: str | Path, estimates: Mapping[str, Trajectory],
                     scores: Mapping[str, SystemScore] | None, transform: PlanarTransform,
                     truths: Mapping[str, TruthTrack] | None, nees: Mapping[str, NeesTrack],
-                    figures: FiguresConfig | None = None) -> list[Path]:
+                    figures: FiguresConfig | None = None, names: Sequence[str] | None = None) -> list[Path]:
     """A run's plots in ``out_dir`` in the ``figures`` formats and dpi (default PNG): trajectory;
-    where something was scored, error_vs_time (with the 2DRMS bands), error_cdf and nees.
-    Returns the files written."""
+    where something was scored, error_vs_time (with the 2DRMS bands), error_cdf and nees
+    (:func:`run_figure_names`); ``names``: only those of them. Returns the files written."""
     figures = figures or FiguresConfig()
     out_dir = Path(out_dir)
-    drawn = {"trajectory": plot_trajectories(estimates, scores, transform, truths)}
-    if scores:
-        drawn |= {"error_vs_time": plot_error_vs_time(scores, estimates), "error_cdf": plot_error_cdf(scores),
-                  "nees": plot_nees(nees)}
-    return [path for name, fig in drawn.items() for path in save_figure(fig, out_dir / name, figures.formats,
-                                                                        figures.dpi)]
+    draw = {"trajectory": lambda: plot_trajectories(estimates, scores, transform, truths),
+            "error_vs_time": lambda: plot_error_vs_time(scores, estimates),
+            "error_cdf": lambda: plot_error_cdf(scores), "nees": lambda: plot_nees(nees)}
+    return [path for name in run_figure_names(scores) if names is None or name in names
+            for path in save_figure(draw[name](), out_dir / name, figures.formats, figures.dpi)]
