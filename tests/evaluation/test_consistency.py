@@ -114,6 +114,21 @@ def test_nees_is_nan_where_the_covariance_is_singular():
     assert values[0] == 1.0 and np.isnan(values[1]) and values[2] == pytest.approx(0.5)
 
 
+@pytest.mark.parametrize("k", [2, 3])
+def test_nees_is_the_quadratic_form_of_the_solved_covariance_in_closed_form_or_not(k):
+    rng = np.random.default_rng(k)
+    cov = random_covariances(rng, 2000, k)
+    err = rng.normal(size=(2000, k))
+    err[5] = np.inf
+    cov[7] = np.diag([1.0] * (k - 1) + [-1.0])  # det < 0
+    solved = np.einsum("ni,ni->n", err, np.linalg.solve(cov, err[..., None])[..., 0])
+    values = nees(err, cov)
+    assert np.isnan(values[[5, 7]]).all()
+    keep = np.ones(2000, bool)
+    keep[[5, 7]] = False
+    np.testing.assert_allclose(values[keep], solved[keep], rtol=1e-9)
+
+
 def test_covariance_health_checked_in_pieces_is_that_of_all_at_once():
     rng = np.random.default_rng(2)
     A = rng.normal(size=(1000, 3, 3))

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.forking import Forked
 from bodyfusion.core.exports import (
     SystemAttitudes,
     write_geojson,
@@ -120,10 +121,19 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
     return doc
 
 
+def _write_tracks(result: RunResult, out_dir: Path) -> None:
+    """The TUM files and, for a geo-referenced run, track.geojson."""
+    decimate = result.loaded.layout.output.decimate
+    write_tum(out_dir / "tum", result.trajectories, result.truths, decimate, attitudes=SystemAttitudes(result.systems))
+    if result.geodetic_origin is not None:
+        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin, decimate)
+
+
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
                   figure_process: FigureProcess | None = None) -> None:
-    """metrics.json, the trajectory files and (unless switched off) the PNG plots; the plots by
-    ``figure_process`` while the rest is written, when given one."""
+    """metrics.json, the trajectory files and (unless switched off) the PNG plots. The TUM files
+    and track.geojson are written in a forked process (:class:`~bodyfusion.base.forking.Forked`)
+    while this one writes the rest, the plots by ``figure_process`` when given one."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -135,16 +145,13 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
         log.info("plotting beside the other outputs")
         figure_process.submit(**figures)
     log.info("writing the outputs to %s", out_dir)
+    beside = Forked(lambda: _write_tracks(result, out_dir))  # at the same time as the two tables, where it may
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
-    write_tum(out_dir / "tum", result.trajectories, result.truths, output.decimate,
-              attitudes=SystemAttitudes(result.systems))
-    if result.geodetic_origin is not None:
-        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin,
-                      output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
+    beside.result()
     if output.plots and figure_process is not None:
         figure_process.written()
     elif output.plots:

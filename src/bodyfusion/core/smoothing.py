@@ -11,6 +11,7 @@ FB-RTS) returns its diagnostics, one that does not returns None. With
 from __future__ import annotations
 
 from collections.abc import Mapping, Set
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -30,13 +31,19 @@ def plan_smoothing(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> 
 
 
 def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:
-    """Smooth every system that smooths; returns {system: its smoothing diagnostics}."""
-    out = {}
-    for name, system in systems.items():
-        diagnostics = system.smooth(cfg)
-        if diagnostics is not None:
-            out[name] = diagnostics
-    return out
+    """Smooth every system that smooths; returns {system: its smoothing diagnostics}, in the
+    layout's order. Systems that smooth in a thread
+    (:attr:`~bodyfusion.core.system.SensorSystem.smooths_in_a_thread`) are smoothed at the same
+    time, one thread each; the others here, one after another."""
+    threaded = [name for name, system in systems.items() if system.smooths_in_a_thread]
+    done = {}
+    with ThreadPoolExecutor(max_workers=max(1, len(threaded) - 1)) as pool:
+        futures = {name: pool.submit(systems[name].smooth, cfg) for name in threaded[1:]}
+        for name, system in systems.items():
+            if name not in futures:
+                done[name] = system.smooth(cfg)
+        done |= {name: future.result() for name, future in futures.items()}
+    return {name: done[name] for name in systems if done[name] is not None}
 
 
 def constrain_trajectories(trajectories: Mapping[str, Trajectory], smoothed: Set[str],

@@ -183,6 +183,10 @@ class SensorSystem(Plugin):
     error_model: ClassVar[str | None] = None
     """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
     :func:`bodyfusion.testing.check_system` can check its Jacobians."""
+    smooths_in_a_thread: ClassVar[bool] = False
+    """True for a system whose :meth:`smooth` may run in a thread beside the other systems' (it
+    touches only its own state and its compiled kernels release the GIL): the core then smooths
+    such systems at the same time, one thread each."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         super().__init__(name, config, context)

@@ -12,64 +12,23 @@ Linux: :meth:`FigureProcess.start` returns None elsewhere, and the caller draws 
 from __future__ import annotations
 
 import multiprocessing
-import os
-import pickle
-import sys
-import threading
-import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-Outcome = tuple[str, Any]
-"""``("ok", value)`` or ``("error", exception)``: what a drawing process sends back."""
-
-
-def _outcome(job: Callable[[], Any]) -> Outcome:
-    """``job()``'s value, or the exception it raised (its traceback as a note; an exception that
-    cannot be pickled becomes a RuntimeError of its text)."""
-    try:
-        return "ok", job()
-    except Exception as err:  # noqa: BLE001 - any failure is handed back to the caller to raise
-        err.add_note("".join(traceback.format_exception(err)).rstrip())
-        try:
-            pickle.dumps(err)
-        except Exception:  # noqa: BLE001
-            err = RuntimeError(f"{type(err).__name__}: {err}\n{err.__notes__[-1]}")
-        return "error", err
+from bodyfusion.base.forking import Forked, fork_is_safe, outcome, raised_or_value
 
 
 def _draw_in_two(kwargs: Mapping[str, Any]) -> list[Path]:
     """Draw the run's figures (``write_run_plots(**kwargs)``): the first half here, the second
-    in a forked process; the files in :data:`~bodyfusion.evaluation.plots.RUN_FIGURES`
-    order."""
+    in a forked process; the files in :data:`~bodyfusion.evaluation.plots.RUN_FIGURES` order."""
     from bodyfusion.evaluation.plots import run_figure_names, write_run_plots
 
     names = run_figure_names(kwargs["scores"])
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the second drawer: its outcome down the pipe, then gone without cleanup
-        try:
-            os.close(read_fd)
-            outcome = _outcome(lambda: write_run_plots(**kwargs, names=names[len(names) // 2:]))
-            with os.fdopen(write_fd, "wb") as pipe:
-                pickle.dump(outcome, pipe)
-        finally:
-            os._exit(0)
-    os.close(write_fd)
-    mine = _outcome(lambda: write_run_plots(**kwargs, names=names[:len(names) // 2]))
-    with os.fdopen(read_fd, "rb") as pipe:
-        data = pipe.read()
-    _, status = os.waitpid(pid, 0)
-    if not data:
-        raise RuntimeError(f"the second figure process ended with exit code {os.waitstatus_to_exitcode(status)}")
-    written = []
-    for kind, value in (mine, pickle.loads(data)):
-        if kind == "error":
-            raise value
-        written += value
-    return sorted(written, key=lambda path: names.index(path.stem))
+    second = Forked(lambda: write_run_plots(**kwargs, names=names[len(names) // 2:]))
+    first = write_run_plots(**kwargs, names=names[:len(names) // 2])
+    return [*first, *second.result()]
 
 
 def _serve(conn: Connection) -> None:
@@ -81,7 +40,7 @@ def _serve(conn: Connection) -> None:
         kwargs = conn.recv()
     except EOFError:
         return
-    conn.send(_outcome(lambda: _draw_in_two(kwargs)))
+    conn.send(outcome(lambda: _draw_in_two(kwargs)))
 
 
 class FigureProcess:
@@ -100,9 +59,7 @@ class FigureProcess:
     def start(cls) -> FigureProcess | None:
         """A figure process, or None where forking is not safe (not Linux, or more than one thread
         in this process)."""
-        if sys.platform != "linux" or threading.active_count() > 1:
-            return None
-        return cls()
+        return cls() if fork_is_safe() else None
 
     def submit(self, **kwargs: Any) -> None:
         """Hand over the run's figures: the arguments of
@@ -113,13 +70,11 @@ class FigureProcess:
         """The files drawn (as :func:`~bodyfusion.evaluation.plots.write_run_plots` returns them),
         once drawn; raises what drawing raised."""
         try:
-            status, value = self._conn.recv()
+            drawn = self._conn.recv()
         except EOFError:
             self._process.join()
             raise RuntimeError(f"the figure process ended with exit code {self._process.exitcode}") from None
-        if status == "error":
-            raise value
-        return value
+        return raised_or_value(drawn)
 
     def close(self) -> None:
         """End the process, whatever it is doing."""

@@ -124,7 +124,7 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> b
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
                 gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, i0: int, i1: int, recorded_x: np.ndarray,
                 ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray, kept_x: np.ndarray,
@@ -503,7 +503,7 @@ def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
     return P
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def fb_segment(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
                params: np.ndarray, params_bw: np.ndarray, P0: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray,
                kept_idx: np.ndarray, kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, a: int, b: int,

@@ -244,7 +244,7 @@ def _smoothed_error_columns(P: np.ndarray, lam: np.ndarray, Lam: np.ndarray, r0:
     T[2, r0], T[2, r0 + 1], T[2, r0 + 2], T[2, r0 + 3], T[2, r0 + 4] = c0, c1, c2, c3, c4
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
                 gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
                 recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
@@ -328,7 +328,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     return P, error, ns, ng, nk
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray,
               i0: int, L: int, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
               gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
@@ -417,7 +417,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     return failed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def block_sweep(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
                 general: np.ndarray, params: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
                 kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, starts: np.ndarray, P_start: np.ndarray,

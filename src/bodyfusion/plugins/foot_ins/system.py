@@ -104,6 +104,7 @@ class FootIns(SensorSystem):
     Config = FootInsConfig
     data_section = "data"
     error_model = "strapdown15"
+    smooths_in_a_thread = True  # its smoother is one compiled call (nogil) on its own record
 
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)

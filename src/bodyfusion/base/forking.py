@@ -1,0 +1,82 @@
+"""Work done beside this process, in a forked copy of it (Linux): output files that do not
+depend on each other written at the same time on two cores.
+
+A forked copy shares this process's memory until either writes to it, so a job needs no
+arguments sent; it hands back its value (or the exception it raised) through a pipe. Forking
+is only safe from a process with one thread on Linux: elsewhere :class:`Forked` runs the job at
+once, here, and :meth:`Forked.result` is the same either way.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import threading
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+Outcome = tuple[str, Any]
+"""``("ok", value)`` or ``("error", exception)``: what a job hands back."""
+
+
+def fork_is_safe() -> bool:
+    """Whether this process may fork: on Linux, with no thread but this one."""
+    return sys.platform == "linux" and threading.active_count() == 1
+
+
+def outcome(job: Callable[[], Any]) -> Outcome:
+    """``job()``'s value, or the exception it raised, its traceback as a note (an exception that
+    cannot be pickled becomes a RuntimeError of its text)."""
+    try:
+        return "ok", job()
+    except Exception as err:  # noqa: BLE001 - any failure is handed back to the caller to raise
+        err.add_note("".join(traceback.format_exception(err)).rstrip())
+        try:
+            pickle.dumps(err)
+        except Exception:  # noqa: BLE001
+            err = RuntimeError(f"{type(err).__name__}: {err}\n{err.__notes__[-1]}")
+        return "error", err
+
+
+def raised_or_value(result: Outcome) -> Any:
+    """The value of an :data:`Outcome`; raises its exception."""
+    kind, value = result
+    if kind == "error":
+        raise value
+    return value
+
+
+class Forked:
+    """``job()`` run in a forked copy of this process (where :func:`fork_is_safe`, else at once,
+    here); :meth:`result` waits for its value and raises what it raised."""
+
+    def __init__(self, job: Callable[[], Any]) -> None:
+        self._pid: int | None = None
+        if not fork_is_safe():
+            self._outcome = outcome(job)
+            return
+        read_fd, write_fd = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the copy: the outcome down the pipe, then gone without this process's exit handlers
+            try:
+                os.close(read_fd)
+                result = outcome(job)
+                with os.fdopen(write_fd, "wb") as pipe:
+                    pickle.dump(result, pipe)
+            finally:
+                os._exit(0)
+        os.close(write_fd)
+        self._pid, self._read_fd = pid, read_fd
+
+    def result(self) -> Any:
+        """The job's value, once done."""
+        if self._pid is not None:
+            with os.fdopen(self._read_fd, "rb") as pipe:
+                data = pipe.read()
+            _, status = os.waitpid(self._pid, 0)
+            self._pid = None
+            self._outcome = pickle.loads(data) if data else (
+                "error", RuntimeError(f"the forked process ended with exit code {os.waitstatus_to_exitcode(status)}"))
+        return raised_or_value(self._outcome)
