@@ -48,13 +48,19 @@ def raised_or_value(result: Outcome) -> Any:
     return value
 
 
-class Forked:
-    """``job()`` run in a forked copy of this process (where :func:`fork_is_safe`, else at once,
-    here); :meth:`result` waits for its value and raises what it raised."""
+FORK_S = 0.01
+"""About what a fork costs a process of a run's size (a few hundred MB resident), s: the copy's
+page tables, its first writes to shared pages, its exit."""
 
-    def __init__(self, job: Callable[[], Any]) -> None:
+
+class Forked:
+    """``job()`` run in a forked copy of this process (where :func:`fork_is_safe` and ``fork``,
+    else at once, here: a job of a few :data:`FORK_S` is not worth a fork); :meth:`result` waits
+    for its value and raises what it raised."""
+
+    def __init__(self, job: Callable[[], Any], fork: bool = True) -> None:
         self._pid: int | None = None
-        if not fork_is_safe():
+        if not (fork and fork_is_safe()):
             self._outcome = outcome(job)
             return
         read_fd, write_fd = os.pipe()

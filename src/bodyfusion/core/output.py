@@ -13,6 +13,7 @@ import numpy as np
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.forking import Forked
 from bodyfusion.core.exports import (
+    ROWS,
     SystemAttitudes,
     write_geojson,
     write_trajectories_csv,
@@ -131,9 +132,10 @@ def _write_tracks(result: RunResult, out_dir: Path) -> None:
 
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
                   figure_process: FigureProcess | None = None) -> None:
-    """metrics.json, the trajectory files and (unless switched off) the PNG plots. The TUM files
-    and track.geojson are written in a forked process (:class:`~bodyfusion.base.forking.Forked`)
-    while this one writes the rest, the plots by ``figure_process`` when given one."""
+    """metrics.json, the trajectory files and (unless switched off) the PNG plots. With more
+    than :data:`~bodyfusion.core.exports.ROWS` rows of tracks, the TUM files and track.geojson
+    are written in a forked process (:class:`~bodyfusion.base.forking.Forked`) while this one
+    writes the rest; the plots by ``figure_process`` when given one."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -145,7 +147,8 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
         log.info("plotting beside the other outputs")
         figure_process.submit(**figures)
     log.info("writing the outputs to %s", out_dir)
-    beside = Forked(lambda: _write_tracks(result, out_dir))  # at the same time as the two tables, where it may
+    long = sum(len(track.t) for track in result.trajectories.values()) // output.decimate > ROWS  # worth a fork
+    beside = Forked(lambda: _write_tracks(result, out_dir), fork=long)  # at the same time as the two tables
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)

@@ -1,16 +1,17 @@
 """A run's figures drawn beside the run, in processes of their own (Linux).
 
 :class:`FigureProcess` forks a process as a command starts. That process imports matplotlib and
-the figure code (:mod:`bodyfusion.evaluation.plots`) while the run computes — a third of a second
-or more that would otherwise follow the run — and, handed the run's result, draws the figures
-(:func:`~bodyfusion.evaluation.plots.write_run_plots`) in two halves, one in a process it forks
-for the purpose, while the calling process writes the other outputs. The files are the bytes the
-calling process would write itself. Forking is only safe from a process with a single thread on
-Linux: :meth:`FigureProcess.start` returns None elsewhere, and the caller draws in-process.
-"""
+the figure code (:mod:`bodyfusion.evaluation.plots`) and draws a figure into memory while the run
+computes — half a second or more that would otherwise follow the run — and, handed the run's
+result, draws the figures (:func:`~bodyfusion.evaluation.plots.write_run_plots`) in two halves,
+one in a process it forks for the purpose, while the calling process writes the other outputs.
+The files are the bytes the calling process would write itself. Forking is only safe from a
+process with a single thread on Linux: :meth:`FigureProcess.start` returns None elsewhere, and
+the caller draws in-process."""
 
 from __future__ import annotations
 
+import io
 import multiprocessing
 from collections.abc import Mapping
 from multiprocessing.connection import Connection
@@ -31,11 +32,23 @@ def _draw_in_two(kwargs: Mapping[str, Any]) -> list[Path]:
     return [*first, *second.result()]
 
 
-def _serve(conn: Connection) -> None:
-    """The figure process: import the figure code, then draw the one job it is sent (none if the
-    caller closes its end first)."""
-    import bodyfusion.evaluation.plots  # noqa: F401 - the import is what this process does ahead of the run
+def _ready() -> None:
+    """Import the figure code and draw one small figure into memory: the first figure a process
+    draws pays for what matplotlib loads and caches on first use (fonts, the PNG writer, the χ²
+    quantiles of the NEES band), about a tenth of a second."""
+    import numpy as np
 
+    from bodyfusion.evaluation.consistency import NeesTrack
+    from bodyfusion.evaluation.plots import plot_nees
+
+    t = np.linspace(0.0, 1.0, 11)
+    plot_nees({"ready": NeesTrack(t, 1.0 + t)}).savefig(io.BytesIO(), format="png")
+
+
+def _serve(conn: Connection) -> None:
+    """The figure process: ready the figure code (:func:`_ready`), then draw the one job it is
+    sent (none if the caller closes its end first)."""
+    _ready()
     try:
         kwargs = conn.recv()
     except EOFError:

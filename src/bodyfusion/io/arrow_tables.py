@@ -1,8 +1,7 @@
-"""Delimited tables read by Arrow's CSV reader (C++, blocks parsed in parallel on every core,
-several times ``numpy.loadtxt``'s speed on one): the fast path of
-:func:`bodyfusion.io.tables.read_labelled_table`, taken for a file Arrow reads exactly as the
-chunked reader of :mod:`bodyfusion.io.tables` does; any other file is left to that reader,
-which names its first bad line."""
+"""Delimited tables read by Arrow's CSV reader (C++, several times ``numpy.loadtxt``'s speed): the
+fast path of :func:`bodyfusion.io.tables.read_labelled_table`, taken for a file Arrow reads
+exactly as the chunked reader of :mod:`bodyfusion.io.tables` does; any other file is left to
+that reader, which names its first bad line."""
 
 from __future__ import annotations
 
@@ -48,7 +47,7 @@ def read_clean_table(path: Path, columns: list[str], n_header: int, idx: list[in
         types[names[label_j]] = pa.string()
     try:
         table = pacsv.read_csv(path, read_options=pacsv.ReadOptions(column_names=names, skip_rows=header_line,
-                                                                    use_threads=True, block_size=1 << 22),
+                                                                    use_threads=False, block_size=1 << 22),
                                parse_options=pacsv.ParseOptions(delimiter=delimiter, quote_char='"'),
                                convert_options=pacsv.ConvertOptions(column_types=types, include_columns=list(types),
                                                                     null_values=[""], strings_can_be_null=False,
