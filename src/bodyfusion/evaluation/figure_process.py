@@ -27,7 +27,7 @@ def _draw_in_two(kwargs: Mapping[str, Any]) -> list[Path]:
     from bodyfusion.evaluation.plots import run_figure_names, write_run_plots
 
     names = run_figure_names(kwargs["scores"])
-    second = Forked(lambda: write_run_plots(**kwargs, names=names[len(names) // 2:]))
+    second = Forked(lambda: write_run_plots(**kwargs, names=names[len(names) // 2:]), fork=len(names) > 1)
     first = write_run_plots(**kwargs, names=names[:len(names) // 2])
     return [*first, *second.result()]
 
