@@ -9,7 +9,9 @@ exit (wall clock), with ``NUMBA_CACHE_DIR`` pointing at a new empty folder:
 3. instrumented: a third process on another empty cache records every compilation from
    numba's ``numba:compile`` events — the kernel, its argument types and the seconds spent
    compiling it, not counting the kernels it compiled in turn (nested compilations) — and,
-   after the run, how many compiled signatures each kernel holds.
+   after the run, how many compiled signatures each kernel holds. The fuser's kernels, which a
+   first run compiles in a forked process beside the systems' (``bodyfusion.core.compile_ahead``)
+   and then loads from the cache, are not among them.
 
 ``--config`` runs another layout the same way (``--simulate``: a scenario, which ``fusion
 simulate`` writes out first, untimed, and whose layout runs): the way to survey what each kind

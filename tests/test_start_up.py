@@ -1,7 +1,7 @@
 """What ``fusion run`` imports: the main command starts without the libraries only some runs
 need (scipy.stats and scipy.signal take over a second to import, pandas 0.3 s, osqp 50 ms), and the
 trajectory files are written without pandas (``pa.array`` would import it); what it compiles: one
-signature per kernel."""
+signature per kernel, and nothing ahead once its kernels are loaded."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 NOT_AT_START = ("scipy.stats", "scipy.signal", "scipy.ndimage", "pandas", "matplotlib", "plotly", "osqp")
@@ -92,15 +93,19 @@ def test_arrow_arrays_are_those_pa_array_makes():
 SIGNATURE_PROBE = """
 import json, sys
 import numba
+from bodyfusion.core.compile_ahead import compile_fuser_kernels
 from bodyfusion.core.layout import load_layout
 from bodyfusion.core.run import run_layout
 from bodyfusion.sim import simulate
 layouts = [(VICON, ["smoother.kind=fb-rts"]), (VICON, ["smoother.kind=rts", "fuser.method=qp"]),
-           (VICON, ["systems.left_foot.filter.kind=enekf", "systems.right_foot.filter.kind=ckf"])]
+           (VICON, ["systems.left_foot.filter.kind=enekf", "systems.right_foot.filter.kind=ckf"]),
+           (VICON, ["fuser.inequality=projection", "fuser.correct=positions"])]
 for scenario in SCENARIOS:
     layouts.append((simulate(scenario, OUT / scenario.stem, seed=0).config_path, []))
 for config, sets in layouts:
-    run_layout(load_layout(config, sets))
+    loaded = load_layout(config, sets)
+    compile_fuser_kernels(loaded.layout)  # what a first run compiles ahead: the signatures the run calls
+    run_layout(loaded)
 multi = {}
 for name, module in list(sys.modules.items()):
     if name.startswith("bodyfusion"):
@@ -115,7 +120,9 @@ def test_every_kernel_compiles_one_signature_whatever_the_layout(tmp_path):
     """A kernel called with an integer or boolean constant, or with arrays of another layout, is
     compiled again for those types (a literal 3 is a type of its own): seconds of a cold start
     each. Foot INS filters of three kinds, FB-RTS and the whole-run RTS, the QP, a phone with
-    GNSS and UWB ranges, run in one process: every compiled kernel holds one signature."""
+    GNSS and UWB ranges, run in one process, each layout's fuser kernels first compiled as a first
+    run compiles them ahead (:mod:`bodyfusion.core.compile_ahead`): every compiled kernel holds
+    one signature."""
     from tests.paths import ROOT
 
     configs = ROOT / "configs"
@@ -125,3 +132,13 @@ def test_every_kernel_compiles_one_signature_whatever_the_layout(tmp_path):
              f"Path({str(configs / 'sim_dual_foot_uwb.yaml')!r})]\n" + SIGNATURE_PROBE)
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.strip().splitlines()[-1]) == {}
+
+
+def test_nothing_is_compiled_ahead_once_the_fusers_kernels_are_loaded():
+    from bodyfusion.core.compile_ahead import compile_fuser_ahead
+    from bodyfusion.core.constraints.kernels import _all_finite
+    from bodyfusion.core.layout import load_layout
+    from tests.paths import ROOT
+
+    _all_finite(np.zeros(3), np.eye(3))  # this process has the kernel: a run here compiles nothing more of it
+    assert compile_fuser_ahead(load_layout(ROOT / "configs" / "dual_foot_vicon.yaml").layout) is None

@@ -10,6 +10,7 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.core import registry as plugin_registry
+from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings
@@ -89,6 +90,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     t0 = time.perf_counter()
     loaded = loaded.checked()
     require_data(loaded.layout, loaded.system_configs, loaded.path)
+    ahead = compile_fuser_ahead(loaded.layout)  # a first run: the fuser's kernels compiled beside the systems'
     context = layout_context(loaded, seed)
     log.info("reading the data of %s", ", ".join(f"{n} ({c.plugin})" for n, c in loaded.system_configs.items()))
     built = build_systems(loaded, context)
@@ -109,6 +111,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
              len(aiding), loaded.layout.fuser.method, len(loaded.layout.constraints))
     report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
+    finish_compiling_ahead(ahead)
     for monitor in monitors.values():
         monitor.flush()
     if tracker is not None:
