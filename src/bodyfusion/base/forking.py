@@ -1,5 +1,6 @@
 """Work done beside this process, in a forked copy of it (Linux): output files that do not
-depend on each other written at the same time on two cores.
+depend on each other written at the same time, a first run's kernels compiled ahead, the two
+halves of a run's figures drawn — on two cores instead of one.
 
 A forked copy shares this process's memory until either writes to it, so a job needs no
 arguments sent; it hands back its value (or the exception it raised) through a pipe. Forking
@@ -48,15 +49,12 @@ def raised_or_value(result: Outcome) -> Any:
     return value
 
 
-FORK_S = 0.01
-"""About what a fork costs a process of a run's size (a few hundred MB resident), s: the copy's
-page tables, its first writes to shared pages, its exit."""
-
-
 class Forked:
-    """``job()`` run in a forked copy of this process (where :func:`fork_is_safe` and ``fork``,
-    else at once, here: a job of a few :data:`FORK_S` is not worth a fork); :meth:`result` waits
-    for its value and raises what it raised."""
+    """``job()`` run in a forked copy of this process (where :func:`fork_is_safe` and ``fork``),
+    else at once, here; :meth:`result` waits for its value and raises what it raised. A fork
+    costs a process of a run's size (a few hundred MB resident) about 10 ms — the copy's page
+    tables, its first writes to shared pages, its exit —, so a job of about that is not worth
+    one (``fork=False``)."""
 
     def __init__(self, job: Callable[[], Any], fork: bool = True) -> None:
         self._pid: int | None = None
