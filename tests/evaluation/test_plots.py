@@ -158,14 +158,18 @@ def test_a_runs_plots_keep_their_png_names_and_take_the_layouts_formats(scored, 
     assert [p.name for p in written] == ["trajectory.pdf", "trajectory.svg"]
 
 
-def test_the_figure_process_writes_the_files_this_process_would(scored, tmp_path):
+@pytest.mark.parametrize("is_scored", [True, False])
+def test_the_figure_process_writes_the_files_this_process_would(scored, tmp_path, is_scored):
     estimates, scores, transform, truths = scored
+    if not is_scored:  # the trajectory alone: drawn without a second fork
+        scores, truths = None, None
     here = write_run_plots(tmp_path / "here", estimates, scores, transform, truths, nees_tracks())
     with FigureProcess() as beside:  # forked in two halves: the files in the same order, the same bytes
         beside.submit(out_dir=tmp_path / "beside", estimates=estimates, scores=scores, transform=transform,
                       truths=truths, nees=nees_tracks(), figures=None)
         written = beside.written()
-    assert [p.name for p in written] == [p.name for p in here]
+    assert [p.name for p in written] == [p.name for p in here] == (
+        ["trajectory.png", "error_vs_time.png", "error_cdf.png", "nees.png"] if is_scored else ["trajectory.png"])
     assert all(a.read_bytes() == b.read_bytes() for a, b in zip(here, written, strict=True))
 
 
