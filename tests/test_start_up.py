@@ -95,7 +95,9 @@ import json, sys
 import numba
 from bodyfusion.core.compile_ahead import compile_fuser_kernels
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.plugins.foot_ins.estimators import compile_step
+from bodyfusion.plugins.foot_ins.system import FootIns
 from bodyfusion.sim import simulate
 layouts = [(VICON, ["smoother.kind=fb-rts"]), (VICON, ["smoother.kind=rts", "fuser.method=qp"]),
            (VICON, ["systems.left_foot.filter.kind=enekf", "systems.right_foot.filter.kind=ckf"]),
@@ -105,6 +107,9 @@ for scenario in SCENARIOS:
 for config, sets in layouts:
     loaded = load_layout(config, sets)
     compile_fuser_kernels(loaded.layout)  # what a first run compiles ahead: the signatures the run calls
+    for system in build_systems(loaded, layout_context(loaded)).values():
+        if isinstance(system, FootIns):
+            compile_step(system.filter, system.run_data, system.phi)
     run_layout(loaded)
 multi = {}
 for name, module in list(sys.modules.items()):
@@ -120,8 +125,9 @@ def test_every_kernel_compiles_one_signature_whatever_the_layout(tmp_path):
     """A kernel called with an integer or boolean constant, or with arrays of another layout, is
     compiled again for those types (a literal 3 is a type of its own): seconds of a cold start
     each. Foot INS filters of three kinds, FB-RTS and the whole-run RTS, the QP, a phone with
-    GNSS and UWB ranges, run in one process, each layout's fuser kernels first compiled as a first
-    run compiles them ahead (:mod:`bodyfusion.core.compile_ahead`): every compiled kernel holds
+    GNSS and UWB ranges, run in one process, each layout's fuser kernels and foot steps first
+    compiled as a first run compiles them ahead (:mod:`bodyfusion.core.compile_ahead`,
+    :func:`~bodyfusion.plugins.foot_ins.estimators.compile_step`): every compiled kernel holds
     one signature."""
     from tests.paths import ROOT
 

@@ -77,9 +77,12 @@ def compile_fuser_ahead(layout: Layout) -> Forked | None:
 
 
 def finish_compiling_ahead(ahead: Forked | None) -> None:
-    """Wait for the process compiling ahead, if any (it is done long before in a first run: its
-    kernels are needed after the systems')."""
+    """Wait for a process compiling ahead, if any; None (to clear the caller's handle). Its
+    failure is logged: the run compiles what it did not."""
     if ahead is not None:
-        failure = ahead.result()
+        try:
+            failure = ahead.result()
+        except Exception as err:  # noqa: BLE001 - the process itself failed (killed, say)
+            failure = f"{type(err).__name__}: {err}"
         if failure:
-            log.debug("compiling the fuser's kernels ahead failed: %s", failure)
+            log.debug("compiling ahead failed: %s", failure)

@@ -36,14 +36,17 @@ __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "l
 log = logging.getLogger(__name__)
 
 
-def layout_context(loaded: LoadedLayout, seed: int = 0) -> LayoutContext:
+def layout_context(loaded: LoadedLayout, seed: int = 0, first_run: bool = False) -> LayoutContext:
+    """The run's :class:`~bodyfusion.core.system.LayoutContext` (``first_run``: an empty dict of
+    kernels compiling ahead for the systems to fill)."""
     lay = loaded.layout
     g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
     outages: dict[str, tuple[tuple[float, float], ...]] = {}
     for o in lay.outages:
         outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
     return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.base_dir,
-                         seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages)
+                         seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages,
+                         compiling_ahead={} if first_run else None)
 
 
 def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem | AidingSource]:
@@ -91,7 +94,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     loaded = loaded.checked()
     require_data(loaded.layout, loaded.system_configs, loaded.path)
     ahead = compile_fuser_ahead(loaded.layout)  # a first run: the fuser's kernels compiled beside the systems'
-    context = layout_context(loaded, seed)
+    context = layout_context(loaded, seed, first_run=ahead is not None)
     log.info("reading the data of %s", ", ".join(f"{n} ({c.plugin})" for n, c in loaded.system_configs.items()))
     built = build_systems(loaded, context)
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}

@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel
@@ -97,7 +97,13 @@ def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray |
 class LayoutContext:
     """Layout-wide facts a system needs: gravity (m/s^2), latitude (deg), config folder,
     run seed, the geodetic origin of the ENU frame (lat deg, lon deg, height m; None:
-    not set) and the GNSS outage windows per system ((start s, duration s), ...)."""
+    not set), the GNSS outage windows per system ((start s, duration s), ...) and, on a first
+    run (numba's cache was empty as it started and forking is safe:
+    :mod:`bodyfusion.core.compile_ahead`), ``compiling_ahead``: the forked processes
+    (:class:`~bodyfusion.base.forking.Forked`) compiling kernels the run needs later, by a name
+    the systems that share one agree on; a system may add one while the run compiles others, and
+    waits for it (:func:`~bodyfusion.core.compile_ahead.finish_compiling_ahead`) before its
+    first use. None on any other run."""
 
     gravity_mps2: float
     latitude_deg: float
@@ -105,6 +111,7 @@ class LayoutContext:
     seed: int = 0
     geodetic_origin: tuple[float, float, float] | None = None
     outages: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+    compiling_ahead: dict[str, Any] | None = None
 
 
 class Plugin(ABC):

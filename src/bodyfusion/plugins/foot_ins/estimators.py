@@ -23,6 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bodyfusion.base.forking import Forked
 from bodyfusion.nav.error_state import inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
@@ -173,3 +174,24 @@ class EnsembleEkf(Estimator):
 ESTIMATORS: dict[str, type[Estimator]] = {"ekf": ErrorStateEkf, "ckf": ColouredEkf, "enekf": EnsembleEkf,
                                           "cenekf": EnsembleEkf}
 """``filter.kind`` → its estimator class."""
+
+
+def compile_step(estimator: Estimator, data: RunData, phi: np.ndarray) -> None:
+    """Compile ``estimator``'s step for these arguments' types: :meth:`Estimator.run` over at
+    most one sample (it moves the state: for a copy, or a system that restarts afterwards)."""
+    estimator.run(data, 1, min(2, len(data.t)), phi)
+
+
+def step_compiled_ahead(estimator: Estimator, data: RunData, phi: np.ndarray,
+                        compiling_ahead: dict[str, Forked] | None) -> Forked | None:
+    """On a first run (``compiling_ahead``: the run's
+    :attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`), the forked process compiling
+    ``estimator``'s step (:func:`compile_step`, on the copy's memory), which the run's first foot
+    of its class starts before compiling its reset (``set_state``, ~3 s of an ~12 s first run);
+    every foot of the class waits for it before its first step. None on any other run."""
+    if compiling_ahead is None:
+        return None
+    key = f"foot_ins.{type(estimator).__name__}.run"
+    if key not in compiling_ahead:
+        compiling_ahead[key] = Forked(lambda: compile_step(estimator, data, phi))
+    return compiling_ahead[key]
