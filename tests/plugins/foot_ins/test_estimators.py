@@ -367,3 +367,39 @@ def test_simulated_stance_noise_is_seeded_and_scored(tmp_path):
     res = run_layout(load_layout(a.config_path, kind_overrides("ckf")))
     for foot in FEET:
         assert res.scores[foot].metrics["horizontal_error_m"]["rmse"] < 0.5
+
+
+class _Step:
+    """An estimator's step that moves its state and says where it ran."""
+
+    def __init__(self) -> None:
+        self.moved_in: list[int] = []
+
+    def run(self, data, i0: int, i1: int, phi) -> None:
+        import os
+
+        self.moved_in.append(os.getpid())
+
+
+def test_a_first_runs_step_is_compiled_ahead_in_a_copy_and_never_here():
+    import threading
+    from types import SimpleNamespace
+
+    from bodyfusion.plugins.foot_ins.estimators import step_compiled_ahead
+
+    step, data, ahead = _Step(), SimpleNamespace(t=np.zeros(5)), {}
+    forked = step_compiled_ahead(step, data, np.empty((0, 0)), ahead)
+    assert forked is not None and list(ahead.values()) == [forked]
+    assert step_compiled_ahead(_Step(), data, np.empty((0, 0)), ahead) is forked  # one per estimator class
+    forked.result()
+    assert step.moved_in == []  # taken in the copy: this process's state did not move
+    assert step_compiled_ahead(step, data, np.empty((0, 0)), None) is None  # not a first run
+    gate = threading.Event()
+    other = threading.Thread(target=gate.wait)
+    other.start()
+    try:  # beside another thread: no fork, and the step is not taken here instead
+        assert step_compiled_ahead(step, data, np.empty((0, 0)), {}) is None
+    finally:
+        gate.set()
+        other.join()
+    assert step.moved_in == []

@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from bodyfusion.base.forking import Forked
+from bodyfusion.base.forking import Forked, fork_is_safe
 from bodyfusion.nav.error_state import inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
@@ -188,8 +188,9 @@ def step_compiled_ahead(estimator: Estimator, data: RunData, phi: np.ndarray,
     :attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`), the forked process compiling
     ``estimator``'s step (:func:`compile_step`, on the copy's memory), which the run's first foot
     of its class starts before compiling its reset (``set_state``, ~3 s of an ~12 s first run);
-    every foot of the class waits for it before its first step. None on any other run."""
-    if compiling_ahead is None:
+    every foot of the class waits for it before its first step. None on any other run, or where
+    forking is not safe (the step is never taken here: it moves the state)."""
+    if compiling_ahead is None or not fork_is_safe():
         return None
     key = f"foot_ins.{type(estimator).__name__}.run"
     if key not in compiling_ahead:
