@@ -7,8 +7,10 @@ The core knows its own kernels, so :func:`compile_fuser_ahead` calls the cheapes
 first and, when numba compiled it rather than loading it from its cache, forks a process
 (:class:`~bodyfusion.base.forking.Forked`) that compiles the others into the cache — it solves
 and truncates a violated constraint of the layout with the layout's solver and checks a few
-covariances — while this process compiles the systems'. When the run reaches them, numba loads
-them from the cache. The compiled code is the same either way; a run on a filled cache, a
+covariances — while this process compiles the systems'. Systems add their own to the run's
+:attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`; the run waits for all of them
+once the systems are built (:func:`finish_compiling_ahead`), and numba loads those kernels
+from the cache when they are first called. The compiled code is the same either way; a run on a filled cache, a
 process that has loaded the kernels already, or one where forking is not safe forks nothing.
 """
 
@@ -76,13 +78,14 @@ def compile_fuser_ahead(layout: Layout) -> Forked | None:
     return Forked(lambda: _compile_quietly(layout))
 
 
-def finish_compiling_ahead(ahead: Forked | None) -> None:
-    """Wait for a process compiling ahead, if any; None (to clear the caller's handle). Its
-    failure is logged: the run compiles what it did not."""
-    if ahead is not None:
+def finish_compiling_ahead(compiling_ahead: dict[str, Forked] | None) -> None:
+    """Wait for every process compiling ahead for the run (the run's
+    :attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`; None: none). A failure is
+    logged: the run compiles what it did not."""
+    for name, ahead in (compiling_ahead or {}).items():
         try:
             failure = ahead.result()
         except Exception as err:  # noqa: BLE001 - the process itself failed (killed, say)
             failure = f"{type(err).__name__}: {err}"
         if failure:
-            log.debug("compiling ahead failed: %s", failure)
+            log.debug("compiling %s ahead failed: %s", name, failure)

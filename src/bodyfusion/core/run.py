@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.forking import Forked
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.core import registry as plugin_registry
@@ -36,9 +37,10 @@ __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "l
 log = logging.getLogger(__name__)
 
 
-def layout_context(loaded: LoadedLayout, seed: int = 0, first_run: bool = False) -> LayoutContext:
-    """The run's :class:`~bodyfusion.core.system.LayoutContext` (``first_run``: an empty dict of
-    kernels compiling ahead for the systems to fill)."""
+def layout_context(loaded: LoadedLayout, seed: int = 0,
+                   compiling_ahead: dict[str, Forked] | None = None) -> LayoutContext:
+    """The run's :class:`~bodyfusion.core.system.LayoutContext` (``compiling_ahead``: on a first
+    run, the processes compiling ahead so far, for the systems to add theirs to)."""
     lay = loaded.layout
     g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
     outages: dict[str, tuple[tuple[float, float], ...]] = {}
@@ -46,7 +48,7 @@ def layout_context(loaded: LoadedLayout, seed: int = 0, first_run: bool = False)
         outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
     return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.base_dir,
                          seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages,
-                         compiling_ahead={} if first_run else None)
+                         compiling_ahead=compiling_ahead)
 
 
 def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem | AidingSource]:
@@ -94,9 +96,10 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     loaded = loaded.checked()
     require_data(loaded.layout, loaded.system_configs, loaded.path)
     ahead = compile_fuser_ahead(loaded.layout)  # a first run: the fuser's kernels compiled beside the systems'
-    context = layout_context(loaded, seed, first_run=ahead is not None)
+    context = layout_context(loaded, seed, {"core.fuser": ahead} if ahead is not None else None)
     log.info("reading the data of %s", ", ".join(f"{n} ({c.plugin})" for n, c in loaded.system_configs.items()))
     built = build_systems(loaded, context)
+    finish_compiling_ahead(context.compiling_ahead)  # before anything advances: the kernels are in the cache
     aiding = {name: s for name, s in built.items() if isinstance(s, AidingSource)}
     systems = {name: s for name, s in built.items() if name not in aiding}
     plan_smoothing(systems, loaded.layout.smoother)
@@ -114,7 +117,6 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
              len(aiding), loaded.layout.fuser.method, len(loaded.layout.constraints))
     report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
-    finish_compiling_ahead(ahead)
     for monitor in monitors.values():
         monitor.flush()
     if tracker is not None:

@@ -101,9 +101,10 @@ class LayoutContext:
     run (numba's cache was empty as it started and forking is safe:
     :mod:`bodyfusion.core.compile_ahead`), ``compiling_ahead``: the forked processes
     (:class:`~bodyfusion.base.forking.Forked`) compiling kernels the run needs later, by a name
-    the systems that share one agree on; a system may add one while the run compiles others, and
-    waits for it (:func:`~bodyfusion.core.compile_ahead.finish_compiling_ahead`) before its
-    first use. None on any other run."""
+    the systems that share one agree on; a system's constructor may add one while the run
+    compiles others, and the run waits for all of them once the systems are built
+    (:func:`~bodyfusion.core.compile_ahead.finish_compiling_ahead`), before anything advances.
+    None on any other run."""
 
     gravity_mps2: float
     latitude_deg: float

@@ -385,21 +385,24 @@ def test_a_first_runs_step_is_compiled_ahead_in_a_copy_and_never_here():
     import threading
     from types import SimpleNamespace
 
-    from bodyfusion.plugins.foot_ins.estimators import step_compiled_ahead
+    from bodyfusion.plugins.foot_ins.estimators import compile_step_ahead
 
     step, data, ahead = _Step(), SimpleNamespace(t=np.zeros(5)), {}
-    forked = step_compiled_ahead(step, data, np.empty((0, 0)), ahead)
-    assert forked is not None and list(ahead.values()) == [forked]
-    assert step_compiled_ahead(_Step(), data, np.empty((0, 0)), ahead) is forked  # one per estimator class
+    compile_step_ahead(step, data, np.empty((0, 0)), ahead)
+    assert len(ahead) == 1
+    forked = next(iter(ahead.values()))
+    compile_step_ahead(_Step(), data, np.empty((0, 0)), ahead)
+    assert list(ahead.values()) == [forked]  # one per estimator class
     forked.result()
     assert step.moved_in == []  # taken in the copy: this process's state did not move
-    assert step_compiled_ahead(step, data, np.empty((0, 0)), None) is None  # not a first run
+    compile_step_ahead(step, data, np.empty((0, 0)), None)  # not a first run: nothing to do
     gate = threading.Event()
     other = threading.Thread(target=gate.wait)
     other.start()
+    beside: dict = {}
     try:  # beside another thread: no fork, and the step is not taken here instead
-        assert step_compiled_ahead(step, data, np.empty((0, 0)), {}) is None
+        compile_step_ahead(step, data, np.empty((0, 0)), beside)
     finally:
         gate.set()
         other.join()
-    assert step.moved_in == []
+    assert beside == {} and step.moved_in == []

@@ -182,17 +182,14 @@ def compile_step(estimator: Estimator, data: RunData, phi: np.ndarray) -> None:
     estimator.run(data, 1, min(2, len(data.t)), phi)
 
 
-def step_compiled_ahead(estimator: Estimator, data: RunData, phi: np.ndarray,
-                        compiling_ahead: dict[str, Forked] | None) -> Forked | None:
+def compile_step_ahead(estimator: Estimator, data: RunData, phi: np.ndarray,
+                       compiling_ahead: dict[str, Forked] | None) -> None:
     """On a first run (``compiling_ahead``: the run's
-    :attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`), the forked process compiling
-    ``estimator``'s step (:func:`compile_step`, on the copy's memory), which the run's first foot
-    of its class starts before compiling its reset (``set_state``, ~3 s of an ~12 s first run);
-    every foot of the class waits for it before its first step. None on any other run, or where
-    forking is not safe (the step is never taken here: it moves the state)."""
-    if compiling_ahead is None or not fork_is_safe():
-        return None
+    :attr:`~bodyfusion.core.system.LayoutContext.compiling_ahead`), fork the process compiling
+    ``estimator``'s step (:func:`compile_step`, on the copy's memory): the run's first foot of
+    its class does, before compiling its reset (``set_state``, ~3 s of an ~12 s first run); the
+    run waits for it before anything advances. Nothing on any other run, or where forking is not
+    safe (the step is never taken here: it moves the state)."""
     key = f"foot_ins.{type(estimator).__name__}.run"
-    if key not in compiling_ahead:
+    if compiling_ahead is not None and key not in compiling_ahead and fork_is_safe():
         compiling_ahead[key] = Forked(lambda: compile_step(estimator, data, phi))
-    return compiling_ahead[key]

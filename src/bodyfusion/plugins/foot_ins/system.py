@@ -10,7 +10,6 @@ import numpy as np
 
 from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.base.sections import KeyedError
-from bodyfusion.core.compile_ahead import finish_compiling_ahead
 from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import ImuStream, InputReport, Trajectory
@@ -28,7 +27,7 @@ from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attit
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
-from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, step_compiled_ahead
+from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
@@ -307,7 +306,7 @@ class FootIns(SensorSystem):
                                 np.zeros(COUNTERS_SIZE))
         self.run_data.record = self._forward_record.restart(self._P0, self.run_data.counters)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
-        self._step_ahead = step_compiled_ahead(self.filter, self.run_data, self.phi, self.context.compiling_ahead)
+        compile_step_ahead(self.filter, self.run_data, self.phi, self.context.compiling_ahead)
         self.filter.reset_and_record(*NO_RESET, self.run_data, 0, NOT_PACKED)
         self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
         self.fix_counts = GateCounts()
@@ -367,7 +366,6 @@ class FootIns(SensorSystem):
         i = self._i + 1
         if i1 <= i:
             return
-        self._step_ahead = finish_compiling_ahead(self._step_ahead)  # a first run: compiled beside ours
         g = self._gap_index  # sorted; the usual case, none ahead, costs no search
         gaps = g[g.searchsorted(i):g.searchsorted(i1)].tolist() if g.size and g[-1] >= i else []
         for a, b in zip([i, *gaps], [*gaps, i1]):
