@@ -48,8 +48,8 @@ def random_spd(rng: np.random.Generator, n: int = ERROR_SIZE, scale: float = 1.0
 
 def step(x: np.ndarray, acc: np.ndarray, gyro: np.ndarray, dt: float):
     x = x.copy()
-    f_n = np.empty(3)
-    C = mechanise(x, acc, gyro, dt, G, NO_EARTH, f_n, np.zeros(6))
+    f_n, C = np.empty(3), np.empty((3, 3))
+    mechanise(x, acc, gyro, dt, G, NO_EARTH, f_n, np.zeros(6), C)
     return x, C, f_n
 
 

@@ -116,8 +116,8 @@ def test_propagation_carries_the_rotation_about_up_to_the_next_sample(seed):
     x = random_nominal_state(rng)
     acc, gyro, dt = rng.normal(0, 5, 3) + [0, 0, 9.8], rng.normal(0, 2, 3), 0.01
     n0 = heading_direction(x)
-    f_n = np.empty(3)
-    C = mechanise(x, acc, gyro, dt, 9.8, np.zeros(3), f_n, rng.normal(0, 0.01, 6))
+    f_n, C = np.empty(3), np.empty((3, 3))
+    mechanise(x, acc, gyro, dt, 9.8, np.zeros(3), f_n, rng.normal(0, 0.01, 6), C)
     F = np.eye(ERROR_SIZE)
     accumulate_propagation(F, C, f_n, dt)
     carried = F @ n0

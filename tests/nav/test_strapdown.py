@@ -16,7 +16,7 @@ from bodyfusion.nav.attitude import (
     quat_from_azimuth_pitch_roll,
     quat_from_rotvec,
     quat_multiply,
-    quat_normalise,
+    quat_normalised,
     quat_to_dcm,
 )
 from bodyfusion.nav.earth import EARTH_RATE, earth_rate_enu
@@ -143,7 +143,8 @@ def test_mechanise_returns_start_dcm_and_mean_nav_specific_force():
     f_n = np.empty(3)
     acc = np.array([0.4, -0.1, 9.9])
     gyro = np.zeros(3)
-    C = mechanise(x, acc, gyro, 0.01, G, NO_EARTH, f_n, np.zeros(6))
+    C = np.empty((3, 3))
+    mechanise(x, acc, gyro, 0.01, G, NO_EARTH, f_n, np.zeros(6), C)
     C_ref = Rotation.from_quat(q, scalar_first=True).as_matrix()
     np.testing.assert_allclose(C, C_ref, atol=1e-14)
     np.testing.assert_allclose(f_n, C_ref @ acc, atol=1e-12)
@@ -185,7 +186,7 @@ def test_earth_rate_coriolis_term_on_a_moving_body():
     x = nominal(v=(10.0, 0.0, 0.0))
     f_n = np.empty(3)
     dt = 0.01
-    mechanise(x, np.array([0.0, 0.0, G]), np.zeros(3), dt, G, w, f_n, np.zeros(6))
+    mechanise(x, np.array([0.0, 0.0, G]), np.zeros(3), dt, G, w, f_n, np.zeros(6), np.empty((3, 3)))
     expected_dv = -2.0 * np.cross(w, [10.0, 0.0, 0.0]) * dt - 0.5 * dt * np.cross(w, [0.0, 0.0, G * dt])
     np.testing.assert_allclose(x[3:6] - [10.0, 0.0, 0.0], expected_dv, atol=1e-15)
 
@@ -203,12 +204,11 @@ def test_quat_multiply_is_hamilton_product_matching_scipy_composition():
     ra, rb = Rotation.random(2, random_state=2)
     a, b = ra.as_quat(scalar_first=True), rb.as_quat(scalar_first=True)
     expected = (ra * rb).as_quat(scalar_first=True)
-    got = quat_multiply(a, b)
+    got = np.array(quat_multiply(tuple(a), tuple(b)))  # the kernels' quaternions are 4-tuples
     got = got if np.dot(got, expected) >= 0 else -got
     np.testing.assert_allclose(got, expected, atol=1e-15)
     # i ⊗ j = k (Hamilton, not JPL)
-    np.testing.assert_array_equal(quat_multiply(np.array([0.0, 1, 0, 0]), np.array([0.0, 0, 1, 0])),
-                                  [0.0, 0, 0, 1])
+    assert quat_multiply((0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0)) == (0.0, 0.0, 0.0, 1.0)
 
 
 @pytest.mark.parametrize("rotvec", [[0.3, -1.2, 2.0], [1e-3, 2e-3, -5e-4], [3e-9, -1e-9, 2e-9], [0.0, 0.0, 0.0],
@@ -216,13 +216,60 @@ def test_quat_multiply_is_hamilton_product_matching_scipy_composition():
 def test_quat_from_rotvec_matches_scipy_including_small_angles(rotvec):
     r = np.asarray(rotvec, float)
     expected = Rotation.from_rotvec(r).as_quat(scalar_first=True)
-    np.testing.assert_allclose(quat_from_rotvec(r), expected, atol=1e-16, rtol=1e-15)
+    np.testing.assert_allclose(quat_from_rotvec(tuple(r)), expected, atol=1e-16, rtol=1e-15)
 
 
-def test_quat_normalise_in_place():
-    q = np.array([2.0, 0.0, 0.0, 0.0]) + 0.1
-    quat_normalise(q)
-    assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-15)
+def test_quat_normalised_has_unit_norm_and_the_same_direction():
+    q = (2.1, 0.1, 0.1, 0.1)
+    unit = np.array(quat_normalised(q))
+    assert np.linalg.norm(unit) == pytest.approx(1.0, abs=1e-15)
+    np.testing.assert_allclose(unit * np.linalg.norm(q), q, rtol=1e-15)
+
+
+def test_mechanise_writes_c_nb_at_the_start_of_the_step_into_the_callers_buffer():
+    x = nominal(q=Rotation.from_rotvec([0.1, -0.2, 0.3]).as_quat(scalar_first=True))
+    C_start = Rotation.from_quat(x[6:10], scalar_first=True).as_matrix()
+    C = np.full((3, 3), np.nan)
+    mechanise(x, np.array([0.4, -0.1, 9.9]), np.array([0.01, 0.02, -0.03]), 0.01, G, NO_EARTH, np.empty(3),
+              np.zeros(6), C)
+    np.testing.assert_allclose(C, C_start, atol=1e-14)
+
+
+ALLOCATIONS = """
+import numba, numpy as np
+from numba.core.runtime import rtsys
+from bodyfusion.nav.strapdown import mechanise
+
+@numba.njit
+def steps(x, acc, gyro, w_ie_n, n):
+    f_n, prev, C = np.empty(3), np.zeros(6), np.empty((3, 3))
+    for _ in range(n):
+        mechanise(x, acc, gyro, 0.01, 9.8, w_ie_n, f_n, prev, C)
+
+x = np.zeros(16)
+x[6] = 1.0
+acc, gyro, w_ie_n = np.array([0.4, -0.1, 9.9]), np.array([0.01, 0.02, -0.03]), np.array([0.0, 5e-5, 4e-5])
+steps(x, acc, gyro, w_ie_n, 1)
+counts = []
+for n in (10, 1000):
+    before = rtsys.get_allocation_stats().alloc
+    steps(x, acc, gyro, w_ie_n, n)
+    counts.append(rtsys.get_allocation_stats().alloc - before)
+print(counts[1] - counts[0])
+"""
+
+
+def test_a_strapdown_step_allocates_no_array():
+    """The per-sample step allocates nothing (3-vectors are scalars, quaternions 4-tuples, C_nb
+    the caller's buffer): numba's allocation counter (``NUMBA_NRT_STATS``) moves as much for a
+    call of a thousand steps as for one of ten."""
+    import os
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", ALLOCATIONS], capture_output=True, text=True, check=True,
+                         env={**os.environ, "NUMBA_NRT_STATS": "1"})
+    assert int(out.stdout.strip().splitlines()[-1]) == 0
 
 
 def test_azimuth_pitch_roll_round_trip_and_scipy_agreement():

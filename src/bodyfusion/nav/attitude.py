@@ -19,56 +19,58 @@ from scipy.spatial.transform import Rotation
 
 
 @numba.njit(cache=True)
-def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a ⊗ b of scalar-first quaternions."""
-    out = np.empty(4)
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
-    return out
+def quat_multiply(a: tuple[float, float, float, float],
+                  b: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """Hamilton product a ⊗ b of scalar-first quaternions. Quaternions in the compiled
+    kernels are 4-tuples of floats: no array is allocated per sample."""
+    return (a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0])
 
 
 @numba.njit(cache=True)
-def quat_from_rotvec(r: np.ndarray) -> np.ndarray:
+def quat_from_rotvec(r: tuple[float, float, float]) -> tuple[float, float, float, float]:
     """Quaternion of the rotation vector r (rad); exact, with a series near zero."""
     angle = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-    out = np.empty(4)
     if angle < 1e-8:
-        out[0] = 1.0 - angle * angle / 8.0
+        w = 1.0 - angle * angle / 8.0
         s = 0.5 - angle * angle / 48.0
     else:
-        out[0] = math.cos(0.5 * angle)
+        w = math.cos(0.5 * angle)
         s = math.sin(0.5 * angle) / angle
-    out[1] = s * r[0]
-    out[2] = s * r[1]
-    out[3] = s * r[2]
-    return out
+    return w, s * r[0], s * r[1], s * r[2]
 
 
 @numba.njit(cache=True)
-def quat_normalise(q: np.ndarray) -> None:
-    """Scale q to unit norm in place."""
+def quat_normalised(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """q scaled to unit norm."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    for k in range(4):
-        q[k] /= n
+    return q[0] / n, q[1] / n, q[2] / n, q[3] / n
+
+
+@numba.njit(cache=True)
+def quat_to_dcm_into(q: np.ndarray, C_nb: np.ndarray) -> None:
+    """``C_nb`` (3, 3) ← the direction-cosine matrix of the unit quaternion q_nb (4,)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    C_nb[0, 0] = 1 - 2 * (y * y + z * z)
+    C_nb[0, 1] = 2 * (x * y - w * z)
+    C_nb[0, 2] = 2 * (x * z + w * y)
+    C_nb[1, 0] = 2 * (x * y + w * z)
+    C_nb[1, 1] = 1 - 2 * (x * x + z * z)
+    C_nb[1, 2] = 2 * (y * z - w * x)
+    C_nb[2, 0] = 2 * (x * z - w * y)
+    C_nb[2, 1] = 2 * (y * z + w * x)
+    C_nb[2, 2] = 1 - 2 * (x * x + y * y)
 
 
 @numba.njit(cache=True)
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:
-    """Direction-cosine matrix C_nb of the unit quaternion q_nb."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    C = np.empty((3, 3))
-    C[0, 0] = 1 - 2 * (y * y + z * z)
-    C[0, 1] = 2 * (x * y - w * z)
-    C[0, 2] = 2 * (x * z + w * y)
-    C[1, 0] = 2 * (x * y + w * z)
-    C[1, 1] = 1 - 2 * (x * x + z * z)
-    C[1, 2] = 2 * (y * z - w * x)
-    C[2, 0] = 2 * (x * z - w * y)
-    C[2, 1] = 2 * (y * z + w * x)
-    C[2, 2] = 1 - 2 * (x * x + y * y)
-    return C
+    """Direction-cosine matrix C_nb (3, 3) of the unit quaternion q_nb (4,), in a new array
+    (:func:`quat_to_dcm_into` fills one)."""
+    C_nb = np.empty((3, 3))
+    quat_to_dcm_into(q, C_nb)
+    return C_nb
 
 
 def quat_from_azimuth_pitch_roll(azimuth: float, pitch: float, roll: float) -> np.ndarray:

@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalise
+from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised
 
 ERROR_SIZE = 15
 
@@ -187,10 +187,8 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
         x[3 + k] += dx[3 + k]
         x[10 + k] += dx[9 + k]
         x[13 + k] += dx[12 + k]
-    q = quat_multiply(quat_from_rotvec(dx[6:9]), x[6:10])
-    quat_normalise(q)
-    for k in range(4):
-        x[6 + k] = q[k]
+    q = quat_multiply(quat_from_rotvec((dx[6], dx[7], dx[8])), (x[6], x[7], x[8], x[9]))
+    x[6], x[7], x[8], x[9] = quat_normalised(q)
 
 
 @numba.njit(inline="always")

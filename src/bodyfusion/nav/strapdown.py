@@ -27,7 +27,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalise, quat_to_dcm
+from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised, quat_to_dcm_into
 
 POS = slice(0, 3)
 VEL = slice(3, 6)
@@ -45,16 +45,17 @@ def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> 
 
 @numba.njit(cache=True)
 def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g: float,
-              w_ie_n: np.ndarray, f_n_out: np.ndarray, prev: np.ndarray) -> np.ndarray:
+              w_ie_n: np.ndarray, f_n_out: np.ndarray, prev: np.ndarray, C_nb: np.ndarray) -> None:
     """Advance the nominal state ``x`` in place by one sample (see module docstring).
 
     acc_b: specific force (m/s^2), gyro_b: angular rate (rad/s), dt (s), g: gravity
     magnitude (m/s^2). Writes the mean navigation-frame specific force of the step
-    into ``f_n_out`` and returns C_nb at the start of the step (both feed the error-state
-    transition matrix). The 3-vectors are scalars (no arrays but C_nb and the attitude
-    kernels' quaternions): each array costs an allocation per sample.
+    into ``f_n_out`` (3,) and C_nb at the start of the step into ``C_nb`` (3, 3) (both feed
+    the error-state transition matrix). The 3-vectors are scalars and the quaternions
+    4-tuples: the step allocates no array.
     """
-    C = quat_to_dcm(x[6:10])
+    C = C_nb
+    quat_to_dcm_into(x[6:10], C)
     t0, t1, t2 = (gyro_b[0] - x[13]) * dt, (gyro_b[1] - x[14]) * dt, (gyro_b[2] - x[15]) * dt  # α_k
     u0, u1, u2 = (acc_b[0] - x[10]) * dt, (acc_b[1] - x[11]) * dt, (acc_b[2] - x[12]) * dt  # υ_k
     pt0, pt1, pt2, pu0, pu1, pu2 = prev[0], prev[1], prev[2], prev[3], prev[4], prev[5]  # α_{k-1}, υ_{k-1}
@@ -67,10 +68,7 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     dv0 = u0 + 0.5 * a0 + sixth * r0 + twelfth * s0 + twelfth * w0  # Δv_b
     dv1 = u1 + 0.5 * a1 + sixth * r1 + twelfth * s1 + twelfth * w1
     dv2 = u2 + 0.5 * a2 + sixth * r2 + twelfth * s2 + twelfth * w2
-    phi = np.empty(3)  # the rotation vector of the step, for quat_from_rotvec
-    phi[0] = t0 + twelfth * c0
-    phi[1] = t1 + twelfth * c1
-    phi[2] = t2 + twelfth * c2
+    phi = (t0 + twelfth * c0, t1 + twelfth * c1, t2 + twelfth * c2)  # the rotation vector of the step
     prev[0], prev[1], prev[2], prev[3], prev[4], prev[5] = t0, t1, t2, u0, u1, u2
     v0, v1, v2 = x[3], x[4], x[5]
     n0 = C[0, 0] * dv0 + C[0, 1] * dv1 + C[0, 2] * dv2  # C_nb Δv_b
@@ -91,16 +89,10 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     x[0] += 0.5 * (v0 + x[3]) * dt
     x[1] += 0.5 * (v1 + x[4]) * dt
     x[2] += 0.5 * (v2 + x[5]) * dt
-    q = quat_multiply(x[6:10], quat_from_rotvec(phi))
+    q = quat_multiply((x[6], x[7], x[8], x[9]), quat_from_rotvec(phi))
     if e0 != 0.0 or e1 != 0.0 or e2 != 0.0:
-        earth = np.empty(3)
-        for k in range(3):
-            earth[k] = -w_ie_n[k] * dt
-        q = quat_multiply(quat_from_rotvec(earth), q)
-    quat_normalise(q)
-    for k in range(4):
-        x[6 + k] = q[k]
-    return C
+        q = quat_multiply(quat_from_rotvec((-w_ie_n[0] * dt, -w_ie_n[1] * dt, -w_ie_n[2] * dt)), q)
+    x[6], x[7], x[8], x[9] = quat_normalised(q)
 
 
 @numba.njit(cache=True)
@@ -113,7 +105,8 @@ def integrate(x0: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarr
     out[0] = x
     f_n = np.empty(3)
     prev = np.zeros(6)
+    C_nb = np.empty((3, 3))
     for i in range(1, n):
-        mechanise(x, acc_b[i], gyro_b[i], t[i] - t[i - 1], g, w_ie_n, f_n, prev)
+        mechanise(x, acc_b[i], gyro_b[i], t[i] - t[i - 1], g, w_ie_n, f_n, prev, C_nb)
         out[i] = x
     return out

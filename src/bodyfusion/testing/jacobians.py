@@ -85,9 +85,9 @@ def _mechanise_step(x: np.ndarray, acc: np.ndarray, gyro: np.ndarray, dt: float,
     """One :func:`bodyfusion.nav.strapdown.mechanise` step from a copy of ``x`` (no Earth
     rotation): the state after it, C_nb at its start and the mean navigation-frame specific force."""
     x = np.ascontiguousarray(x, dtype=np.float64).copy()
-    f_n = np.empty(3)
-    C = mechanise(x, np.ascontiguousarray(acc), np.ascontiguousarray(gyro), float(dt), float(gravity), np.zeros(3),
-                  f_n, np.zeros(6))
+    f_n, C = np.empty(3), np.empty((3, 3))
+    mechanise(x, np.ascontiguousarray(acc), np.ascontiguousarray(gyro), float(dt), float(gravity), np.zeros(3),
+              f_n, np.zeros(6), C)
     return x, np.ascontiguousarray(C), f_n
 
 

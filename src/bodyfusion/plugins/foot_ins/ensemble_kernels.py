@@ -42,7 +42,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.error_state import P_ACC_ND, P_ACC_RW, P_GRAVITY, P_GYRO_ND, P_GYRO_RW, P_ZARU_SIGMA, P_ZUPT_SIGMA, inv3_sym
-from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalise
+from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised
 from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus
 from bodyfusion.nav.strapdown import mechanise
 
@@ -54,13 +54,8 @@ C_ZUPTS, C_ZARUS, C_NIS_SUM = range(3)
 
 @numba.njit(cache=True)
 def _renormalise(ens: np.ndarray) -> None:
-    q = np.empty(4)
     for j in range(ens.shape[0]):
-        for k in range(4):
-            q[k] = ens[j, 6 + k]
-        quat_normalise(q)
-        for k in range(4):
-            ens[j, 6 + k] = q[k]
+        ens[j, 6], ens[j, 7], ens[j, 8], ens[j, 9] = quat_normalised((ens[j, 6], ens[j, 7], ens[j, 8], ens[j, 9]))
 
 
 @numba.njit(cache=True)
@@ -74,10 +69,7 @@ def ensemble_mean(ens: np.ndarray, out: np.ndarray) -> None:
             out[k] += ens[j, k]
     for k in range(ns):
         out[k] /= M
-    q = out[6:10].copy()
-    quat_normalise(q)
-    for k in range(4):
-        out[6 + k] = q[k]
+    out[6], out[7], out[8], out[9] = quat_normalised((out[6], out[7], out[8], out[9]))
 
 
 @numba.njit(cache=True)
@@ -137,13 +129,8 @@ def place_members(mean: np.ndarray, D: np.ndarray, ens: np.ndarray) -> None:
             ens[j, 13 + k] = mean[13 + k] + D[j, 12 + k]
         for k in range(16, ns):
             ens[j, k] = mean[k] + D[j, k - 1]
-        rv = np.empty(3)
-        for k in range(3):
-            rv[k] = D[j, 6 + k]
-        q = quat_multiply(quat_from_rotvec(rv), mean[6:10])
-        quat_normalise(q)
-        for k in range(4):
-            ens[j, 6 + k] = q[k]
+        q = quat_multiply(quat_from_rotvec((D[j, 6], D[j, 7], D[j, 8])), (mean[6], mean[7], mean[8], mean[9]))
+        ens[j, 6], ens[j, 7], ens[j, 8], ens[j, 9] = quat_normalised(q)
 
 
 @numba.njit(cache=True)
@@ -271,6 +258,7 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
     zaru_sigma = params[P_ZARU_SIGMA]
     coloured = alpha >= 0.0
     f_n = np.empty(3)
+    C_nb = np.empty((3, 3))  # C_nb of a member's step (not used here)
     a = np.empty(3)
     w = np.empty(3)
     zero = np.zeros(3)
@@ -297,7 +285,7 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
             for k in range(3):
                 a[k] = acc_b[i, k] + sa * nz[j, k]
                 w[k] = gyro_b[i, k] + sg * nz[j, 3 + k]
-            mechanise(ens[j], a, w, dt, g, w_ie, f_n, memory[j])
+            mechanise(ens[j], a, w, dt, g, w_ie, f_n, memory[j], C_nb)
             for k in range(3):
                 ens[j, 10 + k] += sba * nz[j, 6 + k]
                 ens[j, 13 + k] += sbg * nz[j, 9 + k]

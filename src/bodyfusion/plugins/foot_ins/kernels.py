@@ -56,17 +56,16 @@ def stationary_zupt_params(params: np.ndarray, alpha: float) -> np.ndarray:
 @numba.njit(inline="always")
 def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
                       i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray, mech_memory: np.ndarray,
-                      phi: np.ndarray) -> np.ndarray:
+                      phi: np.ndarray, C: np.ndarray) -> None:
     """Mechanise sample i (from t[i-1] to t[i]), decay the bias estimates and propagate P
-    (and Φ when tracked); returns C_nb (3, 3) of the step, f_n (3,) is left in ``f_n``."""
+    (and Φ when tracked); C_nb (3, 3) of the step is left in ``C``, f_n (3,) in ``f_n``."""
     dt = t[i] - t[i - 1]
-    C = mechanise(x, acc_b[i], gyro_b[i], dt, params[P_GRAVITY], params[7:10], f_n, mech_memory)
+    mechanise(x, acc_b[i], gyro_b[i], dt, params[P_GRAVITY], params[7:10], f_n, mech_memory, C)
     decay_biases(x, q_diag, dt)
     if phi.shape[0] > 0:
         da, dg = bias_decay(q_diag, dt)
         transition_left(phi, C, f_n, dt, da, dg, np.bool_(False))  # not a literal: one signature
     propagate_covariance(P, C, f_n, dt, q_diag)
-    return C
 
 
 @numba.njit(cache=True)
@@ -89,19 +88,19 @@ NO_STANCE = -1.0
 @numba.njit(inline="always")
 def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
              stance: np.ndarray, i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray,
-             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, x_prior: np.ndarray | None,
-             P_prior: np.ndarray | None, Phi: np.ndarray | None) -> float:
+             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, C: np.ndarray,
+             x_prior: np.ndarray | None, P_prior: np.ndarray | None, Phi: np.ndarray | None) -> float:
     """One sample i of the ekf: mechanise from t[i-1] to t[i], propagate P, and at a stance
     sample the gated ZUPT (and ZARU) of :func:`bodyfusion.nav.zupt.stance_update`.
 
     x (16,), P (15, 15), ``mech_memory`` (6,) and ``phi`` (the transition accumulated for the
     fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch; ``f_n`` (3,) receives the
-    step's mean specific force in the navigation frame (m/s²). For the smoothers, the step also
+    step's mean specific force in the navigation frame (m/s²) and ``C`` (3, 3) its C_nb. For the smoothers, the step also
     writes its prior nominal state ``x_prior`` (16,) and covariance ``P_prior`` (15, 15) when
     ``P_prior`` is not empty, and its transition ``Phi`` (15, 15, :func:`transition`) when
     ``Phi`` is not empty; an empty (0, 0) array skips them, None (the filter) leaves them out of
     the compiled step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
-    C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi)
+    _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, C)
     if P_prior is not None:  # pruned at compile time when None
         if P_prior.shape[0] > 0:
             for r in range(15):
@@ -255,13 +254,14 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     q_diag = process_noise_diag(params)
     work = np.empty((15, 15))
     f_n = np.empty(3)
+    C = np.empty((3, 3))
     dx = np.empty(15)
     no_prior = np.empty((0, 0))
     recording = Pu.shape[0] > 0
     for i in range(i0, i1):
         keep = recording and (stance[i] or i == i1 - 1)
-        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, x_prior,
-                       P_prior if keep else no_prior, None)
+        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, C,
+                       x_prior, P_prior if keep else no_prior, None)
         if nis != NO_STANCE:
             _count(params, nis, counters)
         if recording:
@@ -289,6 +289,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     ordinary = stationary_zupt_params(params, alpha)
     work = np.empty((15, 15))
     f_n = np.empty(3)
+    C = np.empty((3, 3))
     dx = np.empty(15)
     v_prev = np.empty(3)
     gate = params[P_ZUPT_GATE]
@@ -296,7 +297,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     for i in range(i0, i1):
         for k in range(3):
             v_prev[k] = x[3 + k]
-        C = _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi)
+        _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, C)
         nis = NO_STANCE
         if stance[i]:
             coloured = False

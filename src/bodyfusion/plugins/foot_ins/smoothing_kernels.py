@@ -51,14 +51,9 @@ def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
         out[3 + k] = xa[3 + k] - xb[3 + k]
         out[9 + k] = xa[10 + k] - xb[10 + k]
         out[12 + k] = xa[13 + k] - xb[13 + k]
-    qb_conj = np.empty(4)
-    qb_conj[0] = xb[6]
-    for k in range(3):
-        qb_conj[1 + k] = -xb[7 + k]
-    d = quat_multiply(xa[6:10], qb_conj)
+    d = quat_multiply((xa[6], xa[7], xa[8], xa[9]), (xb[6], -xb[7], -xb[8], -xb[9]))  # q_a ⊗ q_b⁻¹
     if d[0] < 0.0:
-        for k in range(4):
-            d[k] = -d[k]
+        d = (-d[0], -d[1], -d[2], -d[3])
     s = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
     scale = 2.0 if s < 1e-12 else 2.0 * math.atan2(s, d[0]) / s
     for k in range(3):
@@ -152,6 +147,7 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     q_diag = process_noise_diag(params)
     work = np.empty((15, 15))
     f_n = np.empty(3)
+    C_nb = np.empty((3, 3))
     scratch = np.empty(15)
     x = x0.copy()
     P = P0.copy()
@@ -186,8 +182,8 @@ def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         # storing, the step writes its prior and transition straight into the block buffers;
         # not storing, it skips them (an empty transition)
         x_prior_j, P_prior_j, Phi_j = (xp[j], Pprior[j], Phi[j]) if store else (x_prior, no_phi, no_phi)
-        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior_j,
-                       P_prior_j, Phi_j)
+        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, C_nb,
+                       x_prior_j, P_prior_j, Phi_j)
         if store:
             stanced = nis != NO_STANCE
             yaw_reset[j, 0] = -(x[4] - x_prior_j[4]) if stanced else 0.0

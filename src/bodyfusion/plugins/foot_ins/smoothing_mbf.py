@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.attitude import quat_to_dcm
+from bodyfusion.nav.attitude import quat_to_dcm_into
 from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inv3_sym,
                                        process_noise_diag, transition_transpose_left)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
@@ -274,6 +274,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     q_diag = process_noise_diag(params)
     work = np.empty((15, 15))
     f_n = np.empty(3)
+    C_nb = np.empty((3, 3))
     scratch = np.empty(15)
     x = x0.copy()
     P = P0.copy()
@@ -297,8 +298,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                     P[r, c] += gap_dP[gptr, r, c]
             gptr += 1
         # the prior only where it is stored (stance, general update)
-        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, x_prior,
-                       P_prior if stance[i] or general[i] else no_phi, None)
+        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, C_nb,
+                       x_prior, P_prior if stance[i] or general[i] else no_phi, None)
         j = i - i0
         stanced = nis != NO_STANCE
         if stanced:
@@ -362,6 +363,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     Hc = np.empty((3, 4))
     K = np.empty((15, 3))
     W4 = np.empty((15, 4))
+    C_nb = np.empty((3, 3))
     ns, ng, nk = st_v.shape[0], gen_P.shape[0], kept_P.shape[0]
     failed = 0
     for j in range(L, -1, -1):
@@ -413,7 +415,8 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
             ns -= 1
             if not general[i]:
                 _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
-        _transition_adjoint(quat_to_dcm(hist_x[i - 1, 6:10]), f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
+        quat_to_dcm_into(hist_x[i - 1, 6:10], C_nb)
+        _transition_adjoint(C_nb, f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
     return failed
 
 
