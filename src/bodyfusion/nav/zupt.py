@@ -23,7 +23,7 @@ A stance detector is sometimes wrong (a foot rolling or shuffling, a running sta
 edges still move): a ZUPT at a moving foot corrupts velocity, attitude and biases at once.
 So every ZUPT is chi-square gated, with bounded influence rather than rejection: when the
 normalised innovation squared yᵀ S⁻¹ y (3 degrees of freedom) exceeds the gate γ, the
-measurement noise is raised until it equals γ (:func:`gate_noise_variance`). The
+measurement noise is raised until it equals γ (:func:`gated_variance`). The
 correction then shrinks like γ/|y| as the innovation grows (a foot swinging at 2 m/s moves
 the state by a few per cent of what a plain ZUPT would), while a filter whose own velocity
 is wrong, as after a gap or a bad start, is still pulled back at every stance sample
@@ -65,13 +65,6 @@ def gated_variance(S0: tuple[float, float, float, float, float, float], y: tuple
         else:
             hi = mid
     return hi
-
-
-@numba.njit(cache=True)
-def gate_noise_variance(S0: np.ndarray, y: np.ndarray, r_var: float, gate: float) -> float:
-    """:func:`gated_variance` of H P Hᵀ = ``S0`` (3, 3) and the innovation y (3,) as arrays."""
-    return gated_variance((S0[0, 0], S0[0, 1], S0[0, 2], S0[1, 1], S0[1, 2], S0[2, 2]), (y[0], y[1], y[2]), r_var,
-                          gate)
 
 
 @numba.njit(cache=True)

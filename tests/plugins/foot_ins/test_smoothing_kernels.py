@@ -69,7 +69,7 @@ def test_cholesky_solve_is_the_textbook_loops_bit_for_bit(n, m):
     rng = np.random.default_rng(n * 100 + m)
     for _ in range(5):
         A, B = _spd(rng, n, 8.0), rng.standard_normal((n, m))
-        X, Lw = np.empty((n, m)), np.empty((n, n))
+        X, Lw = np.empty((n, m)), np.empty((n, n + 1))
         assert chol_solve(A, B, X, Lw)
         assert np.array_equal(X, _textbook_chol_solve(A, B))
         np.testing.assert_allclose(A @ X, B, rtol=0, atol=1e-6 * np.abs(B).max())
@@ -78,7 +78,7 @@ def test_cholesky_solve_is_the_textbook_loops_bit_for_bit(n, m):
 def test_cholesky_solve_retries_a_singular_matrix_with_jitter_and_refuses_an_indefinite_one():
     rng = np.random.default_rng(7)
     B = rng.standard_normal((15, 3))
-    X, Lw = np.empty((15, 3)), np.empty((15, 15))
+    X, Lw = np.empty((15, 3)), np.empty((15, 16))
     singular = np.eye(15)
     singular[3, 4] = singular[4, 3] = 1.0  # rows 3 and 4 equal: the pivot at 4 is exactly zero
     with pytest.raises(np.linalg.LinAlgError):

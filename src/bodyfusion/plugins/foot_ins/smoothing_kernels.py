@@ -64,12 +64,13 @@ def boxminus(xa: np.ndarray, xb: np.ndarray, out: np.ndarray) -> None:
 def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> bool:
     """Solve A X = B for symmetric positive-definite A (n×n, top-left block used) and
     B (n×m, its shape gives n and m; X the same), Jacobi-scaled (A's diagonal may span many
-    decades: diffuse and pinned states) before the Cholesky factorisation in ``Lw`` (n×n
-    scratch). A tiny diagonal jitter is added when the factorisation meets a non-positive
+    decades: diffuse and pinned states) before the Cholesky factorisation. ``Lw`` (n, n + 1) is
+    scratch: the factor in its first n columns, the scaling in its last (no allocation per
+    call). A tiny diagonal jitter is added when the factorisation meets a non-positive
     pivot; returns False if it still fails. (Sizes from the shapes, not arguments: integer
     constants at the call sites would each compile a signature of their own.)"""
     n, m = B.shape
-    d = np.empty(n)
+    d = Lw[:, n]
     for r in range(n):
         if not A[r, r] > 0.0:
             return False
@@ -263,7 +264,7 @@ def _rts_sweep(Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray, dx: np.nd
     A = np.empty((n, n))
     M = np.empty((n, n))
     Kt = np.empty((n, n))
-    Lw = np.empty((n, n))
+    Lw = np.empty((n, n + 1))
     KD = np.empty((n, n))
     D = np.zeros((15, 15))  # the states before first stay zero: the heading reset leaves them so
     e = np.empty(15)
@@ -401,7 +402,7 @@ def fuse_block(xf: np.ndarray, Pf: np.ndarray, xb: np.ndarray, Pb: np.ndarray, L
     n = FUSED.shape[0]
     m = out_P.shape[1]
     S = np.empty((n, n))
-    Lw = np.empty((n, n))
+    Lw = np.empty((n, n + 1))
     Z = np.empty((n, m + 1))
     B = np.empty((n, m + 1))
     N = np.empty((15, 15))

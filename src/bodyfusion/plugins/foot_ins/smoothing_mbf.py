@@ -22,9 +22,9 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm_into
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inv3_sym,
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inverse3,
                                        process_noise_diag, transition_transpose_left)
-from bodyfusion.nav.zupt import ZUPT_COLUMNS, gate_noise_variance
+from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
 
@@ -56,12 +56,11 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
 
 
 @numba.njit(cache=True)
-def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray) -> np.ndarray:
-    """H P⁻ Hᵀ (3, 3) of the ZUPT from the prior's columns ``Pc`` (15, 4) at
+def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
+    """``S`` (3, 3) ← H P⁻ Hᵀ of the ZUPT from the prior's columns ``Pc`` (15, 4) at
     :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`: the sums of
     :func:`bodyfusion.nav.error_state.selection_moments` (their zero terms too, which add
     nothing), so the same number and the same gate decision as the filter's."""
-    S = np.empty((3, 3))
     for r in range(3):
         for c in range(r, 3):
             s = 0.0
@@ -72,12 +71,11 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray) -> np.ndarray:
                 s += Hc[r, a] * row
             S[r, c] = s
             S[c, r] = s
-    return S
 
 
 @numba.njit(cache=True)
 def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
-                  Hc: np.ndarray, K: np.ndarray, W: np.ndarray) -> None:
+                  Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
     """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
     G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (5,): the prior velocity v⁻ (m/s)
     and a = (v[3], v[4]) on the east and north velocity rows), then the adjoint of the gated ZUPT
@@ -85,36 +83,42 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
     covariance's columns ``Pc`` (15, 4) at ZUPT_COLUMNS): with H its Jacobian, S its innovation
     covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
     lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H.
-    ``Hc`` (3, 4), ``K`` (15, 3) and ``W`` (15, 4) are scratch."""
+    ``Hc`` (3, 4), ``K`` (15, 3), ``W`` (15, 4), ``S`` and ``Si`` (3, 3) are scratch."""
     a0, a1 = v[3], v[4]
     lam[8] += a0 * lam[3] + a1 * lam[4]
     for r in range(15):
         Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
     for c in range(15):
         Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
-    y = np.empty(3)
+    y = (-v[0], -v[1], -v[2])
     for k in range(3):
-        y[k] = -v[k]
         for m in range(3):
             Hc[k, m] = 1.0 if k == m else 0.0
     Hc[0, 3] = v[1]  # the heading column, bodyfusion.nav.zupt.unobservable_yaw_column
     Hc[1, 3] = -v[0]
     Hc[2, 3] = 0.0
-    S = _zupt_innovation(Pc, Hc)
-    r_var = gate_noise_variance(S, y, params[P_ZUPT_SIGMA] ** 2, params[P_ZUPT_GATE])
+    _zupt_innovation(Pc, Hc, S)
+    r_var = gated_variance((S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]), y, params[P_ZUPT_SIGMA] ** 2,
+                           params[P_ZUPT_GATE])
     for k in range(3):
         S[k, k] += r_var
-    Si = inv3_sym(S)
-    u = np.empty(3)
-    for c in range(3):
-        u[c] = Si[c, 0] * y[0] + Si[c, 1] * y[1] + Si[c, 2] * y[2]
+    i00, i01, i02, i11, i12, i22 = inverse3(S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
+    Si[0, 0], Si[0, 1], Si[0, 2] = i00, i01, i02
+    Si[1, 0], Si[1, 1], Si[1, 2] = i01, i11, i12
+    Si[2, 0], Si[2, 1], Si[2, 2] = i02, i12, i22
+    u0 = Si[0, 0] * y[0] + Si[0, 1] * y[1] + Si[0, 2] * y[2]
+    u1 = Si[1, 0] * y[0] + Si[1, 1] * y[1] + Si[1, 2] * y[2]
+    u2 = Si[2, 0] * y[0] + Si[2, 1] * y[1] + Si[2, 2] * y[2]
     for r in range(15):
         m0 = Pc[r, 0] + Pc[r, 3] * Hc[0, 3]
         m1 = Pc[r, 1] + Pc[r, 3] * Hc[1, 3]
         m2 = Pc[r, 2]
-        for c in range(3):
-            K[r, c] = m0 * Si[0, c] + m1 * Si[1, c] + m2 * Si[2, c]
-            u[c] += K[r, c] * lam[r]
+        K[r, 0] = m0 * Si[0, 0] + m1 * Si[1, 0] + m2 * Si[2, 0]
+        K[r, 1] = m0 * Si[0, 1] + m1 * Si[1, 1] + m2 * Si[2, 1]
+        K[r, 2] = m0 * Si[0, 2] + m1 * Si[1, 2] + m2 * Si[2, 2]
+        u0 += K[r, 0] * lam[r]
+        u1 += K[r, 1] * lam[r]
+        u2 += K[r, 2] * lam[r]
     # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S); W a row of
     # Lam (symmetric) at a time, each element summed over k in the order of a row times a column
     for r in range(15):
@@ -135,9 +139,10 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
             for k in range(15):
                 s += K[k, r] * W[k, c]
             Z[r, c] = s
-    for m in range(3):  # lam ← lam − Hᵀ u
-        lam[3 + m] -= u[m]
-    lam[8] -= Hc[0, 3] * u[0] + Hc[1, 3] * u[1]
+    lam[3] -= u0  # lam ← lam − Hᵀ u
+    lam[4] -= u1
+    lam[5] -= u2
+    lam[8] -= Hc[0, 3] * u0 + Hc[1, 3] * u1
     for m in range(4):  # Lam ← Lam − W H − (W H)ᵀ
         col = ZUPT_COLUMNS[m]
         for r in range(15):
@@ -188,7 +193,7 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
     B[3, 15] -= a0 * dxs[8]
     B[4, 15] -= a1 * dxs[8]
     X = np.empty((15, 16))
-    Lw = np.empty((15, 15))
+    Lw = np.empty((15, 16))
     if not chol_solve(P_prior, B, X, Lw):
         return False
     for r in range(15):
@@ -363,6 +368,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     Hc = np.empty((3, 4))
     K = np.empty((15, 3))
     W4 = np.empty((15, 4))
+    S3, Si3 = np.empty((3, 3)), np.empty((3, 3))
     C_nb = np.empty((3, 3))
     ns, ng, nk = st_v.shape[0], gen_P.shape[0], kept_P.shape[0]
     failed = 0
@@ -414,7 +420,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
         if stance[i]:
             ns -= 1
             if not general[i]:
-                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4)
+                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4, S3, Si3)
         quat_to_dcm_into(hist_x[i - 1, 6:10], C_nb)
         _transition_adjoint(C_nb, f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
     return failed
