@@ -1,5 +1,6 @@
 """Every constraint at every epoch the fuser solved, in preallocated arrays: when, which pair, its
-separation before and after the solve, its multiplier and whether it was active."""
+separation before and after the solve, its multiplier and whether it was active, and how long the
+solve took."""
 
 from __future__ import annotations
 
@@ -19,7 +20,9 @@ class ConstraintLog:
     crossed its limit: ``tail_truncated``); the multiplier λ follows the solvers' sign
     convention (0 when inactive). The stacked positions before and after (``p_before``,
     ``p_after``, (epochs, 3n), ENU m) are kept; the separations are computed from them when
-    asked (``before_m``, ``after_m``)."""
+    asked (``before_m``, ``after_m``). ``solve_us`` (epochs,): the solver's wall time (µs);
+    :attr:`active_multipliers`: the multipliers of the active constraints, epoch by epoch in the
+    order the solver made them active."""
 
     def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
         self.constraints = constraints
@@ -36,6 +39,9 @@ class ConstraintLog:
         self.multiplier = np.empty((epochs, k))
         self.active = np.zeros((epochs, k), dtype=bool)
         self.tail_truncated = np.zeros((epochs, k), dtype=bool)
+        self.solve_us = np.empty(epochs)
+        self._lam_active = np.empty(epochs * k)
+        self._n_active = 0
         self.n = 0
 
     def separations(self, p: np.ndarray) -> np.ndarray:
@@ -43,6 +49,11 @@ class ConstraintLog:
         pos = p.reshape(*p.shape[:-1], -1, 3)
         r = (pos[..., self._i, :] + self._lever[0] - pos[..., self._j, :] - self._lever[1]) * self._axes
         return np.sqrt(np.einsum("...ki,...ki->...k", r, r))
+
+    @property
+    def active_multipliers(self) -> np.ndarray:
+        """λ of every activation (the solvers' sign convention), in the order they were made."""
+        return self._lam_active[:self._n_active]
 
     @property
     def before_m(self) -> np.ndarray:
@@ -55,16 +66,19 @@ class ConstraintLog:
         return self.separations(self.p_after[:self.n])
 
     def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution,
-               tail_truncated: np.ndarray | None = None) -> None:
-        """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution,
-        the constraints truncated in their tails (K,) bool."""
+               solve_us: float, tail_truncated: np.ndarray | None = None) -> None:
+        """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution
+        and its solve time (µs), the constraints truncated in their tails (K,) bool."""
         e = self.n
         self.t[e] = t
         self.p_before[e] = p_hat
         self.p_after[e] = p_after
         self.multiplier[e] = solution.multipliers
+        self.solve_us[e] = solve_us
         for k in solution.active:  # a few: scalar stores cost less than a fancy index
             self.active[e, k] = True
+            self._lam_active[self._n_active] = solution.multipliers[k]
+            self._n_active += 1
         if tail_truncated is not None:
             self.tail_truncated[e] = tail_truncated
         self.n += 1

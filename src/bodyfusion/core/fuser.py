@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Set
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,7 +59,8 @@ class FuserReport:
     at least one was active; tail_truncations: epochs where none was, but the estimate's
     density crossed a limit and was truncated there (``inequality: truncation``,
     :mod:`bodyfusion.core.constraints.truncation`); multipliers: λ of every activation (m⁻² scale, see
-    :mod:`bodyfusion.core.constraints`); violations in metres; solve times in µs.
+    :mod:`bodyfusion.core.constraints`) and solve times (µs) of every epoch are in
+    ``constraint_log`` (:attr:`multipliers`, :attr:`solve_times_us`); violations in metres.
     """
 
     method: str
@@ -70,11 +71,19 @@ class FuserReport:
     not_converged: int = 0
     max_violation_before_m: float = 0.0
     max_violation_after_m: float = 0.0
-    multipliers: list[float] = field(default_factory=list)
-    solve_times_us: list[float] = field(default_factory=list)
     wall_s: float = 0.0
     constraint_log: ConstraintLog | None = None
     """Every constraint at every sync epoch (:class:`~bodyfusion.core.constraint_log.ConstraintLog`)."""
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """λ of every activation, in the order they were made (empty without constraints)."""
+        return np.empty(0) if self.constraint_log is None else self.constraint_log.active_multipliers
+
+    @property
+    def solve_times_us(self) -> np.ndarray:
+        """The solver's wall time (µs) at every epoch (empty without constraints)."""
+        return np.empty(0) if self.constraint_log is None else self.constraint_log.solve_us[:self.constraint_log.n]
 
 
 def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
@@ -312,7 +321,7 @@ class Fuser:
         p_hat = np.concatenate([position() for position in self._positions])
         t0 = time.perf_counter_ns()
         sol = self._solver.solve(p_hat, P.take(self._sigma_index).reshape(pos.size, pos.size))
-        rep.solve_times_us.append((time.perf_counter_ns() - t0) / 1e3)
+        solve_us = (time.perf_counter_ns() - t0) / 1e3
         rep.epochs += 1
         rep.solver_fallbacks += int(sol.fallback)
         rep.not_converged += int(not sol.converged)
@@ -321,17 +330,15 @@ class Fuser:
         if self._truncating:
             dx, P_new, tail = self._truncation.correct(P, pos, p_hat, sol)
             if not sol.active and not tail.any():
-                rep.constraint_log.record(t, p_hat, p_hat, sol)
+                rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us)
                 return
             rep.tail_truncations += int(not sol.active)
         elif sol.active:
             dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
             tail = None
         else:
-            rep.constraint_log.record(t, p_hat, p_hat, sol)
+            rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us)
             return
-        if sol.active:
-            rep.activations += 1
-            rep.multipliers.extend(float(v) for v in sol.multipliers[sol.active])
+        rep.activations += int(bool(sol.active))
         joint.correct(dx, P_new, self._corrected)
-        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, tail)
+        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, solve_us, tail)

@@ -39,10 +39,10 @@ def _json_safe(value):
     return value
 
 
-def _median_p99(values: list[float]) -> dict[str, float]:
-    if not values:
+def _median_p99(values: np.ndarray) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
         return {"median": 0.0, "p99": 0.0}
-    a = np.asarray(values)
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
 
 
