@@ -24,6 +24,7 @@ from typing import ClassVar
 import numpy as np
 
 from bodyfusion.base.forking import Forked, fork_is_safe
+from bodyfusion.base.records import GrowingArray
 from bodyfusion.nav.error_state import inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
@@ -59,8 +60,8 @@ class RunData:
     counters: np.ndarray
     override_idx: list[np.ndarray] = field(default_factory=list)
     override_P: list[np.ndarray] = field(default_factory=list)
-    kept_idx: list[int] = field(default_factory=list)
-    kept_x: list[np.ndarray] = field(default_factory=list)
+    kept_idx: GrowingArray = field(default_factory=lambda: GrowingArray((), np.int64))
+    kept_x: GrowingArray = field(default_factory=lambda: GrowingArray((NOMINAL_SIZE,)))
     record: tuple[np.ndarray, ...] = field(default_factory=no_record)
 
 

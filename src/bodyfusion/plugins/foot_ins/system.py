@@ -420,7 +420,7 @@ class FootIns(SensorSystem):
         """As :meth:`apply_correction`; the smoothers keep it as made (the state before it kept)."""
         if self.filter.smoothable:
             self.run_data.kept_idx.append(self._i)
-            self.run_data.kept_x.append(self.x.copy())
+            self.run_data.kept_x.append(self.x)  # copied into the record's storage
         self.apply_correction(dx, P)
 
     def _record_state(self, i: int, dx: np.ndarray = NO_RESET[0], P: np.ndarray = NO_RESET[1]) -> None:
@@ -468,7 +468,7 @@ class FootIns(SensorSystem):
             order = np.argsort(idx := np.concatenate([*self.run_data.override_idx, idx]), kind="stable")
             idx, Ps = idx[order], np.concatenate([*self.run_data.override_P, Ps])[order]
         # kept corrections: the state before the first at each sample
-        kept_idx, first = np.unique(np.asarray(self.run_data.kept_idx, dtype=np.int64), return_index=True)
+        kept_idx, first = np.unique(self.run_data.kept_idx.view(), return_index=True)
         gaps = self._gap_index <= self._i
         gap_idx = self._gap_index[gaps]
         # the gap policy's inflation went through apply_correction: the last override at g − 1
@@ -478,7 +478,7 @@ class FootIns(SensorSystem):
                 "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
                 "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": idx if keep.all() else idx[keep],
                 "override_P": Ps if keep.all() else Ps[keep], "kept_idx": kept_idx,
-                "kept_x": np.asarray(self.run_data.kept_x, dtype=np.float64).reshape(-1, NOMINAL_SIZE)[first],
+                "kept_x": self.run_data.kept_x.view()[first],
                 "gap_idx": np.ascontiguousarray(gap_idx), "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
                 "rate_hz": float(1.0 / np.median(np.diff(self.stream.t))), "forward_record": self._forward_record}
 
