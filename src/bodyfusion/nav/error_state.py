@@ -221,19 +221,21 @@ def inverse3(s00: float, s01: float, s02: float, s11: float, s12: float,
 
 
 @numba.njit(cache=True)
-def inv3_sym(S: np.ndarray) -> np.ndarray:
-    """Inverse (3, 3) of a symmetric positive-definite 3×3 matrix (cofactors, :func:`inverse3`)."""
+def inv3_sym_into(S: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (3, 3) ← the inverse of the symmetric positive-definite 3×3 matrix S (cofactors,
+    :func:`inverse3`); ``out`` may be S."""
     i00, i01, i02, i11, i12, i22 = inverse3(S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
+    out[0, 0], out[0, 1], out[0, 2] = i00, i01, i02
+    out[1, 0], out[1, 1], out[1, 2] = i01, i11, i12
+    out[2, 0], out[2, 1], out[2, 2] = i02, i12, i22
+
+
+@numba.njit(cache=True)
+def inv3_sym(S: np.ndarray) -> np.ndarray:
+    """Inverse (3, 3) of a symmetric positive-definite 3×3 matrix, in a new array
+    (:func:`inv3_sym_into` fills one)."""
     out = np.empty((3, 3))
-    out[0, 0] = i00
-    out[0, 1] = i01
-    out[0, 2] = i02
-    out[1, 0] = i01
-    out[1, 1] = i11
-    out[1, 2] = i12
-    out[2, 0] = i02
-    out[2, 1] = i12
-    out[2, 2] = i22
+    inv3_sym_into(S, out)
     return out
 
 

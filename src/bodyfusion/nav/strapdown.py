@@ -54,8 +54,7 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     the error-state transition matrix). The 3-vectors are scalars and the quaternions
     4-tuples: the step allocates no array.
     """
-    C = C_nb
-    quat_to_dcm_into(x[6:10], C)
+    quat_to_dcm_into(x[6:10], C_nb)
     t0, t1, t2 = (gyro_b[0] - x[13]) * dt, (gyro_b[1] - x[14]) * dt, (gyro_b[2] - x[15]) * dt  # α_k
     u0, u1, u2 = (acc_b[0] - x[10]) * dt, (acc_b[1] - x[11]) * dt, (acc_b[2] - x[12]) * dt  # υ_k
     pt0, pt1, pt2, pu0, pu1, pu2 = prev[0], prev[1], prev[2], prev[3], prev[4], prev[5]  # α_{k-1}, υ_{k-1}
@@ -71,9 +70,9 @@ def mechanise(x: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, dt: float, g
     phi = (t0 + twelfth * c0, t1 + twelfth * c1, t2 + twelfth * c2)  # the rotation vector of the step
     prev[0], prev[1], prev[2], prev[3], prev[4], prev[5] = t0, t1, t2, u0, u1, u2
     v0, v1, v2 = x[3], x[4], x[5]
-    n0 = C[0, 0] * dv0 + C[0, 1] * dv1 + C[0, 2] * dv2  # C_nb Δv_b
-    n1 = C[1, 0] * dv0 + C[1, 1] * dv1 + C[1, 2] * dv2
-    n2 = C[2, 0] * dv0 + C[2, 1] * dv1 + C[2, 2] * dv2
+    n0 = C_nb[0, 0] * dv0 + C_nb[0, 1] * dv1 + C_nb[0, 2] * dv2  # C_nb Δv_b
+    n1 = C_nb[1, 0] * dv0 + C_nb[1, 1] * dv1 + C_nb[1, 2] * dv2
+    n2 = C_nb[2, 0] * dv0 + C_nb[2, 1] * dv1 + C_nb[2, 2] * dv2
     # rotation of the navigation frame over the step, −½ (ω_ie dt) × Δv_n, and Coriolis −2 ω_ie × v dt
     e0, e1, e2 = w_ie_n[0], w_ie_n[1], w_ie_n[2]
     k0, k1, k2 = _cross(e0, e1, e2, n0, n1, n2)

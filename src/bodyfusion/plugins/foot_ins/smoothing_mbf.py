@@ -22,8 +22,8 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm_into
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject, inverse3,
-                                       process_noise_diag, transition_transpose_left)
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject,
+                                       inv3_sym_into, process_noise_diag, transition_transpose_left)
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
@@ -102,10 +102,7 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
                            params[P_ZUPT_GATE])
     for k in range(3):
         S[k, k] += r_var
-    i00, i01, i02, i11, i12, i22 = inverse3(S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2])
-    Si[0, 0], Si[0, 1], Si[0, 2] = i00, i01, i02
-    Si[1, 0], Si[1, 1], Si[1, 2] = i01, i11, i12
-    Si[2, 0], Si[2, 1], Si[2, 2] = i02, i12, i22
+    inv3_sym_into(S, Si)
     u0 = Si[0, 0] * y[0] + Si[0, 1] * y[1] + Si[0, 2] * y[2]
     u1 = Si[1, 0] * y[0] + Si[1, 1] * y[1] + Si[1, 2] * y[2]
     u2 = Si[2, 0] * y[0] + Si[2, 1] * y[1] + Si[2, 2] * y[2]
