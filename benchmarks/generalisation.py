@@ -18,7 +18,8 @@ defaults and scored with the project's scorer (:func:`bodyfusion.evaluation.metr
   ratio PDR+GNSS / GNSS.
 
 Each data set ends with a summary line ``<set>: median=<m> p90=<m> worst=<m> failed=<n>``.
-``--set KEY=VALUE`` overrides every layout (e.g. ``--set smoother.kind=rts``); ``--only SET``
+``--set KEY=VALUE`` overrides every layout (e.g. ``--set smoother.kind=rts``; ``feet.KEY`` sets KEY
+of every foot system, e.g. ``--set feet.detector.kind=shoe``); ``--only SET``
 runs one set; ``--json FILE`` writes every row. Without ``../shared/data`` (or ``--data``) the
 benchmark says so and exits 0.
 
@@ -43,6 +44,9 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data"
+
+FOOT_PREFIX = "feet."
+"""``--set feet.KEY=VALUE`` sets ``systems.<name>.KEY`` of every foot_ins system of every layout."""
 
 XIO_PUBLISHED_LOOP_M = 0.421
 """x-io Gait-Tracking's own final displacement on long_walk.csv (data README)."""
@@ -131,6 +135,9 @@ def _run(layout: dict, overrides: list[str]):
     from bodyfusion.core.layout import load_layout
     from bodyfusion.core.run import run_layout
 
+    feet = [name for name, section in layout["systems"].items() if section["plugin"] == "foot_ins"]
+    overrides = [o for o in overrides if not o.startswith(FOOT_PREFIX)] + [
+        f"systems.{name}.{o[len(FOOT_PREFIX):]}" for o in overrides if o.startswith(FOOT_PREFIX) for name in feet]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{layout['name']}.yaml"
         path.write_text(yaml.safe_dump(layout, sort_keys=False))

@@ -235,5 +235,5 @@ def test_the_notebook_example_runs(capsys):
 
     runpy.run_path(str(CONFIGS.parent / "examples" / "notebook_api.py"), run_name="__main__")
     out = capsys.readouterr().out
-    for shown in ("refused:", "gnss_position", "zupt", "left_foot-right_foot", "stance"):
+    for shown in ("refused:", "gnss_position", "zupt", "left_foot-hand_phone", "stance"):
         assert shown in out

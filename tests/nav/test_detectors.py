@@ -219,24 +219,42 @@ def test_adaptive_threshold_keeps_the_fixed_one_where_stance_is_still():
     from bodyfusion.nav.detectors import adaptive_shoe_threshold
 
     stat, _ = _statistic_of(3e2, 1e7, 200.0, 0.6, 0.5)
-    assert np.allclose(adaptive_shoe_threshold(stat, 200.0), 3e4)
+    assert np.allclose(adaptive_shoe_threshold(stat, np.full(stat.size, 1.1), 200.0), 3e4)
 
 
-def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it():
+@pytest.mark.parametrize("floor", [5e4, 1.2e5, 3e5])
+def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it(floor):
+    """Running stances whose least statistic is 0.5-3e5 (above any fixed walking threshold):
+    each cycle's threshold sits half a decade above its own floor, and finds every stance."""
     from bodyfusion.nav.detectors import adaptive_shoe_threshold
 
-    stat, truth = _statistic_of(2e4 * 1.5, 1e7, 200.0, 0.15, 0.55)  # above any walking threshold
-    gamma = adaptive_shoe_threshold(stat, 200.0)
-    assert np.all(gamma > 3e4) and np.all(gamma <= 1e5)
+    stat, truth = _statistic_of(floor, 1e8, 200.0, 0.15, 0.55)
+    gamma = adaptive_shoe_threshold(stat, np.full(stat.size, 0.7), 200.0)
+    assert np.all(gamma > 3e4) and np.all(gamma <= 1e7)
     np.testing.assert_array_equal(stat < gamma, truth)
 
 
-def test_adaptive_threshold_never_makes_stance_of_continuous_motion():
-    from bodyfusion.nav.detectors import adaptive_shoe_threshold
+def test_adaptive_threshold_never_makes_stance_of_aperiodic_motion():
+    """A sensor that never rests and repeats nothing (RMS rate > 1 rad/s): no gait period is
+    found, and nothing is stance."""
+    from bodyfusion.nav.detectors import adaptive_shoe
+    from bodyfusion.nav.gait import stride_period
 
     rng = np.random.default_rng(0)
-    stat = 10 ** rng.uniform(5.2, 7.0, 4000)  # a sensor that never rests (RMS rate > 1 rad/s)
-    assert not np.any(stat < adaptive_shoe_threshold(stat, 200.0))
+    gyro = rng.normal(0.0, 1.5, (4000, 3))
+    acc = np.tile([0.0, 0.0, 9.81], (4000, 1)) + rng.normal(0.0, 2.0, (4000, 3))
+    assert np.isnan(stride_period(np.linalg.norm(gyro, axis=1), 200.0)).all()
+    stance, _, _ = adaptive_shoe(acc, gyro, 200.0, gravity=9.81)
+    assert not stance.any()
+
+
+def test_adaptive_threshold_ignores_cycles_whose_floor_does_not_stand_out():
+    """A cycle whose swing rises less than ``prominence_decades`` above its floor is no gait
+    (fidgeting, a shuffle): only the fixed threshold applies there."""
+    from bodyfusion.nav.detectors import adaptive_shoe_threshold
+
+    stat, _ = _statistic_of(2e5, 1e6, 200.0, 0.2, 0.5)  # 0.7 decades of swing
+    assert np.allclose(adaptive_shoe_threshold(stat, np.full(stat.size, 0.7), 200.0), 3e4)
 
 
 def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
@@ -245,8 +263,8 @@ def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
     for rate, w in ((60.0, 3), (200.0, 5), (400.0, 10)):
         n = int(5 * rate)
         acc = np.tile([0.0, 0.0, 9.81], (n, 1))
-        stance, gamma = adaptive_shoe(acc, np.zeros((n, 3)), rate, gravity=9.81)
-        assert stance.all() and gamma.size == n - w + 1
+        stance, gamma, period = adaptive_shoe(acc, np.zeros((n, 3)), rate, gravity=9.81)
+        assert stance.all() and gamma.size == n - w + 1 and period.size == n
 
 
 def test_the_default_detector_holds_on_a_running_stance_that_never_rests(tmp_path):

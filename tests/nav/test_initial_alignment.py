@@ -58,6 +58,32 @@ def test_shuffling_before_the_walk_is_not_taken_for_rest():
     assert st.still and st.start == 0 and st.stop < 320
 
 
+def test_a_foot_slowly_turning_before_the_walk_is_not_taken_for_rest():
+    """A foot shifting its weight turns slowly (a few 10 mrad/s, within the sensor's noise
+    sample by sample): the window spreads pass, but its batch means drift; its mean rate
+    would pass for gyro bias. The later window that does not drift is taken."""
+    rng = np.random.default_rng(5)
+    fidget = noisy_rest(300, rng)
+    turning = 0.03 * np.sin(np.linspace(0.0, 2.0 * np.pi, 300))[:, None] * [1.0, -0.5, 1.0]
+    moving = (rng.normal(0, 3.0, (200, 3)), rng.normal(0, 2.0, (200, 3)))
+    rest = noisy_rest(300, rng)
+    acc = np.vstack([fidget[0], moving[0], rest[0]])
+    gyro = np.vstack([fidget[1] + turning, moving[1], rest[1]])
+    st = find_still_interval(acc, gyro, 100, 0.2, 0.05)
+    assert st.still and st.start >= 500
+    assert np.allclose(gyro[st.start:st.stop].mean(axis=0), [0.01, -0.02, 0.003], atol=2e-3)
+
+
+def test_window_drifts_see_a_slow_rotation_the_spreads_hide():
+    from bodyfusion.nav.initial_alignment import window_drifts
+
+    rng = np.random.default_rng(6)
+    _, still = noisy_rest(400, rng)
+    turning = still + 0.02 * np.linspace(-1.0, 1.0, 400)[:, None]
+    d_still, d_turning = window_drifts(still, 100), window_drifts(turning, 100)
+    assert d_still.shape == (301,) and np.all(d_turning > 2.0 * np.median(d_still))
+
+
 def test_without_rest_the_quietest_window_is_flagged_not_still():
     rng = np.random.default_rng(4)
     acc, gyro = rng.normal(0, 2.0, (600, 3)), rng.normal(0, 1.0, (600, 3))

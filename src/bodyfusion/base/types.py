@@ -60,6 +60,8 @@ class ImuChecks:
     gap_missing_s: np.ndarray = field(default_factory=lambda: np.empty(0))
     clipped_acc_samples: int = 0
     clipped_gyro_samples: int = 0
+    clipping: dict = field(default_factory=dict)
+    """``"acc"`` / ``"gyro"`` → the :class:`bodyfusion.nav.saturation.Clipping` found (where any)."""
     warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:

@@ -18,7 +18,8 @@ Thresholds are physical and hold for any body-worn MEMS IMU:
 * rate: 1 / median Δt against the declared nominal rate (2 % tolerance), and a rate outside
   1 Hz–10 kHz (a time scale off by 1000);
 * gaps: a step longer than ``max_step_samples`` nominal periods;
-* clipping: a run of ≥ 3 equal samples at an axis's largest magnitude in the recording.
+* clipping: readings flat at an axis's extreme while their flanks still climb, again and again
+  (:func:`bodyfusion.nav.saturation.find_clipping`): the sensor's range was exceeded there.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import numpy as np
 from bodyfusion.base.types import ImuChecks
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.initial_alignment import window_spreads
+from bodyfusion.nav.saturation import find_clipping
 
 MAX_BODY_RATE_RADPS = 35.0
 """Above any human segment's angular rate and the widest MEMS gyro range (2000 °/s), rad/s."""
@@ -39,23 +41,6 @@ MIN_MOVING_RATE_RADPS = 0.2
 """A moving body-worn sensor exceeds this angular rate somewhere (99.9th percentile), rad/s."""
 RATE_TOLERANCE = 0.02
 """Relative difference between declared and measured sample rate that is reported."""
-CLIP_RUN = 3
-"""Equal consecutive samples at an axis's extreme that count as flat-topped."""
-
-
-def _clipped_samples(x: np.ndarray) -> int:
-    """Samples in runs of ≥ CLIP_RUN equal values at each axis's largest magnitude."""
-    total = 0
-    for col in np.asarray(x, dtype=float).T:
-        peak = np.max(np.abs(col))
-        if peak == 0.0:
-            continue
-        at_peak = np.abs(col) == peak
-        edges = np.diff(np.concatenate(([0], at_peak.astype(np.int8), [0])))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        runs = ends - starts
-        total += int(runs[runs >= CLIP_RUN].sum())
-    return total
 
 
 def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: str, acc_unit: str,
@@ -104,11 +89,11 @@ def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: s
         warn(f"{source}: {gaps.size} gap(s) longer than {max_step_samples:g} samples, "
              f"{out.gap_missing_s.sum():.3g} s missing in all, the longest {out.gap_missing_s[worst]:.3g} s "
              f"at t = {t[gaps[worst]]:.6g} s")
-    out.clipped_acc_samples = _clipped_samples(acc_b)
-    out.clipped_gyro_samples = _clipped_samples(gyro_b)
-    for what, n, peak in (("accelerometer", out.clipped_acc_samples, np.abs(acc_b).max()),
-                          ("gyroscope", out.clipped_gyro_samples, np.abs(gyro_b).max())):
-        if n:
-            warn(f"{source}: {n} {what} samples flat-topped at its range limit ({peak:.4g}); "
-                 "motion beyond the sensor's range is lost there")
+    for key, what, x, unit in (("acc", "accelerometer", acc_b, "m/s^2"), ("gyro", "gyroscope", gyro_b, "rad/s")):
+        clipping = find_clipping(x, nominal_dt if np.isfinite(nominal_dt) else 0.0)
+        if clipping.runs:
+            out.clipping[key] = clipping
+            warn(f"{source}: {clipping.describe(what, unit)}")
+    out.clipped_acc_samples = out.clipping["acc"].samples if "acc" in out.clipping else 0
+    out.clipped_gyro_samples = out.clipping["gyro"].samples if "gyro" in out.clipping else 0
     return out

@@ -203,56 +203,71 @@ def shoe(
 # --------------------------------------------------------------------------- adaptive SHOE
 
 
-def adaptive_shoe_threshold(statistic: np.ndarray, rate_hz: float, *, gamma_still: float = 0.3e5,
-                            gamma_motion: float = 1e5, floor_window_s: float = 2.0, floor_percentile: float = 5.0,
-                            margin_decades: float = 1.0) -> np.ndarray:
-    """Per-window threshold γ_k for the SHOE statistic T_k, from the recording itself.
+def adaptive_shoe_threshold(statistic: np.ndarray, period_s: np.ndarray, rate_hz: float, *,
+                            gamma_still: float = 0.3e5, gamma_motion: float = 1e7, margin_decades: float = 1.0,
+                            prominence_decades: float = 1.0) -> np.ndarray:
+    """Per-window threshold γ_k for the SHOE statistic T_k, from the gait cycle around each window.
 
-    The statistic of a foot at rest sits at the sensor's noise level; in a walking stance
-    the foot rolls and T dips to 10²–10⁴ (OpenShoe scaling, σ_a = 0.01 m/s^2, σ_ω = 0.1 °/s),
-    in a running stance, only 0.1–0.2 s long with the foot never quite still, to 10⁴–10⁵,
-    above any fixed threshold fit for walking. The local *stance floor* is the
-    ``floor_percentile`` of log₁₀ T over a moving ``floor_window_s`` (a few strides), and
+    The statistic of a foot at rest sits at the sensor's noise level; in a walking stance the
+    foot rolls and T dips to 10²–10⁴ (OpenShoe scaling, σ_a = 0.01 m/s^2, σ_ω = 0.1 °/s); in a
+    running stance, 0.1–0.2 s long with the foot never quite still, only to 10⁴–3·10⁵, above
+    any fixed threshold fit for walking. Each gait cycle has one stance, at its lowest T. So,
+    with P_k the stride period at window k (``period_s``, s, per window; NaN: no gait there,
+    :func:`bodyfusion.nav.gait.stride_period`), the *cycle floor* f_k and *cycle peak* h_k are
+    the least and largest log₁₀ T over the P_k centred on k, and
 
-        log₁₀ γ_k = clip(floor_k + margin_decades, log₁₀ gamma_still, log₁₀ gamma_motion):
+        log₁₀ γ_k = clip(f_k + margin_decades, log₁₀ gamma_still, log₁₀ gamma_motion)
 
-    never below ``gamma_still`` (what is still at OpenShoe's threshold stays stance, so
-    walking and standing are detected as before), never above ``gamma_motion`` (an RMS
-    angular rate of ~1 rad/s is motion whatever the floor: a recording without stance gets
-    no stance from the adaptation), and in between ``margin_decades`` above the floor of
-    the strides around it (a running stance). ``rate_hz`` (Hz) sets the window in samples.
-    Returns an array shaped like ``statistic``.
+    where the cycle's stance stands out of its swing (h_k − f_k ≥ ``prominence_decades``), else
+    log₁₀ gamma_still: what is still at OpenShoe's threshold is always stance; a gait's stance
+    is ``margin_decades`` above its own cycle's floor, whatever the gait; nothing whose RMS
+    angular rate exceeds ~5 rad/s (``gamma_motion``) is. ``rate_hz`` (Hz) converts periods to
+    windows. Returns an array shaped like ``statistic``.
     """
     # imported here: only adaptive thresholds need it, and scipy.ndimage is slow to import
-    from scipy.ndimage import percentile_filter
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
     z = np.log10(np.maximum(np.asarray(statistic, dtype=float), 1e-300))
-    if z.size == 0:
-        return np.empty(0)
-    block = max(1, int(round(rate_hz * 0.02)))  # quantiles on 20 ms block minima: cheap at any rate
-    n_blocks = -(-z.size // block)
-    padded = np.concatenate([z, np.full(n_blocks * block - z.size, z[-1])])
-    minima = padded.reshape(n_blocks, block).min(axis=1)
-    size = max(1, int(round(floor_window_s * rate_hz / block)))
-    floor = percentile_filter(minima, floor_percentile, size=size, mode="nearest")
-    log_gamma = np.clip(np.repeat(floor, block)[: z.size] + margin_decades, np.log10(gamma_still),
-                        np.log10(gamma_motion))
+    log_gamma = np.full(z.size, np.log10(gamma_still))
+    period = np.asarray(period_s, dtype=float)[: z.size]
+    gait = np.isfinite(period)
+    if not gait.any():
+        return 10.0**log_gamma
+    # cycle floors and peaks on a few quantised window lengths (one filter pass each)
+    lengths = np.maximum(3, np.round(period[gait] * rate_hz / PERIOD_STEP_SAMPLES) * PERIOD_STEP_SAMPLES).astype(int)
+    floor = np.empty(lengths.size)
+    peak = np.empty(lengths.size)
+    for length in np.unique(lengths):
+        use = lengths == length
+        floor[use] = minimum_filter1d(z, int(length), mode="nearest")[gait][use]
+        peak[use] = maximum_filter1d(z, int(length), mode="nearest")[gait][use]
+    lifted = np.clip(floor + margin_decades, np.log10(gamma_still), np.log10(gamma_motion))
+    log_gamma[gait] = np.where(peak - floor >= prominence_decades, lifted, log_gamma[gait])
     return 10.0**log_gamma
+
+
+PERIOD_STEP_SAMPLES = 8
+"""Cycle windows (:func:`adaptive_shoe_threshold`) are whole multiples of this many samples."""
 
 
 def adaptive_shoe(acc_b: np.ndarray, gyro_b: np.ndarray, rate_hz: float, *, window: int | None = None,
                   sigma_acc: float = 0.01, sigma_gyro: float = 0.1 * math.pi / 180.0, gravity: float = 9.81,
-                  **threshold_options: float) -> tuple[np.ndarray, np.ndarray]:
-    """SHOE with the recording's own threshold (:func:`adaptive_shoe_threshold`).
+                  **threshold_options: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """SHOE with a threshold that follows the gait (:func:`adaptive_shoe_threshold`), the stride
+    period from the angular rate (:func:`bodyfusion.nav.gait.stride_period`).
 
     ``window`` W in samples (default: 25 ms at ``rate_hz``, at least 3, so the test spans the
     same time at any rate); σ_a (m/s^2), σ_ω (rad/s), ``gravity`` (m/s^2) as in :func:`shoe`.
-    Returns the stance flags (N,) and the threshold per window (N − W + 1,).
+    Returns the stance flags (N,), the threshold per window (N − W + 1,) and the stride period
+    per sample (N,; s, NaN where no gait repeats).
     """
+    from bodyfusion.nav.gait import stride_period
+
     w = window if window is not None else max(3, int(round(0.025 * rate_hz)))
     t = shoe_statistic(acc_b, gyro_b, window=w, sigma_acc=sigma_acc, sigma_gyro=sigma_gyro, gravity=gravity)
-    gamma = adaptive_shoe_threshold(t, rate_hz, **threshold_options)
-    return _spread_windows(t < gamma, int(w), np.asarray(acc_b).shape[0]), gamma
+    period = stride_period(np.linalg.norm(np.asarray(gyro_b, dtype=float), axis=1), rate_hz)
+    gamma = adaptive_shoe_threshold(t, period[w // 2:w // 2 + t.size], rate_hz, **threshold_options)
+    return _spread_windows(t < gamma, int(w), np.asarray(acc_b).shape[0]), gamma, period
 
 
 # --------------------------------------------------------------------------- magnitude

@@ -32,7 +32,8 @@ P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY 
 P_EARTH_RATE = slice(7, 10)
 P_ZUPT_GATE = 10
 P_ACC_BIAS_DECAY, P_GYRO_BIAS_DECAY = 11, 12
-PARAMS_SIZE = 13
+P_ZUPT_PIVOT = 13
+PARAMS_SIZE = 14
 Q_DECAY = 15
 """Index in the :func:`process_noise_diag` vector of the decay rates β_a, β_g (after the 15 densities²)."""
 DPOS = slice(0, 3)

@@ -69,6 +69,28 @@ def window_spreads(acc_b: np.ndarray, gyro_b: np.ndarray, length: int) -> tuple[
     return spread(np.asarray(acc_b, dtype=float)), spread(np.asarray(gyro_b, dtype=float))
 
 
+DRIFT_BATCHES = 5
+"""Consecutive batches of a window whose means show a slow rotation (:func:`window_drifts`)."""
+DRIFT_FACTOR = 2.0
+"""A still window's angular-rate drift is at most this multiple of the recording's smallest."""
+
+
+def window_drifts(gyro_b: np.ndarray, length: int) -> np.ndarray:
+    """Drift (N − L + 1,) of the angular rate over every window of ``length`` samples starting at
+    index k, rad/s: √(Σ_axes var) of the means of its :data:`DRIFT_BATCHES` consecutive batches.
+    Noise averages out of a batch mean; a slow rotation (a foot shifting its weight, which
+    the spread of single samples hides in the noise) does not, and its mean would pass for
+    gyro bias."""
+    x = np.asarray(gyro_b, dtype=float)
+    x = x - x.mean(axis=0)
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
+    size = max(1, length // DRIFT_BATCHES)
+    m = len(x) - length + 1
+    means = np.stack([(c[j * size + size:j * size + size + m] - c[j * size:j * size + m]) / size
+                      for j in range(DRIFT_BATCHES)])
+    return np.sqrt(means.var(axis=0).sum(axis=1))
+
+
 def find_still_interval(acc_b: np.ndarray, gyro_b: np.ndarray, length: int, acc_limit_mps2: float,
                         gyro_limit_radps: float) -> StillInterval:
     """The first still interval of at least ``length`` samples (both window spreads within
@@ -80,8 +102,10 @@ def find_still_interval(acc_b: np.ndarray, gyro_b: np.ndarray, length: int, acc_
     if n < length or length < 2:
         raise ValueError(f"{n} samples cannot hold a window of {length}")
     s_f, s_w = window_spreads(acc_b, gyro_b, length)
+    d_w = window_drifts(gyro_b, length)
     still = ((s_f <= min(acc_limit_mps2, STILL_NOISE_FACTOR * s_f.min()))
-             & (s_w <= min(gyro_limit_radps, STILL_NOISE_FACTOR * s_w.min())))
+             & (s_w <= min(gyro_limit_radps, STILL_NOISE_FACTOR * s_w.min()))
+             & (d_w <= DRIFT_FACTOR * np.percentile(d_w[s_w <= STILL_NOISE_FACTOR * s_w.min()], 10)))
     is_still = bool(still.any())
     if not is_still:  # the quietest windows instead
         score = s_f / acc_limit_mps2 + s_w / gyro_limit_radps

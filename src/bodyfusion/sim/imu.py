@@ -24,7 +24,8 @@ Error model (per triad, accelerometer and gyroscope alike)::
 ``b_const``: turn-on bias (given vector plus a draw of σ ``*_bias_sd_*``);
 ``b_gm``: first-order Gauss–Markov bias instability (stationary σ, correlation time τ);
 ``b_rw``: bias random walk (density, starts at 0); ``n_k``: white noise of
-per-sample σ = density·√rate. Units: accelerometer m/s^2 (density m/s^2/√Hz, random
+per-sample σ = density·√rate. A sensor with a ``range`` then clips every axis of ``y_k`` to
+±range (saturation: a swing turning faster than the gyroscope measures). Units: accelerometer m/s^2 (density m/s^2/√Hz, random
 walk m/s^3/√Hz), gyroscope rad/s (density rad/s/√Hz, random walk rad/s^2/√Hz).
 
 Random numbers: every system has its own :class:`numpy.random.SeedSequence` built
@@ -204,6 +205,8 @@ class SensorErrors:
     bias_sd: float = 0.0
     scale_ppm: Vec3 = (0.0, 0.0, 0.0)
     misalignment_mrad: Vec6 = (0.0,) * 6
+    range: float = math.inf
+    """Largest reading per axis (m/s^2 or rad/s); beyond it the sensor reads ±range."""
 
     @property
     def bias_drift_density(self) -> float:
@@ -317,6 +320,10 @@ class ImuErrorConfig(StrictModel):
     gyro_scale_ppm: Vec3 | float | None = None
     acc_misalignment_mrad: Vec6 | None = None
     gyro_misalignment_mrad: Vec6 | None = None
+    acc_range_mps2: float | None = Field(default=None, gt=0)
+    """Accelerometer full scale per axis, m/s^2 (unset: unlimited); beyond it the reading clips."""
+    gyro_range_radps: float | None = Field(default=None, gt=0)
+    """Gyroscope full scale per axis, rad/s (unset: unlimited); beyond it the reading clips."""
 
     def resolve(self) -> ImuErrorModel:
         """The preset's values with this section's explicit fields on top."""
@@ -340,6 +347,7 @@ class ImuErrorConfig(StrictModel):
                 bias_sd=float(get(f"bias_sd_{unit}", 0.0)),
                 scale_ppm=scale3,
                 misalignment_mrad=tuple(float(v) for v in get("misalignment_mrad", (0.0,) * 6)),
+                range=float(get(f"range_{unit}", math.inf)),
             )
 
         return ImuErrorModel(acc=triad("acc", "mps2"), gyro=triad("gyro", "radps"))
@@ -416,6 +424,8 @@ def corrupt(ideal: np.ndarray, rate_hz: float, errors: SensorErrors,
     if errors.noise_density > 0:
         for lo, z in _normal_blocks(r["white"], n):
             out[lo:lo + len(z)] += errors.noise_density * math.sqrt(rate_hz) * z
+    if math.isfinite(errors.range):
+        np.clip(out, -errors.range, errors.range, out=out)
     return out
 
 

@@ -54,6 +54,10 @@ class FootFilterConfig(StrictModel):
     """Chi-square gate of every zero-velocity update (ekf, ckf; 3 degrees of freedom): a
     consistent update passes with this probability; beyond the gate the update is de-weighted
     to the gate (bounded influence, :mod:`bodyfusion.nav.zupt`) and counted. null: off."""
+    zupt_pivot_m: float = Field(default=0.1, ge=0, le=0.5)
+    """Distance (m) from the IMU to the point the foot rolls about in stance (heel, ball): a
+    stance sample's zero velocity has σ √(zupt_sigma² + (pivot |ω|)²), ω its angular rate
+    (:func:`bodyfusion.nav.zupt.stance_velocity_sigma`): a rolling foot is not at rest. 0: off."""
     zaru_sigma_radps: float | None = Field(default=None, gt=0)
     """Zero-angular-rate update noise, rad/s; unset: no ZARU."""
     earth_rate: bool = False
@@ -63,11 +67,12 @@ class FootFilterConfig(StrictModel):
 class DetectorConfig(StrictModel):
     """Zero-velocity detector. ``labels`` uses the data's stance column.
 
-    adaptive (the default): the SHOE statistic with a threshold taken from the recording
-    (:func:`bodyfusion.nav.detectors.adaptive_shoe_threshold`: ``margin_decades`` above the local
-    stance floor, between ``threshold`` (default 3e4) and ``motion_threshold``), window
-    25 ms at the recording's rate unless ``window`` is set; it follows walking, running and
-    stair stances at any rate. shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a
+    adaptive (the default): the SHOE statistic with a threshold that follows the gait
+    (:func:`bodyfusion.nav.detectors.adaptive_shoe_threshold`: ``margin_decades`` above the floor
+    of each gait cycle, the stride period measured in the recording
+    (:func:`bodyfusion.nav.gait.stride_period`), never below ``threshold`` (default 3e4) nor above
+    ``motion_threshold``), window 25 ms at the recording's rate unless ``window`` is set; it
+    follows walking, running and stair stances at any rate. shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a
     (m/s^2), σ_ω (rad/s) and the fixed ``threshold`` γ; magnitude: | ‖f‖ − g | ≤
     ``threshold`` (m/s^2); axes_band: ``low`` ≤ f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance
     runs shorter than ``min_stance_s`` and swing gaps shorter than ``min_swing_s`` are removed.
@@ -78,10 +83,14 @@ class DetectorConfig(StrictModel):
     window: int | None = Field(default=None, ge=1, le=MAX_WINDOW)
     """Samples per test window, at most :data:`MAX_WINDOW` (shoe, magnitude, axes_band:
     default 5; adaptive: 25 ms)."""
-    motion_threshold: float = Field(default=1e5, gt=0)
-    """adaptive: the SHOE statistic above which a sample is never stance."""
-    margin_decades: float = Field(default=1.0, gt=0)
-    """adaptive: how far (decades of the statistic) above the local stance floor stance reaches."""
+    motion_threshold: float = Field(default=1e7, gt=0)
+    """adaptive: the SHOE statistic above which a sample is never stance (1e7: an RMS angular
+    rate of ~5.5 rad/s at the default σ_ω)."""
+    margin_decades: float = Field(default=0.5, gt=0)
+    """adaptive: how far (decades of the statistic) above its gait cycle's floor stance reaches."""
+    prominence_decades: float = Field(default=1.0, gt=0)
+    """adaptive: how far (decades) a cycle's swing must rise above its floor for the cycle to
+    be a gait (below it only ``threshold`` applies: standing, fidgeting)."""
     threshold: float | None = Field(default=None, gt=0)
     sigma_acc: float = Field(default=0.01, gt=0)
     """SHOE accelerometer noise σ_a, m/s^2."""

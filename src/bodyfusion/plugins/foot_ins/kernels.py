@@ -32,7 +32,7 @@ from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_
                                        closed_loop_reset, decay_biases, process_noise_diag, propagate_covariance,
                                        transition_left)
 from bodyfusion.nav.strapdown import mechanise
-from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, zero_angular_rate_update
+from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, stance_velocity_sigma, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
 
 # Layout of the ``counters`` vector: updates, NIS sum (before gating), the
@@ -206,18 +206,20 @@ def set_state(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray, i
 
 
 @numba.njit(inline="always")
-def record_stance(x: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray, n: int, st_v: np.ndarray,
-                  st_P: np.ndarray) -> None:
+def record_stance(x: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray, sigma_v: float, n: int,
+                  st_v: np.ndarray, st_P: np.ndarray) -> None:
     """Entry n of the whole-run RTS record of the stance samples, from the nominal state x (16,)
     just after the sample's stance update and x_prior (16,), P_prior (15, 15) before it:
-    ``st_v[n]`` (5,) the prior velocity v⁻ (m/s) and the east and north velocity rows
+    ``st_v[n]`` (6,) the prior velocity v⁻ (m/s), the east and north velocity rows
     a = (−Δv_N, Δv_E) of the update's heading reset G = I + a e_ψᵀ (Δv = v⁺ − v⁻,
-    :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`), ``st_P[n]`` (15, 4) the prior
-    covariance's columns at :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`."""
+    :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`) and the ZUPT's noise variance
+    before the gate, σ_v² (m²/s², :func:`bodyfusion.nav.zupt.stance_velocity_sigma`); ``st_P[n]``
+    (15, 4) the prior covariance's columns at :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`."""
     for k in range(3):
         st_v[n, k] = x_prior[3 + k]
     st_v[n, 3] = -(x[4] - x_prior[4])
     st_v[n, 4] = x[3] - x_prior[3]
+    st_v[n, 5] = sigma_v * sigma_v
     for r in range(15):
         for m in range(4):
             st_P[n, r, m] = P_prior[r, ZUPT_COLUMNS[m]]
@@ -225,7 +227,7 @@ def record_stance(x: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray, n: in
 
 def no_record() -> tuple[np.ndarray, ...]:
     """The record arguments of :func:`run_foot_ins` of a run that records nothing."""
-    return (np.empty((0, PACKED_SIZE)), np.empty((0, 3)), np.empty((0, 5)), np.empty((0, 15, 4)), np.empty(16),
+    return (np.empty((0, PACKED_SIZE)), np.empty((0, 3)), np.empty((0, 6)), np.empty((0, 15, 4)), np.empty(16),
             np.empty((0, 0)))
 
 
@@ -248,7 +250,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
     Unless ``Pu`` is empty (:func:`no_record`), the run records for the whole-run RTS: row i of
     ``Pu`` (N, :data:`PACKED_SIZE`) and ``f_ns`` (N, 3) (:func:`record_posterior`) and, at the
     n-th stance sample of the run (n = ``counters[C_STANCE_RECORDS]``), entry n of ``st_v``
-    (S, 5) and ``st_P`` (S, 15, 4) (:func:`record_stance`); ``x_prior`` (16,) and ``P_prior``
+    (S, 6) and ``st_P`` (S, 15, 4) (:func:`record_stance`); ``x_prior`` (16,) and ``P_prior``
     (15, 15) are left with the nominal state and covariance before the step to i1 − 1 (the
     sample a correction from outside the loop would be made at)."""
     q_diag = process_noise_diag(params)
@@ -266,7 +268,8 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
             _count(params, nis, counters)
         if recording:
             if nis != NO_STANCE:
-                record_stance(x, x_prior, P_prior, int(counters[C_STANCE_RECORDS]), st_v, st_P)
+                record_stance(x, x_prior, P_prior, stance_velocity_sigma(params, gyro_b[i], x_prior),
+                              int(counters[C_STANCE_RECORDS]), st_v, st_P)
                 counters[C_STANCE_RECORDS] += 1
             record_posterior(P, f_n, i, Pu, f_ns)
         _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
@@ -303,7 +306,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
             coloured = False
             if stance[i - 1] and i >= 2:
                 nis = coloured_zero_velocity_update(x, P, v_prev, C, f_n, t[i] - t[i - 1], q_diag, alpha,
-                                                    params[P_ZUPT_SIGMA], gate, dx, phi)
+                                                    stance_velocity_sigma(params, gyro_b[i], x), gate, dx, phi)
                 coloured = gate <= 0.0 or nis <= gate
                 if coloured and params[P_ZARU_SIGMA] > 0:
                     zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi, work)

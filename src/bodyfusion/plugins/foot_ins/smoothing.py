@@ -307,7 +307,7 @@ class ForwardRecord:
         if active:
             self.Pu = np.empty((samples, PACKED_SIZE))
             self.f_ns = np.empty((samples, 3))
-            self.st_v = np.empty((n_stance, 5))
+            self.st_v = np.empty((n_stance, 6))
             self.st_P = np.empty((n_stance, 15, 4))
             self.x_prior = np.empty(16)
             self.P_prior = np.empty((15, 15))
@@ -431,7 +431,7 @@ def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> tuple[n
     L = int(np.max(np.diff(bounds)))
     ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][bounds]))) for f in (r.stance, general))
     nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, bounds, side="right"))))
-    return (np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 5)), np.empty((ns, 15, 4)),
+    return (np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 6)), np.empty((ns, 15, 4)),
             np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
             np.empty((nk, 15, 15)))
 

@@ -22,9 +22,9 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm_into
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, P_ZUPT_SIGMA, Q_DECAY, congruence_by_yaw_reset, inject,
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, Q_DECAY, congruence_by_yaw_reset, inject,
                                        inv3_sym_into, process_noise_diag, transition_transpose_left)
-from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance
+from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance, stance_velocity_sigma
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
 
@@ -77,8 +77,8 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
 def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
                   Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
     """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
-    G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (5,): the prior velocity v⁻ (m/s)
-    and a = (v[3], v[4]) on the east and north velocity rows), then the adjoint of the gated ZUPT
+    G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (6,): the prior velocity v⁻ (m/s),
+    a = (v[3], v[4]) on the east and north velocity rows and the ZUPT's σ_v² v[5]), then the adjoint of the gated ZUPT
     as the filter made it (:func:`bodyfusion.nav.zupt.zero_velocity_update`, from the prior
     covariance's columns ``Pc`` (15, 4) at ZUPT_COLUMNS): with H its Jacobian, S its innovation
     covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
@@ -98,8 +98,7 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
     Hc[1, 3] = -v[0]
     Hc[2, 3] = 0.0
     _zupt_innovation(Pc, Hc, S)
-    r_var = gated_variance((S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]), y, params[P_ZUPT_SIGMA] ** 2,
-                           params[P_ZUPT_GATE])
+    r_var = gated_variance((S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]), y, v[5], params[P_ZUPT_GATE])
     for k in range(3):
         S[k, k] += r_var
     inv3_sym_into(S, Si)
@@ -260,8 +259,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
 
     * ``Pu`` (L+1, 120), ``f_ns`` (L+1, 3): the posterior covariance packed and the step's
       mean specific force (:func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior`);
-    * per stance sample (in order): ``st_v`` (·, 5) the prior velocity (m/s) and the heading
-      reset's a (``yaw_reset`` of ``filter_pass``), ``st_P`` (·, 15, 4) the prior covariance's
+    * per stance sample (in order): ``st_v`` (·, 6) the prior velocity (m/s), the heading
+      reset's a (``yaw_reset`` of ``filter_pass``) and the ZUPT's σ_v², ``st_P`` (·, 15, 4) the prior covariance's
       columns at ZUPT_COLUMNS (:func:`~bodyfusion.plugins.foot_ins.kernels.record_stance`; what
       the ekf records as it runs, :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`);
     * per sample with a ``general`` update (in order): ``gen_P`` (·, 15, 15) the prior
@@ -305,7 +304,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
         j = i - i0
         stanced = nis != NO_STANCE
         if stanced:
-            record_stance(x, x_prior, P_prior, ns, st_v, st_P)
+            record_stance(x, x_prior, P_prior, stance_velocity_sigma(params, gyro[i], x_prior), ns, st_v, st_P)
             ns += 1
         kept = kptr < kept_idx.shape[0] and kept_idx[kptr] == i
         if kept:

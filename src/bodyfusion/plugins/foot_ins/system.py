@@ -19,14 +19,15 @@ from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
 from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.earth import earth_rate_enu
-from bodyfusion.nav.error_state import (DATT, DPOS, DVEL, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY,
-                                       P_ZUPT_GATE, PARAMS_SIZE, rotate_about_up)
+from bodyfusion.nav.error_state import (DPOS, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY,
+                                       P_ZUPT_GATE, P_ZUPT_PIVOT, PARAMS_SIZE, rotate_about_up)
 from bodyfusion.nav.frames import apply_axis_map
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
+from bodyfusion.plugins.foot_ins.input_policy import covariance_increments, navigation_clock, repair_saturation
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
@@ -35,15 +36,6 @@ from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
-GAP_HOLD_S = 0.1
-"""Longest stretch of a gap (s) integrated with the sample after it held: a tenth of a stride,
-over which the foot's specific force and rate stay near one sample's."""
-GAP_SPEED_SD_MPS = 3.0
-"""One-sigma speed (m/s) of a foot over a gap in its IMU stream: a brisk run; bounds the
-position and velocity uncertainty a gap adds."""
-GAP_ATTITUDE_SD_RAD = 0.5
-"""Largest one-sigma attitude error (rad) a gap adds: the error-state model is small-angle, and
-the stance updates that follow re-level roll and pitch."""
 
 _DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
 log = logging.getLogger(__name__)
@@ -59,10 +51,11 @@ def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: s
     elif cfg.kind == "adaptive":
         if threshold >= cfg.motion_threshold:
             raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
-        stance, _ = detectors.adaptive_shoe(stream.acc_b, stream.gyro_b, rate, window=cfg.window,
+        stance, _, _ = detectors.adaptive_shoe(stream.acc_b, stream.gyro_b, rate, window=cfg.window,
                                             sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro, gravity=gravity,
                                             gamma_still=threshold, gamma_motion=cfg.motion_threshold,
-                                            margin_decades=cfg.margin_decades)
+                                            margin_decades=cfg.margin_decades,
+                                            prominence_decades=cfg.prominence_decades)
     elif cfg.kind == "shoe":
         stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
                                 sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity)
@@ -109,14 +102,15 @@ class FootIns(SensorSystem):
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)
         self.stream = read_imu(config.data)
+        self.clipping = repair_saturation(self.stream, name)
         self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
         self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
         log.info("%s: %d samples at %.0f Hz; stance (detector %s) in %.0f %% of them", name, len(self.stance),
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
-        self._gap_index, self._gap_P = self._gap_inflation()
-        self._t_nav = self._navigation_clock()
+        self._gap_index, self._gap_P = covariance_increments(self.stream, context.gravity_mps2, self.clipping)
+        self._t_nav = navigation_clock(self.stream)
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
         self._fix_sigma = fx.sigma_m if fx is not None else 0.0
@@ -164,6 +158,7 @@ class FootIns(SensorSystem):
             p[P_EARTH_RATE] = earth_rate_enu(self.context.latitude_deg)
         if f.zupt_gate_probability is not None:
             p[P_ZUPT_GATE] = chi2_gate(f.zupt_gate_probability, 3)
+        p[P_ZUPT_PIVOT] = f.zupt_pivot_m
         for index, tau in ((P_ACC_BIAS_DECAY, f.acc_bias_tau_s), (P_GYRO_BIAS_DECAY, f.gyro_bias_tau_s)):
             p[index] = 0.0 if tau is None else 1.0 / tau
         return p
@@ -193,42 +188,6 @@ class FootIns(SensorSystem):
             self.stream.report.notes.append(f"{self.name}: levelled on the still interval {span}; the "
                                             f"{t[still.start] - t[0]:.2f} s before it navigated backward from there")
         return still
-
-    def _gap_inflation(self) -> tuple[np.ndarray, np.ndarray]:
-        """Gap policy: the step across a gap is mechanised over at most a nominal period plus
-        :data:`GAP_HOLD_S` (:meth:`_navigation_clock`: no sample is held for longer), and before
-        it the covariance grows by what the foot may have done in the Δ missing seconds: an
-        unknown acceleration and rotation of the recording's own RMS sizes σ_f = rms(‖f‖ − g),
-        σ_ω = rms(‖ω‖), bounded by a walker's reach: σ_p = min(σ_f Δ²/2, v_max Δ),
-        σ_v = min(σ_f Δ, v_max), σ_θ = min(σ_ω Δ, θ_max) per axis (:data:`GAP_SPEED_SD_MPS`,
-        :data:`GAP_ATTITUDE_SD_RAD`). Returns the gap sample indices and the (K, 15, 15)
-        covariance increments."""
-        checks = self.stream.checks
-        if checks is None or checks.gap_index.size == 0:
-            return np.empty(0, dtype=np.int64), np.empty((0, 15, 15))
-        f_dev = np.linalg.norm(self.stream.acc_b, axis=1) - self.context.gravity_mps2
-        sigma_f = float(np.sqrt(np.mean(f_dev**2)))
-        sigma_w = float(np.sqrt(np.mean(np.sum(self.stream.gyro_b**2, axis=1))))
-        dP = np.zeros((checks.gap_index.size, 15, 15))
-        for k, missing in enumerate(checks.gap_missing_s):
-            for block, sd in ((DPOS, min(sigma_f * missing**2 / 2, GAP_SPEED_SD_MPS * missing)),
-                              (DVEL, min(sigma_f * missing, GAP_SPEED_SD_MPS)),
-                              (DATT, min(sigma_w * missing, GAP_ATTITUDE_SD_RAD))):
-                dP[k, block, block] = sd**2 * np.eye(3)
-        return checks.gap_index, dP
-
-    def _navigation_clock(self) -> np.ndarray:
-        """The sample times the filter integrates over (s): the recording's, with every gap
-        step cut to the nominal period plus :data:`GAP_HOLD_S` (the time after a gap moves back
-        by what is missing beyond that): a short gap is integrated with its sample held, as any
-        step; of a long one only what a held sample can describe, the rest is the covariance of
-        :meth:`_gap_inflation`. Output times stay the recording's."""
-        checks = self.stream.checks
-        if checks is None or checks.gap_index.size == 0:
-            return self.stream.t
-        beyond = np.zeros(len(self.stream))
-        beyond[checks.gap_index] = np.maximum(checks.gap_missing_s - GAP_HOLD_S, 0.0)
-        return self.stream.t - np.cumsum(beyond)
 
     def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """The state at the first sample: levelled (TRIAD on the mean specific force) and the

@@ -1,0 +1,140 @@
+"""Sensor saturation: readings clipped at the end of an inertial sensor's range, found and repaired.
+
+A foot's swing turns it faster than many gyroscopes measure (a walking swing peaks at
+5–10 rad/s, a running swing at 10–20 rad/s; full scales of ±300 to ±1000 °/s are common),
+and a heel strike can exceed a small accelerometer range. A clipped sample under-reads the
+rotation or the acceleration, and strapdown integrates the shortfall into an attitude error
+at every stride.
+
+Detection (:func:`find_clipping`), per axis and sign, from the recording alone. Samples within
+:data:`RAIL_TOLERANCE` of the axis's extreme reading form candidate runs. A run is *clipped*
+when the signal's flanks say it went beyond the level it was read at: the cubic through the
+:data:`FIT_SAMPLES` unclipped samples on each side of the run (least squares) rises above the
+level by more than :data:`MIN_EXCESS` of it inside the run. A natural peak is reproduced by
+its flanks (its top sample is the peak); a rail is not (the flanks are still steep where the
+readings go flat). The side of the axis is saturated when at least :data:`MIN_CLIPPED_RUNS`
+runs are clipped: one excursion could be a fluke, a rail is met again and again.
+
+Repair (:meth:`Clipping.repaired`): each clipped run is replaced by that cubic (never below the
+rail: the sensor read its end of range, so the truth is beyond it). The reconstruction is a
+guess; :attr:`ClippedRun.excess_integral` (the repaired area beyond the rail, signal unit × s)
+lets a filter add its uncertainty: for a gyroscope, an attitude error of a fraction of that
+angle (:data:`REPAIR_UNCERTAINTY`).
+
+Units: whatever the signal's (m/s^2 or rad/s); times in seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+RAIL_TOLERANCE = 0.005
+"""Readings within this fraction of an axis's extreme value are candidates for its rail."""
+FIT_SAMPLES = 4
+"""Unclipped samples on each side of a run that its cubic is fitted to."""
+MIN_EXCESS = 0.02
+"""A run is clipped when its flanks' cubic exceeds the level by this fraction of it."""
+MIN_CLIPPED_RUNS = 3
+"""Clipped runs on one side of an axis that make it saturated there."""
+REPAIR_UNCERTAINTY = 0.5
+"""One-sigma error of a repair, as a fraction of the repaired area beyond the rail."""
+
+
+@dataclass(frozen=True)
+class ClippedRun:
+    """Samples [start, stop) of one axis read at its rail; ``values``: their repair (the flanks'
+    cubic, never inside the rail); ``excess_integral``: its area beyond the rail (signal unit × s)."""
+
+    axis: int
+    start: int
+    stop: int
+    excess_integral: float
+    values: np.ndarray = field(repr=False, compare=False)
+
+
+@dataclass
+class Clipping:
+    """What was found in an (N, 3) signal: the rail of each axis and side (signal units; NaN
+    where none) and the clipped runs, in time order."""
+
+    rail: np.ndarray = field(default_factory=lambda: np.full((3, 2), np.nan))
+    """(3, 2): the level of each axis's negative and positive rail; NaN: no rail."""
+    runs: list[ClippedRun] = field(default_factory=list)
+
+    @property
+    def samples(self) -> int:
+        """Samples with at least one clipped axis."""
+        mask = np.zeros(max((r.stop for r in self.runs), default=0), dtype=bool)
+        for r in self.runs:
+            mask[r.start:r.stop] = True
+        return int(mask.sum())
+
+    def describe(self, name: str, unit: str) -> str:
+        """One line: which axes were clipped where, on how many samples, and what their flanks say
+        was lost."""
+        rails = [f"{'xyz'[a]} at {'−+'[s]}{self.rail[a, s]:.4g} {unit}"
+                 for a in range(3) for s in range(2) if np.isfinite(self.rail[a, s])]
+        worst = max((r.excess_integral for r in self.runs), default=0.0)
+        return (f"{name} saturated ({', '.join(rails)}): {len(self.runs)} clipped runs, {self.samples} samples; "
+                f"their flanks say up to {worst:.3g} {unit}·s was lost beyond the range in one run")
+
+    def repaired(self, signal: np.ndarray) -> np.ndarray:
+        """A copy of ``signal`` (N, 3), the signal this was found in, with every clipped run
+        replaced by its repair."""
+        out = np.array(signal, dtype=float)
+        for run in self.runs:
+            out[run.start:run.stop, run.axis] = run.values
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain-JSON summary for metrics.json."""
+        return {"rail": [[None if not np.isfinite(v) else float(v) for v in side] for side in self.rail],
+                "clipped_runs": len(self.runs), "clipped_samples": self.samples,
+                "repaired_excess_max": max((r.excess_integral for r in self.runs), default=0.0)}
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and exclusive end indices of the True runs of a 1-D bool array."""
+    d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def _flank_cubic(x: np.ndarray, start: int, stop: int, excluded: np.ndarray) -> np.ndarray | None:
+    """The least-squares cubic through the unexcluded samples of ``x`` within
+    :data:`FIT_SAMPLES` of run [start, stop), evaluated on the run; None without 4 of them."""
+    n = x.size
+    flanks = np.concatenate([np.arange(max(0, start - FIT_SAMPLES), start), np.arange(stop, min(n, stop + FIT_SAMPLES))])
+    flanks = flanks[~excluded[flanks]]
+    if flanks.size < 4:
+        return None
+    centre = 0.5 * (start + stop - 1)
+    coef = np.polyfit(flanks - centre, x[flanks], 3)
+    return np.polyval(coef, np.arange(start, stop) - centre)
+
+
+def find_clipping(signal: np.ndarray, dt: float) -> Clipping:
+    """The rails and clipped runs of ``signal`` (N, 3) sampled every ``dt`` s, each run with its
+    repair (module docstring)."""
+    x = np.asarray(signal, dtype=float)
+    found = Clipping()
+    for axis in range(3):
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            col = sign * x[:, axis]
+            level = float(col.max()) if col.size else 0.0
+            if not level > 0.0:
+                continue
+            candidate = col >= level * (1.0 - RAIL_TOLERANCE)
+            starts, stops = _runs(candidate)
+            clipped = []
+            for a, b in zip(starts, stops):
+                fit = _flank_cubic(col, a, b, candidate)
+                if fit is not None and fit.max() > level * (1.0 + MIN_EXCESS):
+                    beyond = np.maximum(fit, level)
+                    clipped.append(ClippedRun(axis, int(a), int(b), float(np.sum(beyond - level) * dt), sign * beyond))
+            if len(clipped) >= MIN_CLIPPED_RUNS:
+                found.rail[axis, side] = level
+                found.runs += clipped
+    found.runs.sort(key=lambda run: (run.start, run.axis))
+    return found

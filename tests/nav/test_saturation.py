@@ -1,0 +1,61 @@
+"""Clipped readings (bodyfusion.nav.saturation): a rail is found where the flanks keep climbing,
+never on an unclipped signal whose peaks repeat exactly, and the repair restores most of what
+the sensor could not report."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bodyfusion.nav.saturation import MIN_CLIPPED_RUNS, find_clipping
+
+RATE = 200.0
+
+
+def swings(peak: float, strides: int, rng: np.random.Generator, jitter: float = 0.05, noise: float = 0.01) -> np.ndarray:
+    """(N, 3) angular rate of a foot: a pitch-rate pulse per stride on y (peak ± jitter), small
+    rates on x and z, sensor noise."""
+    rows = []
+    for _ in range(strides):
+        tau = np.linspace(0.0, 1.0, 220)
+        pulse = -peak * (1.0 + jitter * rng.standard_normal()) * np.sin(np.pi * np.clip(tau / 0.35, 0, 1)) ** 2
+        rows.append(np.column_stack([0.3 * np.sin(2 * np.pi * tau), pulse, 0.2 * np.cos(2 * np.pi * tau)]))
+    x = np.vstack(rows)
+    return x + noise * rng.standard_normal(x.shape)
+
+
+@settings(max_examples=20, deadline=None)
+@given(peak=st.floats(6.0, 16.0), over=st.floats(1.15, 1.8), seed=st.integers(0, 10_000))
+def test_a_gyroscope_clipped_in_every_swing_is_found_and_repaired(peak, over, seed):
+    rng = np.random.default_rng(seed)
+    truth = swings(peak, 20, rng)
+    limit = peak / over
+    clipped = np.clip(truth, -limit, limit)
+    found = find_clipping(clipped, 1.0 / RATE)
+    assert found.rail[1, 0] == pytest.approx(limit) and np.isnan(found.rail[[0, 2]]).all()
+    assert len(found.runs) >= 15
+    repaired = found.repaired(clipped)
+    lost = np.abs(truth - clipped).sum()
+    assert np.abs(truth - repaired).sum() < 0.35 * lost
+    assert np.all(np.abs(repaired[:, 1]) >= np.abs(clipped[:, 1]) - 1e-12)  # never inside the rail
+
+
+def test_peaks_that_repeat_exactly_are_not_a_rail():
+    """A simulated gait repeats its peaks to the last digit: the top samples of each peak are
+    on one level, but the flanks fall away from them (a natural peak), so nothing is clipped."""
+    x = swings(9.0, 20, np.random.default_rng(0), jitter=0.0, noise=0.0)
+    assert not find_clipping(x, 1.0 / RATE).runs
+
+
+def test_a_rail_needs_several_clipped_runs():
+    rng = np.random.default_rng(3)
+    truth = swings(10.0, 20, rng)
+    top = np.argsort(np.abs(truth[:, 1]))[::-1]
+    limit = 0.8 * np.abs(truth[top[0], 1])
+    once = truth.copy()
+    stride = int(top[0]) // 220
+    once[stride * 220:(stride + 1) * 220, 1] = np.clip(once[stride * 220:(stride + 1) * 220, 1], -limit, limit)
+    found = find_clipping(once, 1.0 / RATE)
+    assert len(found.runs) < MIN_CLIPPED_RUNS and np.isnan(found.rail).all()
