@@ -11,6 +11,7 @@ import numpy as np
 from bodyfusion.core.fuser import FuserReport
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, CovarianceHistory, SensorSystem
+from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
 from bodyfusion.evaluation.consistency import CovarianceHealth, NeesTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
@@ -42,18 +43,23 @@ class RunResult:
     """Counts of the constraints applied to the smoothed tracks (``smoother.constrain_smoothed``)."""
     nees: dict[str, NeesTrack] = field(default_factory=dict)
     """Horizontal NEES against truth of every scored system (after the evaluation alignment)."""
+    findings: list[Finding] = field(default_factory=list)
+    """Health findings of the run (:class:`~bodyfusion.base.findings.Finding`): the systems', the
+    fuser's and the evaluation's, in that order."""
 
     def health(self) -> dict[str, dict]:
         """metrics.json ``systems.<name>.health``: each system's own figures
         (:meth:`~bodyfusion.core.system.SensorSystem.health`), ``trajectory_covariance`` (the
         checks of the output trajectory's east–north covariance at every epoch, smoothed when
-        smoothed) and, where truth exists, ``nees``."""
+        smoothed), where truth exists, ``nees``, and ``findings``: the run's findings about
+        this system."""
         out = {}
         for name, system in self.systems.items():
             traj = self.trajectories[name]
             out[name] = {**system.health(),
                          "trajectory_covariance": CovarianceHealth.of(traj.horizontal_covariance(), traj.t).to_dict(),
-                         **({"nees": self.nees[name].summary()} if name in self.nees else {})}
+                         **({"nees": self.nees[name].summary()} if name in self.nees else {}),
+                         "findings": [f.to_dict() for f in self.findings if f.system == name]}
         return out
 
     @property

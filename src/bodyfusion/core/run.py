@@ -152,8 +152,12 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
             for name, score in scores.items()}
     timings["scoring_s"] = time.perf_counter() - t0
     log.debug("stage times: %s", ", ".join(f"{k} {v:.3f}" for k, v in timings.items()))
-    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
-                     aiding, smoothed_constraints, nees)
+    result = RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
+                       aiding, smoothed_constraints, nees)
+    result.findings = [f for s in (*systems.values(), *aiding.values()) for f in s.findings()]
+    for finding in result.findings:
+        LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
+    return result
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,

@@ -22,6 +22,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.findings import Finding
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.evaluation.consistency import CovarianceHealth
@@ -166,6 +167,12 @@ class Plugin(ABC):
         The core adds ``trajectory_covariance`` and, where truth exists, ``nees`` (the
         horizontal NEES, :meth:`bodyfusion.core.result.RunResult.health`). Default here: nothing."""
         return {}
+
+    def findings(self) -> list[Finding]:
+        """What went wrong in this system's run, as health findings a person can act on
+        (:class:`~bodyfusion.base.findings.Finding`: missed stances, saturation, rejected
+        updates...). Called after the run (and any smoothing). Default: none."""
+        return []
 
     def innovations(self) -> dict[str, np.ndarray]:
         """Every update the plugin applied or refused, in time order, as equal-length columns:

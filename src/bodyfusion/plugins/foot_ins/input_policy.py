@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import ImuStream
 from bodyfusion.nav.error_state import DATT, DPOS, DVEL
 from bodyfusion.nav.saturation import REPAIR_UNCERTAINTY, Clipping, find_clipping
@@ -36,6 +37,8 @@ over which the foot's specific force and rate stay near one sample's."""
 GAP_SPEED_SD_MPS = 3.0
 """One-sigma speed (m/s) of a foot over a gap in its IMU stream: a brisk run; bounds the
 position and velocity uncertainty a gap adds."""
+SATURATION_WARNING_RAD = 0.05
+"""A repair whose uncertainty reaches this attitude error (rad, ~3°) makes saturation a warning."""
 GAP_ATTITUDE_SD_RAD = 0.5
 """Largest one-sigma attitude error (rad) a gap adds: the error-state model is small-angle, and
 the stance updates that follow re-level roll and pitch."""
@@ -104,3 +107,24 @@ def covariance_increments(stream: ImuStream, gravity_mps2: float,
         return np.empty(0, dtype=np.int64), np.empty((0, 15, 15))
     index = np.array(sorted(increments), dtype=np.int64)
     return index, np.stack([increments[int(k)] for k in index])
+
+
+def saturation_findings(name: str, clipping: dict[str, Clipping], t: np.ndarray) -> list[Finding]:
+    """A finding per clipped sensor: a warning when a repair's uncertainty reaches
+    :data:`SATURATION_WARNING_RAD` (or its m/s for the accelerometer), else for information."""
+    out = []
+    for key, what, unit, field in (("gyro", "gyroscope", "rad", "rotation"), ("acc", "accelerometer", "m/s", "velocity")):
+        if key not in clipping:
+            continue
+        c = clipping[key]
+        worst = REPAIR_UNCERTAINTY * max(r.excess_integral for r in c.runs)
+        rails = ", ".join(f"{'xyz'[a]} {'−+'[s]}{c.rail[a, s]:.4g}" for a in range(3) for s in range(2)
+                          if np.isfinite(c.rail[a, s]))
+        out.append(Finding(
+            "saturation", "warning" if worst >= SATURATION_WARNING_RAD else "info", name,
+            float(t[c.runs[0].start]), float(t[min(c.runs[-1].stop, t.size - 1)]),
+            f"the {what} hit its range ({rails}) in {len(c.runs)} runs, {c.samples} samples; each was rebuilt from "
+            f"its flanks, the {field} lost there uncertain by up to {worst:.2g} {unit} a run.",
+            f"the motion is faster than the {what}'s full-scale range (a running swing turns at 10-20 rad/s).",
+            f"set the {what} to a wider range when recording (±2000 °/s, ±16 g)."))
+    return out

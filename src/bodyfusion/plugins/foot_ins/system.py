@@ -9,10 +9,11 @@ import logging
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.findings import Finding
 from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
-from bodyfusion.base.types import ImuStream, InputReport, Trajectory
+from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.evaluation.consistency import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
@@ -26,51 +27,20 @@ from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attit
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
-from bodyfusion.plugins.foot_ins.config import DetectorConfig, FootInsConfig
-from bodyfusion.plugins.foot_ins.input_policy import covariance_increments, navigation_clock, repair_saturation
+from bodyfusion.plugins.foot_ins.config import FootInsConfig
+from bodyfusion.plugins.foot_ins.input_policy import (covariance_increments, navigation_clock, repair_saturation,
+                                                      saturation_findings)
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
+from bodyfusion.plugins.foot_ins.stance import detect_stance, stance_findings
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
 
-_DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
 log = logging.getLogger(__name__)
-
-
-def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> np.ndarray:
-    """Stance flags (N,) from the configured detector, then debounced (durations in s)."""
-    threshold = cfg.threshold if cfg.threshold is not None else _DEFAULT_THRESHOLDS.get(cfg.kind)
-    window = cfg.window if cfg.window is not None else 5
-    rate = 1.0 / np.median(np.diff(stream.t))
-    if cfg.kind == "labels":  # the config model ensures the data have a stance column
-        stance = stream.stance.copy()
-    elif cfg.kind == "adaptive":
-        if threshold >= cfg.motion_threshold:
-            raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
-        stance, _, _ = detectors.adaptive_shoe(stream.acc_b, stream.gyro_b, rate, window=cfg.window,
-                                            sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro, gravity=gravity,
-                                            gamma_still=threshold, gamma_motion=cfg.motion_threshold,
-                                            margin_decades=cfg.margin_decades,
-                                            prominence_decades=cfg.prominence_decades)
-    elif cfg.kind == "shoe":
-        stance = detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
-                                sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity)
-    elif cfg.kind == "magnitude":
-        stance = detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=window)
-    else:
-        low = cfg.low if cfg.low is not None else gravity - 1.0
-        high = cfg.high if cfg.high is not None else gravity + 1.0
-        if not low < high:
-            raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
-        stance = detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=window)
-    if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
-        stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
-                                    min_swing=max(1, round(cfg.min_swing_s * rate)))
-    return np.ascontiguousarray(stance, dtype=np.bool_)
 
 
 class FootIns(SensorSystem):
@@ -104,7 +74,9 @@ class FootIns(SensorSystem):
         self.stream = read_imu(config.data)
         self.clipping = repair_saturation(self.stream, name)
         self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
-        self.stance = detect_stance(self.stream, config.detector, context.gravity_mps2, f"systems.{name}.detector")
+        self.stance_detection = detect_stance(self.stream, config.detector, context.gravity_mps2,
+                                              f"systems.{name}.detector")
+        self.stance = self.stance_detection.stance
         log.info("%s: %d samples at %.0f Hz; stance (detector %s) in %.0f %% of them", name, len(self.stance),
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
@@ -522,6 +494,8 @@ class FootIns(SensorSystem):
             "zaru_updates": int(self.counters[C_ZARUS]),
             "zupt_mean_nis": float(self.counters[C_NIS_SUM] / zupts) if zupts else None,
             "zupt_gated": int(self.counters[C_GATED]),
+            "missed_stances": self.stance_detection.missed_stances,
+            "fallback_updates": int(self.stance_detection.fallback[:self._i + 1].sum()),
             "initialisation": self._initialisation_report(),
             **({"input_checks": self.stream.checks.to_dict()} if self.stream.checks is not None else {}),
             "filter_kind": self.config.filter.kind,
@@ -551,6 +525,26 @@ class FootIns(SensorSystem):
             tallies["position_fix"] = self.fix_nis.tally()
         out = {**super().health(), "quaternion_norm_max_deviation": quaternion_norm_deviation(self.hist_x[:n, 6:10]),
                "nis": {kind: tally.to_dict() for kind, tally in tallies.items()}}
+        out["nis"]["zupt"]["missed_stances"] = self.stance_detection.missed_stances  # beside the gated ones
         if self.smoothed_x is not None:
             out["smoothed_quaternion_norm_max_deviation"] = quaternion_norm_deviation(self.smoothed_x[:n, 6:10])
+        return out
+
+    def findings(self) -> list[Finding]:
+        """Missed stances and ZUPT lockouts (:func:`~bodyfusion.plugins.foot_ins.stance.stance_findings`),
+        saturation (:func:`~bodyfusion.plugins.foot_ins.input_policy.saturation_findings`), and a
+        levelling without rest."""
+        n = self._i + 1
+        out = stance_findings(self.name, self.stance_detection, self.stream.t[:n], self.run_data.hist_nis[:n],
+                              float(self._params[P_ZUPT_GATE]))
+        out += saturation_findings(self.name, self.clipping, self.stream.t)
+        if not self.still.still:
+            t = self.stream.t
+            out.append(Finding(
+                "no_rest", "warning", self.name, float(t[self.still.start]), float(t[self.still.stop - 1]),
+                f"the IMU never rested for {self.config.initial.stationary_s:g} s; it was levelled and its gyro bias "
+                f"taken on its quietest window (spreads {self.still.acc_spread_mps2:.2g} m/s^2, "
+                f"{self.still.gyro_spread_radps:.2g} rad/s), so its initial attitude and heading drift are uncertain.",
+                "the recording starts in motion and never stands still.",
+                "record a second or two standing still before walking, or lower initial.stationary_s."))
         return out

@@ -1,0 +1,201 @@
+"""Stance of a foot: the configured detector, and a watchdog for the stances it missed.
+
+:func:`detect_stance` runs the layout's ``detector`` (:mod:`bodyfusion.nav.detectors`) and then
+the *missed-stance watchdog*: a foot that walks, runs or climbs is at rest once per stride, so
+a stretch with no detected stance longer than :data:`MISSED_STRIDES` of its own stride periods
+(:func:`bodyfusion.nav.gait.stride_period`; where no gait repeats, the recording's median
+period, else :data:`DEFAULT_STRIDE_S`) has missed stances. Without aiding for several strides
+the velocity of a foot INS runs away (metres within seconds), so the watchdog does not leave
+it there: the stretch is cut into stride periods and the stillest window of each (the least
+SHOE statistic) becomes a *fallback stance*. Its zero-velocity update is a loose one by
+itself: the update's noise grows with the foot's angular rate there
+(:func:`bodyfusion.nav.zupt.stance_velocity_sigma`), and its chi-square gate bounds the rest.
+Every such stretch is counted and timed (:class:`StanceDetection`), and becomes a finding.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.findings import Finding, spans
+from bodyfusion.base.types import ImuStream
+from bodyfusion.nav import detectors
+from bodyfusion.nav.gait import stride_period
+from bodyfusion.plugins.foot_ins.config import DetectorConfig
+
+DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
+"""The detectors' thresholds when the layout gives none: SHOE γ (OpenShoe scaling), the
+magnitude test's m/s^2."""
+MISSED_STRIDES = 2.0
+"""A stretch without stance longer than this many stride periods has missed stances."""
+DEFAULT_STRIDE_S = 1.2
+"""Stride period (s) assumed where the recording shows none (an ordinary walk's)."""
+LOCKOUT_STRIDES = 3.0
+"""Stance updates all beyond the gate for this many stride periods are a lockout."""
+
+
+@dataclass
+class StanceDetection:
+    """A foot's stance: ``stance`` (N,) the samples updated as at rest (the detector's and the
+    watchdog's fallbacks), ``detected`` (N,) the detector's alone, ``period_s`` (N,) the stride
+    period (s; NaN where no gait repeats), ``missed`` the stretches with missed stances as
+    (first sample, end sample, stances missed), ``fallback`` (N,) the fallback samples."""
+
+    stance: np.ndarray
+    detected: np.ndarray
+    period_s: np.ndarray
+    fallback: np.ndarray
+    missed: list[tuple[int, int, int]] = field(default_factory=list)
+
+    @property
+    def missed_stances(self) -> int:
+        """Stances missed in all (one fallback update each)."""
+        return sum(n for _, _, n in self.missed)
+
+    def reference_period(self) -> np.ndarray:
+        """The stride period at every sample, s: the local one, else the recording's median,
+        else :data:`DEFAULT_STRIDE_S`."""
+        known = np.isfinite(self.period_s)
+        fill = float(np.median(self.period_s[known])) if known.any() else DEFAULT_STRIDE_S
+        return np.where(known, self.period_s, fill)
+
+
+def _detector_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str,
+                     rate: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """The configured detector's stance flags (N,) and, for the adaptive one, its stride period."""
+    threshold = cfg.threshold if cfg.threshold is not None else DEFAULT_THRESHOLDS.get(cfg.kind)
+    window = cfg.window if cfg.window is not None else 5
+    if cfg.kind == "labels":  # the config model ensures the data have a stance column
+        return stream.stance.copy(), None
+    if cfg.kind == "adaptive":
+        if threshold >= cfg.motion_threshold:
+            raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
+        stance, _, period = detectors.adaptive_shoe(
+            stream.acc_b, stream.gyro_b, rate, window=cfg.window, sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro,
+            gravity=gravity, gamma_still=threshold, gamma_motion=cfg.motion_threshold,
+            margin_decades=cfg.margin_decades, prominence_decades=cfg.prominence_decades)
+        return stance, period
+    if cfg.kind == "shoe":
+        return detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
+                              sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity), None
+    if cfg.kind == "magnitude":
+        return detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=window), None
+    low = cfg.low if cfg.low is not None else gravity - 1.0
+    high = cfg.high if cfg.high is not None else gravity + 1.0
+    if not low < high:
+        raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
+    return detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=window), None
+
+
+def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> StanceDetection:
+    """The configured detector's stance (debounced: durations in s), then the missed-stance
+    watchdog's fallbacks (module docstring)."""
+    rate = float(1.0 / np.median(np.diff(stream.t)))
+    stance, period = _detector_stance(stream, cfg, gravity, key, rate)
+    if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
+        stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
+                                    min_swing=max(1, round(cfg.min_swing_s * rate)))
+    stance = np.ascontiguousarray(stance, dtype=np.bool_)
+    if period is None:
+        period = stride_period(np.linalg.norm(stream.gyro_b, axis=1), rate)
+    found = StanceDetection(stance, stance, period, np.zeros_like(stance))
+    window = cfg.window if cfg.window is not None and cfg.kind == "adaptive" else max(3, round(0.025 * rate))
+    statistic = detectors.shoe_statistic(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
+                                         sigma_gyro=cfg.sigma_gyro, gravity=gravity)
+    _watch(found, statistic, window, rate)
+    return found
+
+
+def _watch(found: StanceDetection, statistic: np.ndarray, window: int, rate: float) -> None:
+    """Fill ``found.fallback`` and ``found.missed``: every stretch without stance longer than
+    :data:`MISSED_STRIDES` periods, cut into periods, each one's stillest window a fallback."""
+    n = found.stance.size
+    if statistic.size == 0:
+        return
+    period = found.reference_period()
+    swing = ~found.detected
+    edges = np.diff(np.concatenate(([0], swing.astype(np.int8), [0])))
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        p = float(np.median(period[a:b])) * rate  # samples per stride here
+        if b - a <= MISSED_STRIDES * p:
+            continue
+        # whole strides inside the stretch, half a stride clear of the stances around it
+        lo, hi = a + (0 if a == 0 else int(0.5 * p)), b - (0 if b == n else int(0.5 * p))
+        cycles = max(1, int(math.floor((hi - lo) / p)))
+        bounds = np.linspace(lo, hi, cycles + 1).round().astype(int)
+        placed = 0
+        for c0, c1 in zip(bounds[:-1], bounds[1:]):
+            c1 = min(c1, statistic.size)
+            if c1 <= c0:
+                continue
+            k = c0 + int(np.argmin(statistic[c0:c1]))
+            found.fallback[k:k + window] = True
+            placed += 1
+        if placed:
+            found.missed.append((int(a), int(b), placed))
+    if found.missed:
+        found.stance = found.detected | found.fallback
+
+
+def stance_findings(name: str, found: StanceDetection, t: np.ndarray, hist_nis: np.ndarray,
+                    gate: float) -> list[Finding]:
+    """The foot's stance findings: the stretches with missed stances (the watchdog's), and the
+    stretches of :data:`LOCKOUT_STRIDES` periods or more whose every stance update was beyond the
+    ZUPT gate (``hist_nis`` (N,): each sample's ZUPT NIS, negative where none; ``gate``: the
+    chi-square gate, 0: off)."""
+    out = []
+    if found.missed:
+        t0, t1 = t[found.missed[0][0]], t[min(found.missed[-1][1], t.size - 1)]
+        seconds = sum(t[min(b, t.size - 1)] - t[a] for a, b, _ in found.missed)
+        where = spans([v for a, b, _ in found.missed for v in (t[a], t[min(b, t.size - 1)])])
+        period = float(np.median(found.reference_period()))
+        out.append(Finding(
+            "missed_stances", "warning", name, float(t0), float(t1),
+            f"{found.missed_stances} stance{'s' if found.missed_stances != 1 else ''} missed over {seconds:.1f} s "
+            f"({where}): the foot moved for more than "
+            f"{MISSED_STRIDES:g} strides ({period:.2f} s each) without a detected stance, where every stride should "
+            "have one; each missed stride got a loose zero-velocity update at its stillest instant.",
+            "the foot never came to rest at the detector's threshold (a fast run, crawling, shuffling), or the "
+            "sensor is not on a foot or is loose.",
+            "check the sensor is strapped to the foot; keep detector.kind adaptive (it follows running); give "
+            "detector.kind labels with a stance column if the recording has them."))
+    if gate > 0 and hist_nis.size:
+        out += _lockouts(name, found, t, hist_nis, gate)
+    return out
+
+
+def _lockouts(name: str, found: StanceDetection, t: np.ndarray, hist_nis: np.ndarray, gate: float) -> list[Finding]:
+    """A finding per stretch of stance runs whose every update was beyond the gate, lasting at
+    least :data:`LOCKOUT_STRIDES` stride periods."""
+    stance = found.stance[:hist_nis.size]
+    starts, ends = detectors.stance_events(stance)
+    if starts.size == 0:
+        return []
+    beyond = np.array([bool(np.all(hist_nis[a:b][hist_nis[a:b] >= 0] > gate)) for a, b in zip(starts, ends)])
+    period = found.reference_period()
+    out = []
+    k = 0
+    while k < beyond.size:
+        if not beyond[k]:
+            k += 1
+            continue
+        j = k
+        while j + 1 < beyond.size and beyond[j + 1]:
+            j += 1
+        a, b = starts[k], ends[j] - 1
+        if t[b] - t[a] >= LOCKOUT_STRIDES * float(np.median(period[a:b + 1])):
+            out.append(Finding(
+                "zupt_lockout", "warning", name, float(t[a]), float(t[b]),
+                f"{j - k + 1} stance phases in a row had every zero-velocity update beyond the gate (NIS > {gate:.3g}, "
+                "3 degrees of freedom): the filter's velocity disagreed with rest for "
+                f"{t[b] - t[a]:.1f} s and was only partly pulled back.",
+                "the velocity had run away before (missed stances, a gap, saturation), or the detector flags "
+                "motion as stance.",
+                "look for missed stances or saturation before this span; if the detector is wrong here, lower "
+                "detector.margin_decades or give stance labels."))
+        k = j + 1
+    return out
