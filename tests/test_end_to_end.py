@@ -23,12 +23,23 @@ def perfect_walk(tmp_path_factory) -> Path:
 
 
 def test_error_free_imus_navigate_to_under_a_centimetre_after_a_minute_of_walking(perfect_walk):
-    """A check of mechanisation + ZUPT filter on exact data: > 60 s of walking, < 1 cm."""
-    result = run_layout(load_layout(perfect_walk))
+    """A check of mechanisation + ZUPT filter on exact data: > 60 s of walking, < 1 cm (each
+    foot on its own: the relative-heading tie between them is checked next)."""
+    result = run_layout(load_layout(perfect_walk, ["heading_alignment.continuous=false"]))
     for name, score in result.scores.items():
         assert score.t[-1] - score.t[0] > 60.0
         assert score.metrics["horizontal_error_m"]["max"] < 0.01, name
         assert score.metrics["vertical_error_m"]["max"] < 0.01, name
+
+
+def test_the_heading_tie_of_error_free_feet_measures_no_drift(perfect_walk):
+    """Exact feet have no relative heading drift: the tie's measurements (their paths on the
+    body's centreline) stay within half a degree, and the feet within 2 cm after 80 m."""
+    result = run_layout(load_layout(perfect_walk))
+    (tie,) = result.fuser.heading_ties
+    assert tie.summary()["measurements"] >= 5 and tie.summary()["max_abs_deg"] < 0.5
+    for name, score in result.scores.items():
+        assert score.metrics["horizontal_error_m"]["max"] < 0.02, name
 
 
 @pytest.mark.slow

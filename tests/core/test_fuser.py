@@ -122,14 +122,14 @@ def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet_under_the_proj
     the tail of their density beyond it, which moves estimates whose covariance exceeds their
     error — these have none — by the cut tail's mean.)"""
     config = simulate(ROOT / "configs" / "sim_perfect_walk.yaml", tmp_path, seed=0).config_path
-    free = run_layout(load_layout(config))
+    free = run_layout(load_layout(config, ["heading_alignment.continuous=false"]))
     truth = free.truths
     t = truth["left_foot"].t
     sep = np.hypot(*(truth["left_foot"].pos_n - np.array([np.interp(t, truth["right_foot"].t, c)
                                                            for c in truth["right_foot"].pos_n.T]).T)[:, :2].T)
     limit = float(np.round(sep.max() + 0.05, 2))
     constrained = run_layout(load_layout(config, [
-        "fuser.method=projection", "fuser.inequality=projection",
+        "fuser.method=projection", "fuser.inequality=projection", "heading_alignment.continuous=false",
         f"constraints=[{{between: [left_foot, right_foot], kind: max, distance_m: {limit}}}]"]))
     for name, score in constrained.scores.items():
         assert score.metrics["horizontal_error_m"]["max"] < 0.01, name
@@ -164,7 +164,8 @@ def test_tracking_cross_covariances_keeps_the_filter_consistent():
 
 
 def test_cross_covariance_tracking_runs_with_foot_systems():
-    res = run_layout(load_layout(VICON, ["fuser.cross_covariance=true"]))
+    # a limit tighter than the walk's (its feet part by up to 0.52 m), so that it acts
+    res = run_layout(load_layout(VICON, ["fuser.cross_covariance=true", "constraints.0.distance_m=0.4"]))
     assert res.fuser.activations > 0
     for system in res.systems.values():
         assert np.linalg.eigvalsh(system.P).min() > -1e-12

@@ -37,11 +37,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Set
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from bodyfusion.core.heading import HeadingTie
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig
+from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
                                          SocpSolver)
 from bodyfusion.core.constraints.truncation import DensityTruncation
@@ -49,6 +51,8 @@ from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
 SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
+TIE_GATE_PROBABILITY = 0.999
+"""Chi-square gate (1 degree of freedom) of a relative-heading measurement."""
 
 
 @dataclass
@@ -74,6 +78,8 @@ class FuserReport:
     wall_s: float = 0.0
     constraint_log: ConstraintLog | None = None
     """Every constraint at every sync epoch (:class:`~bodyfusion.core.constraint_log.ConstraintLog`)."""
+    heading_ties: list[HeadingTie] = field(default_factory=list)
+    """The relative headings measured through the run, each with its log."""
 
     @property
     def multipliers(self) -> np.ndarray:
@@ -228,17 +234,21 @@ class Fuser:
 
     Parameters: ``systems`` (name → system, initialised and heading-aligned),
     ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list),
-    ``aiding`` (name → aiding source). Result: ``report`` (:class:`FuserReport`).
+    ``aiding`` (name → aiding source), ``ties`` (the relative headings kept through the run,
+    :class:`~bodyfusion.core.heading.HeadingTie`: measured at both systems' sync epochs, after
+    the measurements and before the constraints of one time). Result: ``report``
+    (:class:`FuserReport`).
     """
 
     def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig,
                  constraints: list[ConstraintConfig] | None = None,
-                 aiding: Mapping[str, AidingSource] | None = None) -> None:
+                 aiding: Mapping[str, AidingSource] | None = None, ties: list[HeadingTie] | None = None) -> None:
         self.systems = systems
         self.config = config
         self.constraints = constraints or []
         self.aiding = dict(aiding or {})
-        self.report = FuserReport(method=config.method)
+        self.ties = list(ties or [])
+        self.report = FuserReport(method=config.method, heading_ties=self.ties)
 
     def run(self) -> FuserReport:
         t_begin = time.perf_counter()
@@ -249,6 +259,7 @@ class Fuser:
         for src in sources:
             pairs = {src.measured_systems(k) for k in range(len(src.measurement_times()))}
             order += [name for pair in pairs if len(pair) > 1 for name in pair if name not in order]
+        order += [name for tie in self.ties for name in (tie.reference, tie.system) if name not in order]
         self.joint = JointState([self.systems[name] for name in order], self.config.cross_covariance) if order else None
         self._index = {name: k for k, name in enumerate(order)}
         events: list[tuple[float, int, int, int]] = []
@@ -258,7 +269,7 @@ class Fuser:
             self._solver = SOLVERS[self.config.method](n_constrained, limits, tol_m=self.config.tolerance_m,
                                                        max_iter=self.config.max_iterations)
             epochs = epoch_times(members, self.config)
-            events += [(float(t), 1, 0, 0) for t in epochs]
+            events += [(float(t), 2, 0, 0) for t in epochs]
             self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
             self._truncation = DensityTruncation(limits, n_constrained, self.config.correct == "positions")
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
@@ -269,9 +280,16 @@ class Fuser:
             self._truncating = self.config.inequality == "truncation"
         for i, src in enumerate(sources):
             events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
+        if self.ties:
+            events += [(float(t), 1, 0, 0) for t in epoch_times(
+                [self.systems[n] for n in dict.fromkeys(m for tie in self.ties for m in (tie.reference, tie.system))],
+                FuserConfig(epochs="events"))]
+            self._tie_gate = chi2_gate(TIE_GATE_PROBABILITY, 1)
         for t, kind, i, k in sorted(events):
             if kind == 0:
                 self._measurement(sources[i], k, t)
+            elif kind == 1:
+                self._tie_epoch(t)
             else:
                 self._constraint_epoch(t)
         for system in self.systems.values():
@@ -310,6 +328,40 @@ class Fuser:
             self.joint.correct(dx, P_new, which, measured=frozenset(joint) if len(names) == 1 else frozenset())
         else:
             measured[0].apply_correction(dx, P_new)
+
+    def _tie_epoch(self, t: float) -> None:
+        """Measure every heading tie whose stretch is complete at time t (gated scalar update of
+        the two systems' joint error state, relative for both) and start its next stretch."""
+        joint = self.joint
+        joint.advance(t)
+        for tie in self.ties:
+            a, b = self._index[tie.reference], self._index[tie.system]
+            ref, sys = joint.systems[a], joint.systems[b]
+            tie.add(ref.position_n(), sys.position_n())
+            got = tie.measure(self._lateral_sd(ref, tie), self._lateral_sd(sys, tie))
+            if got is None:
+                continue
+            z, r_var = got
+            P = joint.covariance()
+            H = np.zeros(P.shape[0])
+            H[joint.blocks[b]] += sys.yaw_error_row()
+            H[joint.blocks[a]] -= ref.yaw_error_row()
+            nis, dx, P_new = scalar_update(P, H, z, r_var, self._tie_gate)
+            tie.log.append((t, z, float(np.sqrt(r_var)), nis, dx is not None))
+            if dx is not None:
+                joint.correct(dx, P_new, list(range(len(joint.systems))) if joint.track else [a, b])
+            tie.restart_at(ref.position_n(), sys.position_n())
+
+    @staticmethod
+    def _lateral_sd(system: SensorSystem, tie: HeadingTie) -> float:
+        """A stretch end's lateral σ (m): the tie's for a dead-reckoning system, the horizontal
+        position σ for one whose heading (and position) is geographic."""
+        if not system.heading_is_absolute:
+            return tie.lateral_sd_m
+        P = system.covariance()
+        rows = system.position_indices
+        return float(np.sqrt(max(0.5 * (P[rows.start, rows.start] + P[rows.start + 1, rows.start + 1]),
+                                 tie.lateral_sd_m**2)))
 
     def _constraint_epoch(self, t: float) -> None:
         """Solve the active constraints among the constrained systems (the first joint ones) at

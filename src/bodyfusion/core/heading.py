@@ -1,20 +1,50 @@
 """One navigation frame for systems worn together.
 
-IMUs on two feet are rarely mounted with the same yaw, and a heading set by hand is
-rarely right. Systems whose layout says ``heading_deg: auto`` are rotated about their
-start point so that their first ``distance_m`` of travel points the same way as the
-reference system's. Azimuths are clockwise from North, radians.
+IMUs on two feet are rarely mounted with the same yaw, a heading set by hand is rarely right,
+and each system's heading then drifts on its own. Two mechanisms keep every system of a layout
+in one frame, with no setting from the user:
+
+* At the start (:func:`align_headings`), every system whose ``heading_deg`` is ``auto`` (the
+  default of a foot INS) is rotated about its start point so that its first ``distance_m`` of
+  travel points the way the reference's does; then every system without a given initial
+  position is put where it is worn (a left foot half a stance to the left of the walking
+  direction, :meth:`~bodyfusion.core.system.SensorSystem.place_on_body`). The reference (:func:`heading_reference`) is the
+  layout's ``heading_alignment.reference``, else a system whose heading is geographic (GNSS, a
+  magnetometer: then over at least :data:`ABSOLUTE_REFERENCE_M`, the fixes' noise being
+  metres), else the first system with a numeric heading, else the first that travels.
+* Throughout the run (:class:`HeadingTie`, applied by the fuser), the relative heading of every
+  other system with a heading error state is measured against the reference's: both walk the
+  same path, so over each stretch of ``window_m`` of travel their tracks have one shape. The
+  rotation that lays the system's track onto the reference's (about their centroids) measures
+  the difference of their heading errors (each the rotation about Up, counter-clockwise, that
+  turns the estimate into the truth; :meth:`~bodyfusion.core.system.SensorSystem.yaw_error_row`):
+
+      z = ∠(track_S → track_R) = δθ_S − δθ_R,   σ_z² = (σ_S² + σ_R²) / r²,
+
+  r the tracks' RMS distance from their centroids, each track moved onto the body's centreline
+  first (a left foot walks half a stance to the left of it), σ a track's lateral uncertainty over the
+  stretch: ``lateral_sd_m`` for a dead-reckoning system (the feet's paths differ by their
+  stance width and gait phase), the horizontal position σ for one with absolute position
+  fixes. It is a gated scalar update of their joint error state (Joseph form), relative for
+  both; consecutive stretches share only their end points, so no stretch is counted twice.
+
+Azimuths are clockwise from North, radians; rotations about Up counter-clockwise.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from bodyfusion.core.layout import HeadingAlignmentConfig
 from bodyfusion.base.errors import FusionError
+from bodyfusion.core.layout import HeadingAlignmentConfig
 from bodyfusion.core.system import SensorSystem
+
+ABSOLUTE_REFERENCE_M = 30.0
+"""Least travel (m) over which a geographic reference's first azimuth is taken: its positions
+come from fixes a few metres apart from the truth."""
 
 
 def wrap_angle(a: float) -> float:
@@ -22,33 +52,129 @@ def wrap_angle(a: float) -> float:
     return float(-((-a + np.pi) % (2 * np.pi) - np.pi))
 
 
+def heading_reference(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> str | None:
+    """The system every other is aligned to (module docstring); None without a candidate (one
+    system, or none that travels)."""
+    if cfg.reference is not None:
+        return cfg.reference
+    absolute = [n for n, s in systems.items() if s.heading_is_absolute]
+    fixed = [n for n, s in systems.items() if not s.heading_is_auto and n not in absolute]
+    ordered = absolute + fixed + [n for n in systems if n not in absolute and n not in fixed]
+    return ordered[0] if ordered else None
+
+
 def align_headings(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> dict[str, float]:
-    """Rotate every ``auto`` system onto the reference; returns the rotation applied (rad) per system."""
+    """Rotate every ``auto`` system onto the reference, then place the systems on the body
+    (:meth:`~bodyfusion.core.system.SensorSystem.place_on_body`, about the reference's first
+    walking direction); returns the rotation applied (rad) per system."""
     auto = [name for name, s in systems.items() if s.heading_is_auto]
-    if not auto:
+    placed = [name for name, s in systems.items() if s.wants_body_place]
+    if (not auto and not placed) or len(systems) < 2:
         return {}
-    ref, ref_azimuth = cfg.reference, None
-    if ref is None:  # the first system with a fixed heading that travels far enough, else the first that does
-        candidates = [n for n, s in systems.items() if not s.heading_is_auto] or list(systems)
-        for name in candidates:
-            ref_azimuth = systems[name].initial_travel_azimuth(cfg.distance_m)
-            if ref_azimuth is not None:
-                ref = name
-                break
-        if ref is None:
-            raise FusionError(f"heading alignment: no system travels {cfg.distance_m} m to serve as reference")
-    else:
-        ref_azimuth = systems[ref].initial_travel_azimuth(cfg.distance_m)
+    ref = heading_reference(systems, cfg)
+    candidates = [ref] if cfg.reference is not None else [ref, *[n for n in systems if n != ref]]
+    ref_azimuth, distance = None, cfg.distance_m
+    for name in candidates:
+        distance = max(cfg.distance_m, ABSOLUTE_REFERENCE_M) if systems[name].heading_is_absolute else cfg.distance_m
+        ref_azimuth = systems[name].initial_travel_azimuth(distance)
+        if ref_azimuth is not None:
+            ref = name
+            break
+        if cfg.reference is not None:
+            raise FusionError(f"heading alignment: reference system {ref!r} never travels {distance:g} m")
     if ref_azimuth is None:
-        raise FusionError(f"heading alignment: reference system {ref!r} never travels {cfg.distance_m} m")
+        raise FusionError(f"heading alignment: no system travels {cfg.distance_m:g} m to serve as reference")
     applied: dict[str, float] = {}
     for name in auto:
         if name == ref:
             continue
-        azimuth = systems[name].initial_travel_azimuth(cfg.distance_m)
+        azimuth = systems[name].initial_travel_azimuth(distance)
         if azimuth is None:
-            raise FusionError(f"heading alignment: system {name!r} never travels {cfg.distance_m} m")
+            raise FusionError(f"heading alignment: system {name!r} never travels {distance:g} m")
         delta = wrap_angle(ref_azimuth - azimuth)
         systems[name].rotate_initial_heading(delta)
         applied[name] = delta
+    for name in placed:
+        systems[name].place_on_body(ref_azimuth)
     return applied
+
+
+@dataclass
+class HeadingTie:
+    """The relative heading of ``system`` against ``reference`` (module docstring), measured over
+    stretches in which both travel ``window_m``: their positions at the fuser's epochs are
+    collected (:meth:`add`) and, the stretch complete, the rotation that best lays the system's
+    track onto the reference's (2-D Procrustes about their centroids) is the measurement. A walk
+    that turns or goes back and forth measures it as well as a straight one.
+
+    ``log``: every measurement as (t s, z rad, σ rad, NIS, accepted)."""
+
+    reference: str
+    system: str
+    window_m: float
+    lateral_sd_m: float
+    offsets_m: tuple[float, float] = (0.0, 0.0)
+    """Where the reference and the system are worn, m to the right of the body's centreline
+    (:attr:`~bodyfusion.core.system.SensorSystem.lateral_offset_m`): taken out of each track
+    before the two are compared, so that a left and a right foot walk one path."""
+    points: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    travelled: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    log: list[tuple[float, float, float, float, bool]] = field(default_factory=list)
+
+    def add(self, p_ref: np.ndarray, p_sys: np.ndarray) -> None:
+        """The two systems' positions (ENU, m) at an epoch of the current stretch."""
+        here = (np.array(p_ref[:2], dtype=float), np.array(p_sys[:2], dtype=float))
+        if self.points:
+            self.travelled += [np.hypot(*(here[0] - self.points[-1][0])), np.hypot(*(here[1] - self.points[-1][1]))]
+        self.points.append(here)
+
+    def measure(self, sd_ref: float, sd_sys: float) -> tuple[float, float] | None:
+        """(z rad, σ_z² rad²) of the current stretch once both have travelled ``window_m`` (None
+        before): z the counter-clockwise rotation from the system's centred track to the
+        reference's, σ_z² = (σ_ref² + σ_sys²) / r², r the tracks' RMS distance from their
+        centroids (``sd_*``: each track's lateral σ, m). The stretch then restarts from its last
+        points."""
+        if self.travelled.min() < self.window_m:
+            return None
+        ref = np.array([p[0] for p in self.points])
+        sys = np.array([p[1] for p in self.points])
+        if any(self.offsets_m) and len(ref) >= 2:  # on the centreline: the walking direction's right
+            walk = np.gradient(ref + sys, axis=0)
+            right = np.column_stack([walk[:, 1], -walk[:, 0]]) / np.maximum(np.hypot(*walk.T), 1e-12)[:, None]
+            ref -= self.offsets_m[0] * right
+            sys -= self.offsets_m[1] * right
+        ref -= ref.mean(axis=0)
+        sys -= sys.mean(axis=0)
+        cross = float(np.sum(sys[:, 0] * ref[:, 1] - sys[:, 1] * ref[:, 0]))
+        z = float(np.arctan2(cross, float(np.sum(sys * ref))))
+        r2 = min(float(np.mean(np.sum(ref**2, axis=1))), float(np.mean(np.sum(sys**2, axis=1))))
+        self.points = self.points[-1:]
+        self.travelled = np.zeros(2)
+        return (z, (sd_ref**2 + sd_sys**2) / r2) if r2 > 0.0 else None
+
+    def restart_at(self, p_ref: np.ndarray, p_sys: np.ndarray) -> None:
+        """After a correction: the stretch's last points are these positions."""
+        self.points[-1] = (np.array(p_ref[:2], dtype=float), np.array(p_sys[:2], dtype=float))
+
+    def summary(self) -> dict:
+        """metrics.json figures: measurements, accepted, mean NIS, the largest and RMS |z| (degrees)."""
+        if not self.log:
+            return {"reference": self.reference, "measurements": 0}
+        z = np.array([m[1] for m in self.log])
+        nis = np.array([m[3] for m in self.log])
+        return {"reference": self.reference, "measurements": len(self.log),
+                "accepted": int(sum(m[4] for m in self.log)), "mean_nis": float(nis.mean()),
+                "max_abs_deg": float(np.degrees(np.abs(z).max())),
+                "rms_deg": float(np.degrees(np.sqrt(np.mean(z**2))))}
+
+
+def heading_ties(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> list[HeadingTie]:
+    """A tie of every system with a heading error state, other than the reference and those
+    whose heading is geographic, to the reference (none with ``continuous`` off or one system)."""
+    if not cfg.continuous or len(systems) < 2:
+        return []
+    ref = heading_reference(systems, cfg)
+    if ref is None or systems[ref].yaw_error_row() is None:
+        return []
+    return [HeadingTie(ref, name, cfg.window_m, cfg.lateral_sd_m, (systems[ref].lateral_offset_m, s.lateral_offset_m))
+            for name, s in systems.items() if name != ref and not s.heading_is_absolute and s.yaw_error_row() is not None]

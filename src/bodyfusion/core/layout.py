@@ -155,15 +155,25 @@ class SmootherConfig(StrictModel):
 
 
 class HeadingAlignmentConfig(StrictModel):
-    """Puts systems worn together in one navigation frame.
+    """Puts systems worn together in one navigation frame (:mod:`bodyfusion.core.heading`).
 
-    Systems whose ``initial.heading_deg`` is ``auto`` are rotated about their start so
-    that their first ``distance_m`` of travel points the same way as the reference
-    system's (the first system with a numeric heading, unless ``reference`` names one).
+    Systems whose ``initial.heading_deg`` is ``auto`` (a foot INS's default) are rotated about
+    their start so that their first ``distance_m`` of travel points the same way as the
+    reference system's (``reference``, else one with a geographic heading, else the first with
+    a numeric one, else the first that travels). With ``continuous`` the fuser then measures
+    every other system's heading against the reference's over each ``window_m`` of travel and
+    corrects both (their paths' lateral difference σ ``lateral_sd_m`` per stretch).
     """
 
     reference: str | None = None
     distance_m: float = Field(default=3.0, gt=0)
+    continuous: bool = True
+    """Keep estimating the relative headings through the run (off: aligned once at the start)."""
+    window_m: float = Field(default=10.0, gt=0, le=1e4)
+    """Travel (m) of each stretch whose displacements measure a relative heading."""
+    lateral_sd_m: float = Field(default=0.1, gt=0, le=100)
+    """One-sigma lateral difference (m) of two dead-reckoned paths over a stretch (stance width,
+    gait phase)."""
 
 
 class TruthConfig(PositionFrame, TableSection):

@@ -91,6 +91,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
                           "vertical_offset_m": float(t.vertical_offset_m)},
         },
         "heading_alignment_deg": {k: float(np.rad2deg(v)) for k, v in result.heading_rotations_rad.items()},
+        "heading_ties": {tie.system: tie.summary() for tie in result.fuser.heading_ties},
         "health": {"findings": [f.to_dict() for f in result.findings]},
         "systems": systems,
     }

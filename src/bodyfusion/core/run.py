@@ -14,7 +14,7 @@ from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.fuser import Fuser
-from bodyfusion.core.heading import align_headings
+from bodyfusion.core.heading import align_headings, heading_ties
 from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.output import write_outputs
@@ -116,7 +116,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     monitors = {name: CovarianceMonitor(tracker.track(s) if tracker else s) for name, s in systems.items()}
     log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
              len(aiding), loaded.layout.fuser.method, len(loaded.layout.constraints))
-    report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding).run()
+    ties = heading_ties(systems, loaded.layout.heading_alignment)
+    report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding, ties).run()
     for monitor in monitors.values():
         monitor.flush()
     if tracker is not None:

@@ -245,6 +245,36 @@ class SensorSystem(Plugin):
     def heading_is_auto(self) -> bool:
         """True if the layout asks for the heading to be aligned to the other systems."""
 
+    @property
+    def heading_is_absolute(self) -> bool:
+        """True for a system whose heading is geographic (from GNSS or a magnetometer): it is the
+        reference other systems' headings are aligned to. Default: False."""
+        return False
+
+    @property
+    def wants_body_place(self) -> bool:
+        """True for a system whose initial position is not given and that knows where on the body
+        it is worn (:meth:`place_on_body`). Default: False."""
+        return False
+
+    @property
+    def lateral_offset_m(self) -> float:
+        """Where the system is worn across the body: metres to the right of its centreline (a
+        left foot about −0.1, a right foot +0.1); 0 (the default) on it or unknown."""
+        return 0.0
+
+    def place_on_body(self, walking_azimuth_rad: float) -> None:
+        """Set the initial position (and its σ) where the system is worn, the body at the origin
+        facing ``walking_azimuth_rad`` (clockwise from North), and restart. Called for a system
+        of a layout of several when :attr:`wants_body_place`. Default: nothing."""
+
+    def yaw_error_row(self) -> np.ndarray | None:
+        """The row h (n,) of the error state with h δx = the rotation about Up (rad,
+        counter-clockwise positive) that turns the estimated attitude into the true one, for a
+        system whose heading drifts (:class:`bodyfusion.core.heading.HeadingTie` keeps systems
+        worn together in one frame through it); None (the default): no heading error state."""
+        return None
+
     # --- fuser interface ----------------------------------------------------------
     @abstractmethod
     def position_n(self) -> np.ndarray:

@@ -247,7 +247,7 @@ def test_segmented_rts_is_the_textbook_sweep_of_each_segment(walk, vicon_cut):
             scale = sd[:, [0, 1, 2, 0]] * sd[:, [0, 1, 2, 1]]
             np.testing.assert_allclose(res.pos_var[a:a + L + 1] / scale, var / scale, rtol=0, atol=1e-9)
             checked += 1
-    assert checked > 30 and skipped > 30
+    assert checked > 20 and skipped > 10, (checked, skipped)
 
 
 def test_only_the_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):

@@ -112,7 +112,8 @@ def test_magnetometer_bounds_the_heading_of_a_biased_gyro_without_gnss(biased_wa
     hard-iron and tilt errors, a few degrees)."""
     errors = {}
     for on in (False, True):
-        result = run_layout(load_layout(biased_walk, ["fuser.method=none", "systems.hand_phone.step.length=constant",
+        result = run_layout(load_layout(biased_walk, ["fuser.method=none", "heading_alignment.continuous=false",
+                                                      "systems.hand_phone.step.length=constant",
                                                       f"systems.hand_phone.magnetometer.enabled={str(on).lower()}"]))
         errors[on] = result.scores["hand_phone"].horizontal_error_m
         if on:

@@ -16,6 +16,11 @@ COLOURED_KINDS = ("ckf", "cenekf")
 MAX_MEMBERS = 2000
 """Largest ensemble: 2000 members run about 300 samples/s (100 members: 5,300), so a minute of
 100 Hz data per foot takes 20 s; larger ensembles would run for hours on a walk."""
+STANCE_WIDTH_M = 0.2
+"""Lateral distance between the feet of a person standing (m): where an unset initial position
+puts the feet of a layout, either side of the origin."""
+BODY_POSITION_SD_M = 0.05
+"""One-sigma of a foot's initial position placed by the body (m): stances vary."""
 MAX_WINDOW = 1000
 """Largest stance-detector window, samples (10 s at 100 Hz: longer than any stance)."""
 
@@ -105,7 +110,8 @@ class DetectorConfig(StrictModel):
 class InitialStateConfig(StrictModel):
     """Initial state at the first sample: position (ENU m), heading (azimuth of the
     horizontal projection of the body ``heading_axis``, degrees clockwise from North, or
-    ``auto`` to align with the other systems), and one-sigma uncertainties.
+    ``auto``, the default: aligned with the other systems of the layout, and 0 for a system
+    alone; :mod:`bodyfusion.core.heading`), and one-sigma uncertainties.
 
     The IMU is levelled and its gyro bias estimated on the first still interval of the
     recording (:mod:`bodyfusion.nav.initial_alignment`): at least ``stationary_s`` long, with the
@@ -115,8 +121,12 @@ class InitialStateConfig(StrictModel):
     used, the level and gyro-bias σ at least the standard errors of its means (a warning
     says so)."""
 
-    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    heading_deg: float | Literal["auto"] = 0.0
+    position_m: tuple[float, float, float] | None = None
+    """Initial position, ENU m. Unset: the origin for a foot alone; in a layout of several
+    systems, the foot's place in a stance at the origin: half of :data:`STANCE_WIDTH_M` to the
+    left or right of the walking direction (``foot``), with ``position_sd_m`` at least
+    :data:`BODY_POSITION_SD_M` (twice that when the side is unknown)."""
+    heading_deg: float | Literal["auto"] = "auto"
     heading_axis: Literal["x", "y", "z"] = "x"
     """Body axis whose heading ``heading_deg`` gives; if it is within 30° of vertical at
     rest, the most horizontal axis is used instead (a warning says so)."""
@@ -173,6 +183,8 @@ class FootInsConfig(StrictModel):
     """A foot-mounted IMU with strapdown navigation, ZUPT and a 15-state error filter."""
 
     plugin: Literal["foot_ins"] = "foot_ins"
+    foot: Literal["left", "right"] | None = None
+    """Which foot wears it; unset: from the system's name (``left`` or ``right`` in it), else unknown."""
     data: ImuCsvConfig
     filter: FootFilterConfig = Field(default_factory=FootFilterConfig)
     detector: DetectorConfig = Field(default_factory=DetectorConfig)

@@ -27,7 +27,7 @@ from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attit
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
-from bodyfusion.plugins.foot_ins.config import FootInsConfig
+from bodyfusion.plugins.foot_ins.config import BODY_POSITION_SD_M, STANCE_WIDTH_M, FootInsConfig
 from bodyfusion.plugins.foot_ins.input_policy import (covariance_increments, navigation_clock, repair_saturation,
                                                       saturation_findings)
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
@@ -89,6 +89,8 @@ class FootIns(SensorSystem):
         self._fix_gate = chi2_gate(fx.gate_probability, 3) if fx is not None else 0.0
         heading = config.initial.heading_deg
         self._azimuth0 = 0.0 if heading == "auto" else np.deg2rad(heading)
+        self._position0 = np.zeros(3) if config.initial.position_m is None else np.asarray(config.initial.position_m)
+        self._position_sd0 = config.initial.position_sd_m
         self._x0, self._P0 = self._initial_state()
         self._forward_record = ForwardRecord()  # what the filter records for the whole-run RTS
         self.restart()
@@ -182,14 +184,14 @@ class FootIns(SensorSystem):
         x[6:10] = attitude_from_specific_force(f_b, self._azimuth0, self.heading_axis)
         x[13:16] = self.stream.gyro_b[window].mean(axis=0)
         sd = np.concatenate([
-            np.full(3, ini.position_sd_m), np.full(3, ini.velocity_sd_mps),
+            np.full(3, self._position_sd0), np.full(3, ini.velocity_sd_mps),
             [level_sd, level_sd, np.deg2rad(ini.heading_sd_deg)],
             np.full(3, ini.acc_bias_sd_mps2), np.full(3, gyro_bias_sd)])
         P = np.diag(sd**2)
         self._still_priors = {"level_sd_deg": float(np.degrees(level_sd)), "gyro_bias_sd_radps": float(gyro_bias_sd)}
         if st.start > 0:
             x, P = self._navigate_back(x, P, st.start)
-        x[0:3] = ini.position_m
+        x[0:3] = self._position0
         return x, P
 
     def _navigate_back(self, x_s: np.ndarray, P_s: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +226,7 @@ class FootIns(SensorSystem):
         x0, P0 = rotate_about_up(xb, Pb, self._azimuth0 - float(np.arctan2(a_n[0], a_n[1])))
         P0[DPOS, :] = 0.0
         P0[:, DPOS] = 0.0
-        P0[DPOS, DPOS] = np.eye(3) * self.config.initial.position_sd_m**2
+        P0[DPOS, DPOS] = np.eye(3) * self._position_sd0**2
         return x0, P0
 
     def restart(self) -> None:
@@ -331,6 +333,40 @@ class FootIns(SensorSystem):
                 break
         self.restart()
         return azimuth
+
+    def yaw_error_row(self) -> np.ndarray:
+        """δθ_U, the attitude error about Up (:mod:`bodyfusion.nav.error_state`)."""
+        row = np.zeros(self.P.shape[0])
+        row[8] = 1.0
+        return row
+
+    @property
+    def side(self) -> str | None:
+        """The foot wearing it: ``foot`` of the layout, else ``left``/``right`` in the system's name."""
+        if self.config.foot is not None:
+            return self.config.foot
+        sides = [side for side in ("left", "right") if side in self.name.lower()]
+        return sides[0] if len(sides) == 1 else None
+
+    @property
+    def wants_body_place(self) -> bool:
+        return self.config.initial.position_m is None
+
+    @property
+    def lateral_offset_m(self) -> float:
+        """Half of :data:`~bodyfusion.plugins.foot_ins.config.STANCE_WIDTH_M` left (−) or right (+)."""
+        return {"left": -0.5, "right": 0.5, None: 0.0}[self.side] * STANCE_WIDTH_M
+
+    def place_on_body(self, walking_azimuth_rad: float) -> None:
+        """Half of :data:`~bodyfusion.plugins.foot_ins.config.STANCE_WIDTH_M` to the left or right
+        of the walking direction, σ at least :data:`~bodyfusion.plugins.foot_ins.config.BODY_POSITION_SD_M`
+        horizontally (twice that, at the origin, when the side is unknown)."""
+        right = np.array([np.cos(walking_azimuth_rad), -np.sin(walking_azimuth_rad), 0.0])  # azimuth + 90°
+        self._position0 = self.lateral_offset_m * right
+        self._position_sd0 = max(self.config.initial.position_sd_m,
+                                 BODY_POSITION_SD_M * (1.0 if self.side is not None else 2.0))
+        self._x0, self._P0 = self._initial_state()
+        self.restart()
 
     def rotate_initial_heading(self, delta_rad: float) -> None:
         self._azimuth0 += delta_rad

@@ -458,11 +458,31 @@ class HandPdr(SensorSystem):
     def heading_is_auto(self) -> bool:
         return self.config.initial.heading_deg == "auto"
 
+    @property
+    def heading_is_absolute(self) -> bool:
+        """A phone with GNSS fixes or a magnetometer knows its heading in the geographic frame."""
+        return self._fixes is not None or self._mag is not None
+
+    def yaw_error_row(self) -> np.ndarray:
+        """−δψ: ψ is an azimuth (clockwise), the row wants the rotation about Up (counter-clockwise)."""
+        row = np.zeros(self.n_err)
+        row[3] = -1.0
+        return row
+
     def initial_travel_azimuth(self, distance_m: float) -> float | None:
-        """As :meth:`SensorSystem.initial_travel_azimuth`; None while the initial heading is
-        unknown (``gnss_track``): such a phone cannot serve as the heading reference."""
+        """As :meth:`SensorSystem.initial_travel_azimuth`. A heading unknown at the start
+        (``gnss_track``) is acquired from the fixes: the azimuth is then that of the phone's own
+        GNSS-aided track, the whole run filtered once (and restarted)."""
         if self.config.initial.heading_deg == "gnss_track":
-            return None
+            self.advance(self.t_end)
+            track = self.trajectory()
+            self.restart()
+            path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track.pos_n[:, :2], axis=0).T))])
+            far = np.flatnonzero(path >= distance_m)
+            if far.size == 0:
+                return None
+            d = track.pos_n[far[0], :2] - track.pos_n[0, :2]
+            return float(np.arctan2(d[0], d[1]))
         ts, track = self._pdr_track(self._psi0)
         far = np.flatnonzero(np.hypot(*track.T) >= distance_m)
         return None if far.size == 0 else float(np.arctan2(*track[far[0]]))
