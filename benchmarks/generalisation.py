@@ -83,17 +83,16 @@ def pyshoe_layout(trial: Path) -> dict:
 
 
 def vicon_layout(folder: Path) -> dict:
-    """Both feet, 60 Hz sample counter; one frame for both (the right foot's heading is
-    aligned to the left's); Vicon truth with z down."""
-    def foot(side: str, heading: object) -> dict:
+    """Both feet, 60 Hz sample counter, nothing but their data columns (one frame for both is the
+    default); Vicon truth with z down."""
+    def foot(side: str) -> dict:
         return {"plugin": "foot_ins",
                 "data": {"path": str(folder / f"imuMeas{side}.csv"), "time_column": "time_index",
                          "time_scale": 1 / 60, "acc_columns": ["acc_x", "acc_y", "acc_z"],
-                         "gyro_columns": ["gyro_x", "gyro_y", "gyro_z"]},
-                "initial": {"heading_deg": heading}}
+                         "gyro_columns": ["gyro_x", "gyro_y", "gyro_z"]}}
     return {
         "name": "dual_foot_vicon",
-        "systems": {"left_foot": foot("Left", 0), "right_foot": foot("Right", "auto")},
+        "systems": {"left_foot": foot("Left"), "right_foot": foot("Right")},
         "truth": {"path": str(folder / "positionGt.csv"), "time_column": "time_index", "time_scale": 1 / 60,
                   "systems": {"left_foot": ["pos_left_x", "pos_left_y", "pos_left_z"],
                               "right_foot": ["pos_right_x", "pos_right_y", "pos_right_z"]},

@@ -56,7 +56,8 @@ def test_the_tutorial_notebook_runs_and_compares_the_methods(tmp_path, monkeypat
     assert mean_rmse.between(0.02, 0.4).all()
 
     events = namespace["events"]
-    assert 0.0 < events.active.mean() < 1.0
+    assert 0.0 < (events.active | events.tail_truncated).mean() <= 1.0
+    assert (events.limit_m > 0.6).all() and (events.limit_m <= 1.1).all()  # the body's, following the strides
     active = events[events.active]
     assert (active.distance_after_m <= active.limit_m + 1e-6).all()
 

@@ -22,6 +22,8 @@ from tests.paths import ROOT
 
 WALKERS = ROOT / "configs" / "paper_constraint_monte_carlo.yaml"
 VICON = ROOT / "configs" / "dual_foot_vicon.yaml"
+TIGHT = "constraints.0.distance_m=0.55"
+"""A limit the Vicon walk's estimates break now and then (its truth's feet part by up to 0.52 m)."""
 
 
 def walkers(method: str, seconds: float, seed: int = 0):
@@ -67,8 +69,9 @@ def test_unconstrained_method_changes_nothing():
 
 @pytest.mark.parametrize("method", ["qp", "socp"])
 def test_every_method_gives_the_projection_trajectory_on_the_vicon_walk(method):
-    ref = run_layout(load_layout(VICON, ["fuser.method=projection"]))
-    other = run_layout(load_layout(VICON, [f"fuser.method={method}"]))
+    # 0.55 m (the truth's feet part by up to 0.52 m): a limit the estimates break now and then
+    ref = run_layout(load_layout(VICON, ["fuser.method=projection", TIGHT]))
+    other = run_layout(load_layout(VICON, [f"fuser.method={method}", TIGHT]))
     assert other.fuser.activations == ref.fuser.activations > 0
     assert other.fuser.solver_fallbacks == 0
     for name in ref.trajectories:
@@ -136,7 +139,7 @@ def test_a_limit_the_truth_obeys_does_not_disturb_error_free_feet_under_the_proj
 
 
 def test_run_writes_the_constraints_block(tmp_path):
-    _, out = run(VICON, [], tmp_path)
+    _, out = run(VICON, [TIGHT], tmp_path)
     block = json.loads((out / "metrics.json").read_text())["constraints"]
     for key in ("method", "epochs", "activations", "solver_fallbacks", "max_violation_after_m", "solve_time_us"):
         assert key in block

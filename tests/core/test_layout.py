@@ -68,11 +68,11 @@ def test_vicon_config_reads_as_written():
     loaded = load_layout(VICON_CFG)
     left, right = loaded.system_configs["left_foot"], loaded.system_configs["right_foot"]
     assert left.detector.kind == right.detector.kind == "labels"
-    assert left.initial.heading_deg == 0.0
-    assert right.initial.heading_deg == "auto"
+    assert left.initial.heading_deg == right.initial.heading_deg == "auto"  # one frame by default
     assert right.data.path.name == "imuMeasRight.csv"
     assert right.data.acc_columns == ("acc_x", "acc_y", "acc_z")  # from the YAML merge key
-    assert loaded.layout.heading_alignment.reference == "left_foot"
+    assert loaded.layout.heading_alignment.reference is None
+    assert loaded.layout.constraints[0].distance_m == "body"
     assert loaded.layout.truth.alignment == "first_3m"
     assert loaded.name == "dual_foot_vicon"
 

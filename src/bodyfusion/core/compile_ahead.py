@@ -41,7 +41,8 @@ def compile_fuser_kernels(layout: Layout) -> None:
     if layout.fuser.method == "none" or not layout.constraints:
         return
     order = list(dict.fromkeys(name for c in layout.constraints for name in c.between))
-    limits = distance_constraints(layout.constraints, order)
+    numeric = [c.model_copy(update={"distance_m": 1.0}) if c.distance_m == "body" else c for c in layout.constraints]
+    limits = distance_constraints(numeric, order)  # a body limit's value does not change what compiles
     n = len(order)
     solver = SOLVERS[layout.fuser.method](n, limits, tol_m=layout.fuser.tolerance_m,
                                           max_iter=layout.fuser.max_iterations)

@@ -18,7 +18,8 @@ class ConstraintLog:
     the correction projects, ``fuser.inequality: projection``; inside the limit by the truncated
     density's mean with ``truncation``, also where the constraint held but the estimate's density
     crossed its limit: ``tail_truncated``); the multiplier λ follows the solvers' sign
-    convention (0 when inactive). The stacked positions before and after (``p_before``,
+    convention (0 when inactive); ``limit`` the limit at the epoch (m: a body limit follows the
+    gait, a fighting one is relaxed, :mod:`bodyfusion.core.limits`). The stacked positions before and after (``p_before``,
     ``p_after``, (epochs, 3n), ENU m) are kept; the separations are computed from them when
     asked (``before_m``, ``after_m``). ``solve_us`` (epochs,): the solver's wall time (µs);
     :attr:`active_multipliers`: the multipliers of the active constraints, epoch by epoch in the
@@ -37,6 +38,7 @@ class ConstraintLog:
         self.p_before = np.empty((epochs, 3 * len(order)))
         self.p_after = np.empty((epochs, 3 * len(order)))
         self.multiplier = np.empty((epochs, k))
+        self.limit = np.empty((epochs, k))
         self.active = np.zeros((epochs, k), dtype=bool)
         self.tail_truncated = np.zeros((epochs, k), dtype=bool)
         self.solve_us = np.empty(epochs)
@@ -66,11 +68,13 @@ class ConstraintLog:
         return self.separations(self.p_after[:self.n])
 
     def record(self, t: float, p_hat: np.ndarray, p_after: np.ndarray, solution: ConstraintSolution,
-               solve_us: float, tail_truncated: np.ndarray | None = None) -> None:
+               solve_us: float, limits: np.ndarray, tail_truncated: np.ndarray | None = None) -> None:
         """One epoch at time t (s): the estimates p̂ and the corrected estimates (3n,), the solution
-        and its solve time (µs), the constraints truncated in their tails (K,) bool."""
+        and its solve time (µs), the limits that held (K,, m), the constraints truncated in their
+        tails (K,) bool."""
         e = self.n
         self.t[e] = t
+        self.limit[e] = limits
         self.p_before[e] = p_hat
         self.p_after[e] = p_after
         self.multiplier[e] = solution.multipliers
@@ -94,7 +98,7 @@ class ConstraintLog:
         b = np.array([c.between[1] for c in self.constraints], dtype=object)
         return {"t": np.repeat(self.t[:n], k), "pair": labels[pick], "system_a": a[pick], "system_b": b[pick],
                 "kind": np.array([c.kind for c in self.constraints], dtype=object)[pick],
-                "limit_m": np.array([c.distance_m for c in self.constraints])[pick],
+                "limit_m": self.limit[:n].ravel(),
                 "distance_before_m": self.before_m.ravel(), "distance_after_m": self.after_m.ravel(),
                 "multiplier": self.multiplier[:n].ravel(), "active": self.active[:n].ravel(),
                 "tail_truncated": self.tail_truncated[:n].ravel()}

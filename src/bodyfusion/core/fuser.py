@@ -42,7 +42,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bodyfusion.core.heading import HeadingTie
-from bodyfusion.core.layout import ConstraintConfig, FuserConfig
+from bodyfusion.core.layout import BodyConfig, ConstraintConfig, FuserConfig
+from bodyfusion.core.limits import LimitGuard
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
                                          SocpSolver)
@@ -51,6 +52,8 @@ from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
 SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
+LIMIT_STEP_M = 0.05
+"""A limit that follows the gait is rounded up to a multiple of this (m): one solver per step."""
 TIE_GATE_PROBABILITY = 0.999
 """Chi-square gate (1 degree of freedom) of a relative-heading measurement."""
 
@@ -80,6 +83,8 @@ class FuserReport:
     """Every constraint at every sync epoch (:class:`~bodyfusion.core.constraint_log.ConstraintLog`)."""
     heading_ties: list[HeadingTie] = field(default_factory=list)
     """The relative headings measured through the run, each with its log."""
+    limits: LimitGuard | None = None
+    """The constraints' limits through the run: the gait they followed, the fights they met."""
 
     @property
     def multipliers(self) -> np.ndarray:
@@ -233,7 +238,9 @@ class Fuser:
     first, then the constraints).
 
     Parameters: ``systems`` (name → system, initialised and heading-aligned),
-    ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list),
+    ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list, every limit
+    in metres: :func:`~bodyfusion.core.limits.resolve_constraints`; ``follows_gait``: which
+    follow the feet's strides, ``body``: the wearer, :class:`~bodyfusion.core.limits.LimitGuard`),
     ``aiding`` (name → aiding source), ``ties`` (the relative headings kept through the run,
     :class:`~bodyfusion.core.heading.HeadingTie`: measured at both systems' sync epochs, after
     the measurements and before the constraints of one time). Result: ``report``
@@ -242,10 +249,13 @@ class Fuser:
 
     def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig,
                  constraints: list[ConstraintConfig] | None = None,
-                 aiding: Mapping[str, AidingSource] | None = None, ties: list[HeadingTie] | None = None) -> None:
+                 aiding: Mapping[str, AidingSource] | None = None, ties: list[HeadingTie] | None = None,
+                 follows_gait: list[bool] | None = None, body: BodyConfig | None = None) -> None:
         self.systems = systems
         self.config = config
         self.constraints = constraints or []
+        self.follows_gait = follows_gait or [False] * len(self.constraints)
+        self.body = body or BodyConfig()
         self.aiding = dict(aiding or {})
         self.ties = list(ties or [])
         self.report = FuserReport(method=config.method, heading_ties=self.ties)
@@ -265,13 +275,15 @@ class Fuser:
         events: list[tuple[float, int, int, int]] = []
         if constrained:
             members = self.joint.systems[:n_constrained]
-            limits = distance_constraints(self.constraints, order[:n_constrained])
-            self._solver = SOLVERS[self.config.method](n_constrained, limits, tol_m=self.config.tolerance_m,
-                                                       max_iter=self.config.max_iterations)
+            self._order = order[:n_constrained]
+            self._solvers: dict[tuple[float, ...], tuple] = {}
+            parts = [s.body_part for s in members]
+            self.report.limits = LimitGuard(self.constraints, self.follows_gait, self._order, parts,
+                                            {i: s.sync_times() for i, s in enumerate(members) if parts[i] == "foot"},
+                                            self.body, self.config.relax_fights)
             epochs = epoch_times(members, self.config)
             events += [(float(t), 2, 0, 0) for t in epochs]
             self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
-            self._truncation = DensityTruncation(limits, n_constrained, self.config.correct == "positions")
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
             n_joint = self.joint.cross.shape[0]  # Σ = P[pos][:, pos] by flat indices: a quarter of np.ix_'s cost
             self._sigma_index = (self._pos[:, None] * n_joint + self._pos[None, :]).ravel()
@@ -371,26 +383,47 @@ class Fuser:
         joint.advance(t)
         P = joint.covariance()
         p_hat = np.concatenate([position() for position in self._positions])
+        limits = rep.limits.limits(t, p_hat)
+        solver, truncation = self._solvers_for(limits)
+        sigma = P.take(self._sigma_index).reshape(pos.size, pos.size)
         t0 = time.perf_counter_ns()
-        sol = self._solver.solve(p_hat, P.take(self._sigma_index).reshape(pos.size, pos.size))
+        sol = solver.solve(p_hat, sigma)
         solve_us = (time.perf_counter_ns() - t0) / 1e3
+        rep.limits.watch(t, p_hat, sigma, limits)
         rep.epochs += 1
         rep.solver_fallbacks += int(sol.fallback)
         rep.not_converged += int(not sol.converged)
         rep.max_violation_before_m = max(rep.max_violation_before_m, sol.violation_before_m)
         rep.max_violation_after_m = max(rep.max_violation_after_m, sol.violation_after_m)
         if self._truncating:
-            dx, P_new, tail = self._truncation.correct(P, pos, p_hat, sol)
+            dx, P_new, tail = truncation.correct(P, pos, p_hat, sol)
             if not sol.active and not tail.any():
-                rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us)
+                rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us, limits)
                 return
             rep.tail_truncations += int(not sol.active)
         elif sol.active:
             dx, P_new = spread_correction(P, pos, sol, self.config.correct == "positions")
             tail = None
         else:
-            rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us)
+            rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us, limits)
             return
         rep.activations += int(bool(sol.active))
         joint.correct(dx, P_new, self._corrected)
-        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, solve_us, tail)
+        rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, solve_us, limits, tail)
+
+    def _solvers_for(self, limits: np.ndarray) -> tuple:
+        """The solver and the density truncation of the constraints at ``limits`` (m), built once
+        per set of limits (a limit that follows the gait moves in :data:`LIMIT_STEP_M` steps)."""
+        key = tuple(float(d) if not follows else float(np.ceil(d / LIMIT_STEP_M) * LIMIT_STEP_M)
+                    for d, follows in zip(limits, self.follows_gait))
+        built = self._solvers.get(key)
+        if built is None:
+            cons = distance_constraints([c.model_copy(update={"distance_m": d}) for c, d in zip(self.constraints, key)],
+                                        self._order)
+            n = len(self._order)
+            built = (SOLVERS[self.config.method](n, cons, tol_m=self.config.tolerance_m,
+                                                 max_iter=self.config.max_iterations),
+                     DensityTruncation(cons, n, self.config.correct == "positions"))
+            self._solvers[key] = built
+        limits[:] = key
+        return built

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, StrictModel, TableSection
 from bodyfusion.core import registry as plugin_registry
+from bodyfusion.core.body import body_limit
 from bodyfusion.core.data_tables import bind_tables, require_data
 from bodyfusion.core.layout_io import (  # the file handling was here: its names stay importable
     MAX_YAML_BYTES,  # noqa: F401
@@ -67,10 +68,27 @@ class ConstraintConfig(StrictModel):
 
     between: tuple[str, str]
     kind: Literal["max", "min", "fixed"] = "max"
-    distance_m: float = Field(gt=0)
+    distance_m: float | Literal["body"] = "body"
+    """The limit, m; ``body`` (the default, ``max`` only): where the two are worn and the wearer's
+    height say, widened to the gait's stride (:mod:`bodyfusion.core.limits`)."""
     horizontal: bool = True
     lever_arms_m: dict[str, tuple[float, float, float]] = Field(default_factory=dict)
     """Per system, the offset (ENU, m) from its navigated point to the constrained point."""
+
+    @model_validator(mode="after")
+    def _body_limits_are_maxima(self) -> "ConstraintConfig":
+        if self.distance_m == "body" and self.kind != "max":
+            raise KeyedError("distance_m", f"a {self.kind} limit needs a distance in metres (body: max limits only)")
+        if self.distance_m != "body" and not self.distance_m > 0:
+            raise KeyedError("distance_m", f"must be > 0 m, got {self.distance_m}")
+        return self
+
+
+class BodyConfig(StrictModel):
+    """The wearer, whose proportions give the default distance limits (:mod:`bodyfusion.core.limits`)."""
+
+    height_m: float = Field(default=1.75, ge=1.0, le=2.3)
+    """Standing height, m."""
 
 
 class OutageConfig(StrictModel):
@@ -113,6 +131,9 @@ class FuserConfig(StrictModel):
     cross_covariance: bool = False
     correct: Literal["all", "positions"] = "all"
     inequality: Literal["projection", "truncation"] = "truncation"
+    relax_fights: bool = True
+    """Relax a limit the estimates keep breaking while both are confident (it fights them,
+    :mod:`bodyfusion.core.limits`) instead of pulling both tracks; it is reported either way."""
 
 
 class SmootherConfig(StrictModel):
@@ -241,7 +262,7 @@ def _check_feasible(constraints: list[ConstraintConfig]) -> None:
     through any chain of others (triangle inequality; a horizontal limit bounds only
     horizontal distances, a 3-D one both). Constraints with lever arms are left out (their
     arms loosen the bound)."""
-    plain = [(k, c) for k, c in enumerate(constraints) if not c.lever_arms_m]
+    plain = [(k, c) for k, c in enumerate(constraints) if not c.lever_arms_m and c.distance_m != "body"]
     names = sorted({n for _, c in plain for n in c.between})
     index = {n: i for i, n in enumerate(names)}
     for horizontal in (True, False):
@@ -276,6 +297,7 @@ class Layout(StrictModel):
     systems: dict[str, SystemSection]
     outages: list[OutageConfig] = Field(default_factory=list)
     heading_alignment: HeadingAlignmentConfig = Field(default_factory=HeadingAlignmentConfig)
+    body: BodyConfig = Field(default_factory=BodyConfig)
     constraints: list[ConstraintConfig] = Field(default_factory=list)
     fuser: FuserConfig = Field(default_factory=FuserConfig)
     smoother: SmootherConfig = Field(default_factory=SmootherConfig)
@@ -301,6 +323,8 @@ class Layout(StrictModel):
                     raise KeyedError(f"constraints.{k}.lever_arms_m.{side}", "not one of the constrained systems")
         bounds: dict[frozenset[str], dict[str, float]] = {}
         for k, c in enumerate(self.constraints):
+            if c.distance_m == "body":
+                continue
             pair = bounds.setdefault(frozenset(c.between), {})
             pair[c.kind] = c.distance_m
             if "min" in pair and "max" in pair and pair["min"] > pair["max"]:
@@ -503,3 +527,9 @@ def _check_aiding_references(layout: Layout, system_configs: dict[str, BaseModel
                                   path)
     if layout.heading_alignment.reference in aiding:
         raise ConfigError("heading_alignment.reference", "an aiding source has no heading", path)
+    for k, c in enumerate(layout.constraints):
+        parts = [classes[side].body_part for side in c.between]
+        if c.distance_m == "body" and body_limit(*parts, layout.body.height_m) is None:
+            raise ConfigError(f"constraints.{k}.distance_m", f"the body gives no limit between {c.between[0]} "
+                              f"({parts[0] or 'unknown part'}) and {c.between[1]} ({parts[1] or 'unknown part'}): "
+                              "give distance_m in metres", path)

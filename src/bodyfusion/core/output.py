@@ -107,6 +107,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
             "multipliers": {"mean": float(lam.mean()) if lam.size else 0.0,
                             "max": float(lam.max()) if lam.size else 0.0},
             "solve_time_us": _median_p99(rep.solve_times_us),
+            **({"limits": rep.limits.summary()} if rep.limits is not None else {}),
         }
     if result.smoothed_constraints is not None:
         doc.setdefault("constraints", {})["smoothed"] = result.smoothed_constraints

@@ -17,6 +17,7 @@ from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings, heading_ties
 from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
+from bodyfusion.core.limits import resolve_constraints, truth_separation_findings
 from bodyfusion.core.output import write_outputs
 from bodyfusion.core.progress import FusionProgress
 from bodyfusion.core.result import RunResult
@@ -117,7 +118,9 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
              len(aiding), loaded.layout.fuser.method, len(loaded.layout.constraints))
     ties = heading_ties(systems, loaded.layout.heading_alignment)
-    report = Fuser(monitors, loaded.layout.fuser, loaded.layout.constraints, aiding, ties).run()
+    constraints, follows = resolve_constraints(loaded.layout.constraints,
+                                               {name: s.body_part for name, s in built.items()}, loaded.layout.body)
+    report = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body).run()
     for monitor in monitors.values():
         monitor.flush()
     if tracker is not None:
@@ -140,8 +143,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     if constrain is None:
         constrain = loaded.layout.fuser.method != "none"
     if constrain and loaded.layout.constraints and smoothed:
-        trajectories, smoothed_constraints = constrain_trajectories(trajectories, set(smoothed),
-                                                                    loaded.layout.constraints, loaded.layout.fuser)
+        trajectories, smoothed_constraints = constrain_trajectories(trajectories, set(smoothed), constraints,
+                                                                    loaded.layout.fuser)
     truth_cfg = loaded.layout.truth
     if truths:
         log.info("scoring %s against the truth (alignment %s)", ", ".join(truths), truth_cfg.alignment)
@@ -156,6 +159,9 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     result = RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
                        aiding, smoothed_constraints, nees)
     result.findings = [f for s in (*systems.values(), *aiding.values()) for f in s.findings()]
+    if report.limits is not None:
+        result.findings += report.limits.findings()
+        result.findings += truth_separation_findings(constraints, report.constraint_log, truths)
     for finding in result.findings:
         LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
     return result

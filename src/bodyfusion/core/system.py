@@ -126,6 +126,9 @@ class Plugin(ABC):
     navigates: ClassVar[bool]
     """True for a navigation system (it has a position and a trajectory), False for an aiding
     source that only measures the navigation systems."""
+    body_part: ClassVar[str | None] = None
+    """Where on the body the system is worn (``foot``, ``hand``...; :mod:`bodyfusion.core.body`
+    knows the distances between them); None: unknown."""
     data_section: ClassVar[str | None] = None
     """The section of the plugin's config (a :class:`~bodyfusion.base.sections.TableSection`, by
     its key within the system's section) that a table given in memory for the whole system feeds

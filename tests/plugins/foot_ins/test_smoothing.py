@@ -483,7 +483,7 @@ def test_constrained_rts_keeps_the_constrained_filters_accuracy_on_the_vicon_wal
 
 
 def test_smoothed_tracks_are_constrained_by_default_only_where_the_fuser_enforces_the_constraints():
-    independent = ["fuser.method=none", "smoother.kind=rts"]
+    independent = ["fuser.method=none", "smoother.kind=rts", "constraints.0.distance_m=0.55"]
     assert run_layout(load_layout(VICON_CFG, independent)).smoothed_constraints is None
     asked = run_layout(load_layout(VICON_CFG, [*independent, "smoother.constrain_smoothed=true"]))
     assert asked.smoothed_constraints["constrained_samples"] > 0

@@ -64,6 +64,7 @@ class FootIns(SensorSystem):
     detector output."""
 
     plugin_name = "foot_ins"
+    body_part = "foot"
     Config = FootInsConfig
     data_section = "data"
     error_model = "strapdown15"

@@ -118,6 +118,7 @@ class HandPdr(SensorSystem):
     """
 
     plugin_name = "hand_pdr"
+    body_part = "hand"
     Config = HandPdrConfig
     data_section = "imu"
 
