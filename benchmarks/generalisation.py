@@ -1,29 +1,39 @@
-"""Generalisation benchmark: every recording with truth in ``../shared/data`` at default settings.
+"""Generalisation benchmark: every recording with truth in ``../shared/data``, and simulated gaits, at defaults.
 
 Each data set has ONE layout template (what is worn, where the files are, their units and
-frames — nothing tuned); every recording of the set is run through it with the project's
-defaults and scored with the project's scorer (:func:`bodyfusion.evaluation.metrics.score_systems`):
+frames — nothing tuned, no heading, no limit); every recording of the set is run through it
+with the project's defaults and scored with the project's scorer
+(:func:`bodyfusion.evaluation.metrics.score_systems`):
 
 * ``foot_vicon_pyshoe`` (21 trials, one foot, 200 Hz): horizontal RMSE, first-3 m alignment;
-  beside it PyShoe's own published trajectory (``pyshoe.csv``) scored the same way, and the
-  run's ``zupt_mean_nis``;
-* ``dual_foot_vicon_hu2025`` (both feet, 60 Hz): horizontal RMSE per foot, one alignment for
-  both feet; beside it Hu & Hu's EKF-ZUPT (their own alignment, from the data's table);
+  beside it PyShoe's own published trajectory (``pyshoe.csv``) scored the same way;
+* ``dual_foot_vicon_hu2025`` (both feet, 60 Hz): horizontal RMSE per foot in one joint frame
+  (one alignment for both feet), the feet on their own (``vicon``) and held by the body's
+  default limit (``vicon_limit``); beside it Hu & Hu's EKF-ZUPT (their own alignment, from the
+  data's table);
 * ``single_foot_loop_xio`` (one foot, 400 Hz, a closed loop): loop-closure error; beside it
   x-io's published 0.421 m;
 * ``handheld_phone_ipin2023`` (nine phone logs): the 75th percentile of the horizontal error
-  at the surveyed points (the competition's metric); beside it the phone's GNSS alone, scored
-  the same way (its first fix before GNSS starts, its last held after it stops, so both are scored
-  at every surveyed point; ``gnss_coverage`` is the share of points inside the GNSS span), and the
-  ratio PDR+GNSS / GNSS.
+  at the surveyed points (the competition's metric); beside it the phone's GNSS alone as the
+  run itself reports it (metrics.json ``sensor_alone``: the last fix at or before each point),
+  and the ratio PDR+GNSS / GNSS;
+* ``sim`` (simulated with truth, seed 1, both feet run from their data columns alone, first-3 m
+  alignment): a walk, a long consumer-grade walk, stairs, a run, and a run with no still instant
+  whose gyroscope clips in every swing (``scenarios/running_rolling.yaml``).
 
-Each data set ends with a summary line ``<set>: median=<m> p90=<m> worst=<m> failed=<n>``.
+Every foot's row carries the detector's decisions (stance share, stances missed and filled by
+the watchdog, clipped runs) and its motion, from the run's own stride table (the majority of
+its strides' ``motion``, stairs up and down counted as ``stairs``, with the share of each). After each data set's summary line
+``<set>: median=<m> p90=<m> worst=<m> failed=<n>``, the foot recordings are summed up by
+motion: ``motion <kind>: n=<recordings> median=<m> worst=<m>`` (a recording counts under its
+majority motion; ``mixed`` where none has 70 % of the strides).
+
 ``--set KEY=VALUE`` overrides every layout (e.g. ``--set smoother.kind=rts``; ``feet.KEY`` sets KEY
-of every foot system, e.g. ``--set feet.detector.kind=shoe``); ``--only SET``
-runs one set; ``--json FILE`` writes every row. Without ``../shared/data`` (or ``--data``) the
-benchmark says so and exits 0.
+of every foot system, e.g. ``--set feet.detector.kind=shoe``); ``--only SET`` runs one set;
+``--json FILE`` writes every row. Without ``../shared/data`` (or ``--data``) only the
+simulations run.
 
-Usage: python benchmarks/generalisation.py [--only pyshoe|vicon|xio|ipin] [--set K=V]... [--workers N]
+Usage: python benchmarks/generalisation.py [--only pyshoe|vicon|vicon_limit|xio|ipin|sim] [--set K=V]... [--workers N]
 """
 
 from __future__ import annotations
@@ -34,6 +44,7 @@ import os
 import sys
 import tempfile
 import traceback
+from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
@@ -44,12 +55,21 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data"
-
 FOOT_PREFIX = "feet."
 """``--set feet.KEY=VALUE`` sets ``systems.<name>.KEY`` of every foot_ins system of every layout."""
 
 XIO_PUBLISHED_LOOP_M = 0.421
 """x-io Gait-Tracking's own final displacement on long_walk.csv (data README)."""
+SIMULATIONS = {
+    "walk": ROOT / "configs" / "sim_dual_foot_square.yaml",
+    "walk_consumer": ROOT / "configs" / "sim_dual_foot_consumer_walk.yaml",
+    "stairs": ROOT / "configs" / "sim_stairs.yaml",
+    "run": ROOT / "configs" / "sim_running.yaml",
+    "run_rolling_clipped": ROOT / "benchmarks" / "scenarios" / "running_rolling.yaml",
+}
+"""Simulated recordings (name → scenario), each simulated with seed 1."""
+MIXED_SHARE = 0.7
+"""A recording whose commonest stride motion has less than this share is ``mixed``."""
 
 
 @dataclass
@@ -82,9 +102,9 @@ def pyshoe_layout(trial: Path) -> dict:
     }
 
 
-def vicon_layout(folder: Path) -> dict:
+def vicon_layout(folder: Path, limit: bool = False) -> dict:
     """Both feet, 60 Hz sample counter, nothing but their data columns (one frame for both is the
-    default); Vicon truth with z down."""
+    default), with ``limit`` the body's default limit between them; Vicon truth with z down."""
     def foot(side: str) -> dict:
         return {"plugin": "foot_ins",
                 "data": {"path": str(folder / f"imuMeas{side}.csv"), "time_column": "time_index",
@@ -93,6 +113,7 @@ def vicon_layout(folder: Path) -> dict:
     return {
         "name": "dual_foot_vicon",
         "systems": {"left_foot": foot("Left"), "right_foot": foot("Right")},
+        **({"constraints": [{"between": ["left_foot", "right_foot"]}]} if limit else {}),
         "truth": {"path": str(folder / "positionGt.csv"), "time_column": "time_index", "time_scale": 1 / 60,
                   "systems": {"left_foot": ["pos_left_x", "pos_left_y", "pos_left_z"],
                               "right_foot": ["pos_right_x", "pos_right_y", "pos_right_z"]},
@@ -127,6 +148,20 @@ def ipin_layout(log: Path) -> dict:
     }
 
 
+def simulated_layout(folder: Path) -> dict:
+    """The feet of a simulation (``fusion simulate``'s ``config.yaml`` in ``folder``) from their data
+    columns alone (no stance labels, heading, filter or detector settings), its truth aligned on
+    the first 3 m as a recording's would be."""
+    generated = yaml.safe_load((folder / "config.yaml").read_text())
+    systems = {}
+    for name, section in generated["systems"].items():
+        data = {k: v for k, v in section["data"].items() if k != "stance_column"}
+        systems[name] = {"plugin": "foot_ins", "data": {**data, "path": str(folder / data["path"])}}
+    return {"name": f"sim_{folder.name}", "systems": systems,
+            "truth": {"path": str(folder / "truth.csv"), "format": "long", "alignment": "first_3m"},
+            "output": {"plots": False}}
+
+
 # --------------------------------------------------------------------------- scoring
 
 
@@ -143,8 +178,19 @@ def _run(layout: dict, overrides: list[str]):
         return run_layout(load_layout(path, overrides))
 
 
-def _zupt_nis(result, name: str) -> float | None:
-    return result.systems[name].diagnostics().get("zupt_mean_nis")
+def _foot_notes(result, name: str) -> dict:
+    """The detector's decisions and the motion of a foot, and the run's warnings about it."""
+    system = result.systems[name]
+    d = system.diagnostics()
+    motions = Counter(m.replace("_up", "").replace("_down", "") for m in system.strides().get("motion", []))
+    strides = sum(motions.values())
+    top, count = motions.most_common(1)[0] if strides else ("none", 0)
+    clipped = getattr(system, "clipping", {})
+    return {"motion": top if strides and count >= MIXED_SHARE * strides else "mixed",
+            "motions": {m: round(c / strides, 2) for m, c in motions.most_common()} if strides else {},
+            "stance": d["stance_fraction"], "missed": d["missed_stances"], "fallback": d["fallback_updates"],
+            "clipped_runs": sum(len(c.runs) for c in clipped.values()), "zupt_nis": d["zupt_mean_nis"],
+            "findings": [f.kind for f in result.findings if f.system in (name, None) and f.severity == "warning"]}
 
 
 def pyshoe_row(trial: Path, overrides: list[str]) -> list[Row]:
@@ -159,7 +205,7 @@ def pyshoe_row(trial: Path, overrides: list[str]) -> list[Row]:
     _, peer_scores = score_systems({"foot": Trajectory(peer.t, ned_to_enu, np.zeros_like(ned_to_enu))},
                                    {"foot": result.truths["foot"]})
     return [Row("pyshoe", trial.name, score, peer_scores["foot"].metrics["horizontal_error_m"]["rmse"],
-                {"zupt_mean_nis": _zupt_nis(result, "foot"), **_notes(result)})]
+                _foot_notes(result, "foot"))]
 
 
 def _hu_ekf_zupt(folder: Path) -> dict[str, float]:
@@ -171,12 +217,20 @@ def _hu_ekf_zupt(folder: Path) -> dict[str, float]:
     return {}
 
 
-def vicon_rows(folder: Path, overrides: list[str]) -> list[Row]:
-    result = _run(vicon_layout(folder), overrides)
+def _vicon(folder: Path, overrides: list[str], limit: bool) -> list[Row]:
+    result = _run(vicon_layout(folder, limit), overrides)
     peers = _hu_ekf_zupt(folder)
-    return [Row("vicon", name, result.scores[name].metrics["horizontal_error_m"]["rmse"], peers.get(name),
-                {"zupt_mean_nis": _zupt_nis(result, name), **_notes(result)})
-            for name in ("left_foot", "right_foot")]
+    key = "vicon_limit" if limit else "vicon"
+    return [Row(key, name, result.scores[name].metrics["horizontal_error_m"]["rmse"], peers.get(name),
+                _foot_notes(result, name)) for name in ("left_foot", "right_foot")]
+
+
+def vicon_rows(folder: Path, overrides: list[str]) -> list[Row]:
+    return _vicon(folder, overrides, False)
+
+
+def vicon_limit_rows(folder: Path, overrides: list[str]) -> list[Row]:
+    return _vicon(folder, overrides, True)
 
 
 def xio_row(csv: Path, overrides: list[str]) -> list[Row]:
@@ -184,44 +238,41 @@ def xio_row(csv: Path, overrides: list[str]) -> list[Row]:
 
     result = _run(xio_layout(csv), overrides)
     return [Row("xio", csv.stem, loop_closure_m(result.trajectories["foot"]), XIO_PUBLISHED_LOOP_M,
-                {"zupt_mean_nis": _zupt_nis(result, "foot"), **_notes(result)})]
+                _foot_notes(result, "foot"))]
 
 
 def ipin_row(log: Path, overrides: list[str]) -> list[Row]:
-    from bodyfusion.evaluation.metrics import score_systems
-    from bodyfusion.io.phone_log import read_getsensordata
-    from bodyfusion.base.types import Trajectory
-
     result = _run(ipin_layout(log), overrides)
     p75 = result.scores["hand_phone"].metrics["horizontal_error_m"]["p75"]
-    gnss = read_getsensordata(log).gnss
-    truth = result.truths["hand_phone"]
-    # GNSS alone as its user has it: the first fix before GNSS starts, the last one held after it
-    # stops, so both are scored at every surveyed point
-    t = np.concatenate([[min(truth.t[0], gnss.t[0]) - 1.0], gnss.t, [max(truth.t[-1], gnss.t[-1]) + 1.0]])
-    enu = gnss.enu(result.geodetic_origin)
-    enu = np.vstack([enu[:1], enu, enu[-1:]])
-    _, gnss_scores = score_systems({"hand_phone": Trajectory(t, enu, np.zeros_like(enu))}, {"hand_phone": truth},
-                                   alignment="none")
-    gnss_p75 = gnss_scores["hand_phone"].metrics["horizontal_error_m"]["p75"]
-    covered = float(np.mean((truth.t >= gnss.t[0]) & (truth.t <= gnss.t[-1])))
+    gnss_p75 = result.sensor_alone["hand_phone"]["horizontal_error_m"]["p75"]
+    d = result.systems["hand_phone"].diagnostics()
     return [Row("ipin", log.stem.replace("IPIN2023_T3_", ""), p75, gnss_p75,
-                {"ratio": p75 / gnss_p75, "gnss_coverage": covered, **_notes(result)})]
+                {"ratio": p75 / gnss_p75, "steps": d["steps"], "reanchored": d["gnss"]["reanchored"],
+                 "track_heading": d["gnss"]["track_heading_accepted"]})]
 
 
-def _notes(result) -> dict:
-    notes = result.input_report.notes
-    return {"notes": notes} if notes else {}
+def sim_rows(scenario: Path, overrides: list[str]) -> list[Row]:
+    from bodyfusion.sim import simulate
+
+    name = next(k for k, v in SIMULATIONS.items() if v == scenario)
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate(scenario, Path(tmp) / name, seed=1)
+        result = _run(simulated_layout(Path(tmp) / name), overrides)
+        return [Row("sim", f"{name}/{foot}", result.scores[foot].metrics["horizontal_error_m"]["rmse"], None,
+                    _foot_notes(result, foot)) for foot in result.scores]
 
 
-DATASETS: dict[str, tuple[str, Callable[[Path], list[Path]], Callable[[Path, list[str]], list[Row]], str, str]] = {
-    # key: (folder, recordings in it, runner, figure, peer)
+DATASETS: dict[str, tuple[str | None, Callable[[Path], list[Path]], Callable[[Path, list[str]], list[Row]], str, str]] = {
+    # key: (folder in the data, its recordings, runner, figure, peer)
     "pyshoe": ("foot_vicon_pyshoe", lambda d: sorted(p for p in d.iterdir() if (p / "imu.csv").exists()),
                pyshoe_row, "h-RMSE m", "PyShoe m"),
-    "vicon": ("dual_foot_vicon_hu2025", lambda d: [d], vicon_rows, "h-RMSE m", "Hu&Hu EKF m"),
+    "vicon": ("dual_foot_vicon_hu2025", lambda d: [d], vicon_rows, "h-RMSE m (feet on their own)", "Hu&Hu EKF m"),
+    "vicon_limit": ("dual_foot_vicon_hu2025", lambda d: [d], vicon_limit_rows, "h-RMSE m (the body's limit)",
+                    "Hu&Hu EKF m"),
     "xio": ("single_foot_loop_xio", lambda d: [d / "long_walk.csv"], xio_row, "loop m", "x-io m"),
     "ipin": ("handheld_phone_ipin2023", lambda d: sorted(d.glob("IPIN2023_T3_*.txt")), ipin_row,
-             "p75 m", "GNSS p75 m"),
+             "p75 m", "GNSS alone p75 m"),
+    "sim": (None, lambda d: list(SIMULATIONS.values()), sim_rows, "h-RMSE m", "-"),
 }
 
 
@@ -245,6 +296,27 @@ def summary(rows: list[Row]) -> str:
             f"failed={failed}")
 
 
+def by_motion(rows: list[Row]) -> list[str]:
+    """``motion <kind>: n=… median=… worst=…`` of the foot recordings (not the dual-foot or loop
+    figures, which measure other things), by their majority motion."""
+    kinds: dict[str, list[float]] = {}
+    for r in rows:
+        if r.dataset in ("pyshoe", "sim") and r.value is not None and "motion" in r.extra:
+            kinds.setdefault(r.extra["motion"], []).append(r.value)
+    return [f"motion {kind}: n={len(v)} median={np.median(v):.3f} worst={max(v):.3f}" for kind, v in sorted(kinds.items())]
+
+
+def _extra_text(extra: dict) -> str:
+    shown = []
+    for k, v in extra.items():
+        if k in ("notes", "motions") or v is None or v == []:
+            continue
+        shown.append(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}")
+    if extra.get("motions"):
+        shown.append("strides=" + ",".join(f"{m}:{s:.0%}" for m, s in extra["motions"].items()))
+    return " ".join(shown)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder")
@@ -254,11 +326,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--json", type=Path, help="write every row to this file")
     args = parser.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"generalisation: no shared data at {args.data}; skipped")
-        return 0
     keys = args.only or list(DATASETS)
-    jobs = [(key, str(rec)) for key in keys for rec in DATASETS[key][1](args.data / DATASETS[key][0])]
+    if not args.data.is_dir():
+        print(f"generalisation: no shared data at {args.data}; the simulations only")
+        keys = [k for k in keys if DATASETS[k][0] is None]
+    jobs = [(key, str(rec)) for key in keys
+            for rec in DATASETS[key][1](args.data / DATASETS[key][0] if DATASETS[key][0] else args.data)]
     with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
         futures = [pool.submit(_job, key, rec, args.overrides) for key, rec in jobs]
         results = [row for f in futures for row in f.result()]
@@ -266,27 +339,26 @@ def main(argv: list[str] | None = None) -> int:
     lines = []
     for key in keys:
         rows = [r for r in results if r.dataset == key]
-        _, _, _, figure, peer = DATASETS[key]
-        print(f"\n{DATASETS[key][0]}: {figure} (peer: {peer})")
+        folder, _, _, figure, peer = DATASETS[key]
+        print(f"\n{folder or 'simulated gaits'}: {figure} (peer: {peer})")
         for r in rows:
             if r.error:
                 print(f"  {r.recording:<40} FAILED {r.error}")
                 continue
-            extra = " ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
-                             for k, v in r.extra.items() if k != "notes" and v is not None)
             peer_txt = f"{r.peer:8.3f}" if r.peer is not None else "       -"
-            print(f"  {r.recording:<40} {r.value:8.3f} {peer_txt}  {extra}")
+            print(f"  {r.recording:<40} {r.value:8.3f} {peer_txt}  {_extra_text(r.extra)}")
         line = f"{key}: {summary(rows)}"
         peers = [r for r in rows if r.peer is not None and r.value is not None]
         if peers:
             line += f" peer_median={np.median([r.peer for r in peers]):.3f} peer_worst={max(r.peer for r in peers):.3f}"
+            line += f" at_or_below_peer={sum(r.value <= r.peer for r in peers)}/{len(peers)}"
         if key == "ipin":
             ratios = [r.extra["ratio"] for r in rows if r.error is None]
             line += (f" ratio_median={np.median(ratios):.2f} better_or_equal={sum(x <= 1.0 for x in ratios)}/{len(rows)}"
                      if ratios else "")
         lines.append(line)
     print()
-    for line in lines:
+    for line in lines + by_motion(results):
         print(line)
     if args.json:
         args.json.write_text(json.dumps([asdict(r) for r in results], indent=1, default=float))

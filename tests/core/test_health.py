@@ -184,10 +184,12 @@ def test_hand_and_foot_nis_on_a_simulated_walk(tmp_path):
     result = run_layout(load_layout(sim.config_path))
     health = result.health()
     hand = health["hand_phone"]["nis"]
-    assert {k: v["expected"] for k, v in hand.items()} == {"gnss_position": 3.0, "gnss_course": 1.0}
+    assert {k: v["expected"] for k, v in hand.items()} == {"gnss_position": 3.0, "gnss_course": 1.0,
+                                                          "gnss_track": 1.0}
     gnss = result.systems["hand_phone"].gnss_counts
     assert hand["gnss_position"]["count"] == gnss["accepted"] + gnss["rejected"]
     assert hand["gnss_course"]["count"] == gnss["heading_accepted"] + gnss["heading_rejected"]
+    assert hand["gnss_track"]["count"] == gnss["track_heading_accepted"] + gnss["track_heading_rejected"] > 0
     assert all(0.0 < v["mean"] < 30.0 for v in hand.values())
     assert np.any(result.trajectories["hand_phone"].pos_cov_en != 0.0)
     for name, h in health.items():

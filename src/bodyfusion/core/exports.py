@@ -440,3 +440,31 @@ def write_geojson(path: Path, trajectories: Mapping[str, Trajectory], truths: Ma
     with path.open("w") as fh:
         _write_json(fh, {"type": "FeatureCollection", "features": features()})
         fh.write("\n")
+
+
+STRIDE_COLUMNS = ("stride", "t_start", "t_end", "length_m", "duration_s", "speed_mps", "climb_m", "clearance_m",
+                  "motion")
+"""strides.csv's columns after ``system`` (docs/contract.md), in order."""
+
+
+def write_strides_csv(path: Path, systems: Mapping) -> bool:
+    """``strides.csv``: one row per stride of every system that has strides
+    (:meth:`~bodyfusion.core.system.SensorSystem.strides`); times s to the µs, lengths m to the
+    mm. Writes nothing and returns False when no system has any."""
+    rows = []
+    for name, system in systems.items():
+        cols = system.strides()
+        if not cols or len(cols["stride"]) == 0:
+            continue
+        for k in range(len(cols["stride"])):
+            values = []
+            for c in STRIDE_COLUMNS:
+                v = cols[c][k] if c in cols else ""
+                values.append(str(v) if c in ("stride", "motion") or v == "" else
+                              f"{float(v):.6f}".rstrip("0").rstrip(".") if c.startswith("t_") else
+                              f"{float(v):.3f}")
+            rows.append(",".join([name, *values]))
+    if not rows:
+        return False
+    path.write_text("system," + ",".join(STRIDE_COLUMNS) + "\n" + "\n".join(rows) + "\n")
+    return True

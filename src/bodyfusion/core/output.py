@@ -16,6 +16,7 @@ from bodyfusion.core.exports import (
     ROWS,
     SystemAttitudes,
     write_geojson,
+    write_strides_csv,
     write_trajectories_csv,
     write_trajectories_parquet,
     write_tum,
@@ -76,6 +77,11 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
         if loop and "loop_closure_m" not in block:
             block["loop_closure_m"] = loop_closure_m(traj)
         block.update(_outage_block(result, name))
+        if name in result.sensor_alone:
+            alone = result.sensor_alone[name]
+            p75 = alone["horizontal_error_m"]["p75"]
+            block["sensor_alone"] = {**alone, "fused_over_alone_p75": block["horizontal_error_m"]["p75"] / p75
+                                     if p75 > 0 else None}
         block["diagnostics"] = system.diagnostics()
         block["health"] = health[name]
         systems[name] = block
@@ -153,6 +159,7 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     long = sum(len(track.t) for track in result.trajectories.values()) // output.decimate > ROWS  # worth a fork
     beside = Forked(lambda: _write_tracks(result, out_dir), fork=long)  # at the same time as the two tables
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
+    write_strides_csv(out_dir / "strides.csv", result.systems)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
                                config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
     doc = metrics_document(result, config_label, total_wall_s)

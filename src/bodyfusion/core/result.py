@@ -43,6 +43,9 @@ class RunResult:
     """Counts of the constraints applied to the smoothed tracks (``smoother.constrain_smoothed``)."""
     nees: dict[str, NeesTrack] = field(default_factory=dict)
     """Horizontal NEES against truth of every scored system (after the evaluation alignment)."""
+    sensor_alone: dict[str, dict] = field(default_factory=dict)
+    """Per system with an absolute sensor (a phone's GNSS) and geo-referenced truth: the errors
+    of that sensor used alone (:func:`bodyfusion.evaluation.metrics.sensor_alone_score`)."""
     findings: list[Finding] = field(default_factory=list)
     """Health findings of the run (:class:`~bodyfusion.base.findings.Finding`): the systems', the
     fuser's and the evaluation's, in that order."""
@@ -126,6 +129,14 @@ class RunResult:
         from bodyfusion.core import result_frames
 
         return result_frames.events(self)
+
+    def strides(self) -> pd.DataFrame:
+        """Every foot system's strides (strides.csv): ``system``, ``stride``, ``t_start``,
+        ``t_end`` (s), ``length_m``, ``duration_s``, ``speed_mps``, ``climb_m``, ``clearance_m``,
+        ``motion`` (:mod:`bodyfusion.plugins.foot_ins.strides` for the foot INS)."""
+        from bodyfusion.core import result_frames
+
+        return result_frames.strides(self)
 
     def innovations(self) -> pd.DataFrame:
         """Every recorded update: ``system``, ``t``, ``aiding`` (``zupt``, ``position_fix``,

@@ -67,6 +67,14 @@ def errors(result: RunResult) -> pd.DataFrame:
     return _long(parts, ["t", "horizontal_error_m", "vertical_error_m"])
 
 
+def strides(result: RunResult) -> pd.DataFrame:
+    """``system`` and every foot system's strides (:meth:`~bodyfusion.core.system.SensorSystem.strides`)."""
+    parts = [pd.DataFrame({"system": name, **cols}) for name, s in result.systems.items() if len(cols := s.strides())
+             and len(cols["stride"])]
+    columns = ["system", "stride", "t_start", "t_end", "length_m", "duration_s", "speed_mps"]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame({c: [] for c in columns})
+
+
 def events(result: RunResult) -> pd.DataFrame:
     """``system``, ``event`` (``stance``, ``step``), ``t`` and ``t_end`` (s), ``duration_s`` and,
     where the system measures it, ``length_m``: every system's gait events."""

@@ -18,6 +18,7 @@ from bodyfusion.core.heading import align_headings, heading_ties
 from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.limits import resolve_constraints, truth_separation_findings
+from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings
 from bodyfusion.core.output import write_outputs
 from bodyfusion.core.progress import FusionProgress
 from bodyfusion.core.result import RunResult
@@ -30,7 +31,7 @@ from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
 from bodyfusion.core.truth import read_truth
 from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.figure_process import FigureProcess
-from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
+from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
 from bodyfusion.nav.earth import normal_gravity
 
 __all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "load_truth", "run", "run_layout"]
@@ -154,28 +155,33 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
         transform, scores = PlanarTransform.identity(), {}
     nees = {name: horizontal_nees(trajectories[name], score, transform, truth_cfg.alignment)
             for name, score in scores.items()}
+    alone = {name: sensor_alone_score(*fixes, truths[name]) for name in scores
+             if truth_cfg.alignment == "none" and (fixes := systems[name].absolute_fixes()) is not None}
     timings["scoring_s"] = time.perf_counter() - t0
     log.debug("stage times: %s", ", ".join(f"{k} {v:.3f}" for k, v in timings.items()))
     result = RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
-                       aiding, smoothed_constraints, nees)
+                       aiding, smoothed_constraints, nees, sensor_alone=alone)
     result.findings = [f for s in (*systems.values(), *aiding.values()) for f in s.findings()]
     if report.limits is not None:
         result.findings += report.limits.findings()
         result.findings += truth_separation_findings(constraints, report.constraint_log, truths)
-    for finding in result.findings:
-        LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
+    result.findings += sensor_alone_findings(scores, alone)
+    result.findings += large_error_findings(scores, result.findings)
     return result
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
         seed: int = 0, progress: ProgressCallback | None = None,
         figure_process: FigureProcess | None = None) -> tuple[RunResult, Path]:
-    """Load, run (``progress`` as :func:`run_layout` takes it), and write outputs (the plots by
-    ``figure_process`` when given one); returns the result and the output folder."""
+    """Load, run (``progress`` as :func:`run_layout` takes it), write outputs (the plots by
+    ``figure_process`` when given one) and say the run's health findings on the log (stderr from
+    the command line), one line each; returns the result and the output folder."""
     t0 = time.perf_counter()
     log.info("loading %s", config_path)
     loaded = load_layout(config_path, overrides)
     result = run_layout(loaded, seed, progress)
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
     write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0, figure_process=figure_process)
+    for finding in result.findings:  # on stderr, as in metrics.json
+        LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
     return result, out

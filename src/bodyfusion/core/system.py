@@ -254,6 +254,12 @@ class SensorSystem(Plugin):
         reference other systems' headings are aligned to. Default: False."""
         return False
 
+    def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The system's absolute position sensor alone, for comparison (a phone's GNSS): fix
+        times (K,) s and ENU positions (K, 3) m, every fix its user would have (outages
+        masked); None (the default) without such a sensor."""
+        return None
+
     @property
     def wants_body_place(self) -> bool:
         """True for a system whose initial position is not given and that knows where on the body
@@ -360,6 +366,12 @@ class SensorSystem(Plugin):
         """Gait events the system detected, as equal-length columns: ``event`` (``stance``,
         ``step``...), ``t`` (start, s), ``t_end`` (s; equal to ``t`` for an instant) and, where the
         system has it, ``length_m`` (a step's length). Default: none."""
+        return {}
+
+    def strides(self) -> dict[str, np.ndarray]:
+        """The gait stride by stride, for a system worn on a foot: equal-length columns ``stride``,
+        ``t_start``, ``t_end`` (s), ``length_m``, ``duration_s``, ``speed_mps`` and what else it
+        measures (strides.csv). Default: none."""
         return {}
 
     # --- consistency ----------------------------------------------------------------

@@ -396,3 +396,17 @@ def score_systems(
         transform = PlanarTransform.identity()
     scores = {n: _score_one(n, estimates[n], truths[n], transform, loop) for n in names}
     return transform, scores
+
+
+def sensor_alone_score(t_fix: np.ndarray, pos_fix: np.ndarray, truth: TruthTrack) -> dict:
+    """The error of a system's absolute sensor used alone (a phone's GNSS fixes, ``t_fix`` (K,) s,
+    ``pos_fix`` (K, 3) ENU m) at every truth epoch, as its user has it: the last fix at or before
+    the epoch (the first fix before any), no alignment. ``horizontal_error_m`` (and, with 3-D
+    truth, ``vertical_error_m``) blocks of :func:`error_stats`."""
+    t = np.asarray(truth.t, dtype=float)
+    k = np.clip(np.searchsorted(t_fix, t, side="right") - 1, 0, len(t_fix) - 1)
+    d = np.asarray(pos_fix, dtype=float)[k] - np.asarray(truth.pos_n, dtype=float)
+    out = {"horizontal_error_m": error_stats(np.hypot(d[:, 0], d[:, 1]))}
+    if np.asarray(truth.pos_n).shape[1] > 2 and np.isfinite(d[:, 2]).any():
+        out["vertical_error_m"] = error_stats(np.abs(d[:, 2]))
+    return out

@@ -34,6 +34,7 @@ from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Esti
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
 from bodyfusion.plugins.foot_ins.stance import detect_stance, stance_findings
+from bodyfusion.plugins.foot_ins.strides import stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
@@ -506,6 +507,12 @@ class FootIns(SensorSystem):
     def events(self) -> dict[str, np.ndarray]:
         """The stance phases the detector found."""
         return stance_phases(self.stream.t, self.stance[:self._i + 1])
+
+    def strides(self) -> dict[str, np.ndarray]:
+        """Stride by stride, on the navigated (smoothed where smoothed) track
+        (:func:`~bodyfusion.plugins.foot_ins.strides.stride_table`)."""
+        n = self._i + 1
+        return stride_table(self.stream.t[:n], self._history()[0][:, 0:3], self.stance[:n])
 
     def innovations(self) -> dict[str, np.ndarray]:
         """Every stance update's NIS (``zupt``, 3 dof, before the gate; beyond it: de-weighted; the

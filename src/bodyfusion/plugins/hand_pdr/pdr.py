@@ -54,15 +54,47 @@ def azimuth_increments(t: np.ndarray, gyro_b: np.ndarray, up_b: np.ndarray) -> n
     return np.concatenate([[0.0], np.cumsum(-0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)])
 
 
+MISSED_STEPS = 1.6
+"""A gap between detected steps longer than this many step periods holds missed steps."""
+MISSED_STEP_SHARE = 0.6
+"""A missed step's peak is at least this share of the median peak of the steps detected within
+:data:`NEIGHBOURS_S` of it: softer than its neighbours, not a phone resting between walks."""
+NEIGHBOURS_S = 5.0
+"""Span (s) on each side of a gap whose detected steps set the height a missed step must reach."""
+
+
 def detect_steps(t: np.ndarray, acc_b: np.ndarray, cfg: StepConfig, gravity: float) -> np.ndarray:
     """Sample indices of steps: peaks of the low-passed ‖f‖ − g above the threshold, at least
-    ``min_interval_s`` apart (debounced)."""
+    ``min_interval_s`` apart (debounced); then the steps the threshold missed while the walk
+    goes on (a soft step, a phone held more gently), as the foot INS's watchdog finds its
+    missed stances: where the signal repeats with a step period P
+    (:func:`bodyfusion.nav.gait.stride_period` of ‖f‖ − g: one cycle per step), a gap between
+    detected steps longer than :data:`MISSED_STEPS` P is cut into periods, and the highest peak
+    of each is a step if it reaches :data:`MISSED_STEP_SHARE` of its neighbours' median."""
     from scipy.signal import find_peaks
+
+    from bodyfusion.nav.gait import stride_period
 
     rate = 1.0 / np.median(np.diff(t))
     a = lowpass(np.linalg.norm(acc_b, axis=1) - gravity, rate, cfg.lowpass_hz)
-    peaks, _ = find_peaks(a, height=cfg.threshold_mps2, distance=max(1, int(round(cfg.min_interval_s * rate))))
-    return peaks
+    distance = max(1, int(round(cfg.min_interval_s * rate)))
+    peaks, _ = find_peaks(a, height=cfg.threshold_mps2, distance=distance)
+    period = stride_period(a, rate) * rate  # samples per step; NaN where nothing repeats
+    fills = []
+    for lo, hi in zip(np.concatenate([[0], peaks]), np.concatenate([peaks, [a.size]])):
+        p = float(np.nanmedian(period[lo:hi])) if np.isfinite(period[lo:hi]).any() else np.nan
+        if not p > 0 or hi - lo <= MISSED_STEPS * p:
+            continue
+        near = peaks[(peaks >= lo - NEIGHBOURS_S * rate) & (peaks <= hi + NEIGHBOURS_S * rate)]
+        floor = MISSED_STEP_SHARE * float(np.median(a[near])) if near.size else np.inf
+        cycles = max(1, int(round((hi - lo) / p)) - 1)  # whole steps strictly between the two
+        for c0, c1 in zip(np.linspace(lo + 0.5 * p, hi - 0.5 * p, cycles + 1)[:-1].astype(int),
+                          np.linspace(lo + 0.5 * p, hi - 0.5 * p, cycles + 1)[1:].astype(int)):
+            if c1 > c0:
+                k = c0 + int(np.argmax(a[c0:c1]))
+                if a[k] >= floor and k - max([lo, *fills[-1:]]) >= distance:
+                    fills.append(k)
+    return np.sort(np.concatenate([peaks, np.asarray(fills, dtype=peaks.dtype)]))
 
 
 def weinberg_features(t: np.ndarray, acc_b: np.ndarray, steps: np.ndarray, cfg: StepConfig) -> np.ndarray:

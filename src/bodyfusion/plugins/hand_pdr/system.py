@@ -27,7 +27,9 @@ Heading from the GNSS course, z = wrap(ψ_gnss − ψ̂), only from a fix taken 
 detects steps with the phone held steadily, fast enough and accurate enough (a standing
 phone's course is its GNSS jitter). Each update is gated by the chi-square test on its
 innovation. The fixes' σ_k, the fixes skipped (in an outage, held, too fast) and the start
-fix: :mod:`bodyfusion.plugins.hand_pdr.fixes`.
+fix: :mod:`bodyfusion.plugins.hand_pdr.fixes`; the updates, the heading from the track's shape
+and the re-anchoring of a dead reckoning that strayed from the fixes:
+:mod:`bodyfusion.plugins.hand_pdr.gnss_aiding`.
 
 Start from GNSS (``initial.position_m: gnss``): from the first usable fix that its
 successor confirms (:mod:`~bodyfusion.plugins.hand_pdr.fixes`; earlier fixes are skipped).
@@ -82,6 +84,8 @@ from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
 from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
+from bodyfusion.plugins.hand_pdr.gnss_aiding import DIFFUSE_SD_M, GnssAiding
+from bodyfusion.plugins.hand_pdr.track_heading import TrackHeading
 from bodyfusion.plugins.hand_pdr.model import B, BE, BN, C, E, N, O, PSI, U, PdrModel
 from bodyfusion.plugins.hand_pdr.magnetometer import (
     MagneticHeading,
@@ -101,11 +105,9 @@ N_ERR = 9
 """Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
 STEP, GNSS, MAGNETOMETER, STEADY = range(4)
 """Event kinds, in the order they are processed at one time."""
-DIFFUSE_SD_M = 1e3
-"""One-sigma (m) of a position not known yet: far above any fix error, well inside float64."""
 
 
-class HandPdr(SensorSystem):
+class HandPdr(GnssAiding, SensorSystem):
     """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
     with the magnetometer's holding offset), or a bank of them while the heading is unknown.
 
@@ -264,8 +266,11 @@ class HandPdr(SensorSystem):
         self.gnss_counts = {"accepted": 0, "rejected": 0, "masked": 0, "held": 0, "too_fast": 0, "before_start": 0,
                             "position_resets": 0, "heading_accepted": 0, "heading_rejected": 0,
                             "heading_skipped_standing": 0, "heading_skipped_handling": 0,
-                            "heading_skipped_accuracy": 0}
-        self.nis_records = {"gnss_position": NisRecord(3), "gnss_course": NisRecord(1)}
+                            "heading_skipped_accuracy": 0, "track_heading_accepted": 0, "track_heading_rejected": 0,
+                            "reanchored": 0}
+        self.reanchor_times: list[float] = []
+        self.nis_records = {"gnss_position": NisRecord(3), "gnss_course": NisRecord(1), "gnss_track": NisRecord(1)}
+        self._track = TrackHeading(f.gnss_correlated_fraction)
         if self._mag is not None:
             self.nis_records["magnetometer"] = NisRecord(1)
         self._hist_x = GrowingArray((1 + len(self._nominal),))  # t, nominal state
@@ -316,6 +321,8 @@ class HandPdr(SensorSystem):
             h.x[1] += s * cos
         count = len(self._bank)
         self._bank.transition(self._model.F_step[:count], self._model.Q_step[:count])
+        x = self._bank.moments(copy=False)[0]
+        self._track.step(x[7] * s_model, x[3])
 
     def _update(self, H: np.ndarray, residual: Callable[[np.ndarray], np.ndarray], R: np.ndarray, gate: float,
                 weigh: bool, kind: str | None) -> bool:
@@ -335,6 +342,7 @@ class HandPdr(SensorSystem):
         it is unknown, so the bank is spread round the circle again from the mixture's moments;
         so is the holding offset: back to its prior (δo ← fresh, σ ``offset_sd_deg``), or, if
         ``auto``, taken afresh from the next accepted sample."""
+        self._track.clear()
         x, P = self._bank.moments()
         mag = self.config.magnetometer
         if self._mag is not None:
@@ -345,52 +353,6 @@ class HandPdr(SensorSystem):
         self._bank.spread(x, P, self.config.initial.heading_hypotheses)
         self.heading_resolved_s = None
         self.heading_counts["reopened"] += 1
-
-    def _forget_position(self) -> None:
-        """δp ← fresh with σ :data:`DIFFUSE_SD_M` (rows of δp in the transition zeroed)."""
-        F = np.eye(self.n_err)
-        F[[E, N, U]] = 0.0
-        Q = np.diag([DIFFUSE_SD_M**2 if i in (E, N, U) else 0.0 for i in range(self.n_err)])
-        self._bank.transition(F, Q)
-
-    def _gnss(self, j: int) -> None:
-        counts, fx = self.gnss_counts, self._fixes
-        skipped = fx.skipped(j, self._start_fix)
-        if skipped is not None:
-            counts[skipped] += 1
-            return
-        f = self.config.filter
-        walking, steady = bool(fx.walking[j]), bool(fx.steady[j])
-        self._model.gnss_position(fx.sd[j])
-        H, R = self._model.H_pos, self._model.R_pos
-        H_nominal = H[:, self._nominal]
-
-        def residual(x: np.ndarray) -> np.ndarray:  # z − (p̂ + σ_k √ρ β̂): linear in the nominal state
-            return fx.pos[j] - H_nominal @ x
-
-        ok = self._update(H, residual, R, self._gate_pos, walking and steady, "gnss_position")
-        self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
-        if not ok and 0 < f.reset_after_rejections <= self._rejected_in_row:
-            self._forget_position()
-            ok = self._update(H, residual, R, self._gate_pos, False, None)
-            counts["position_resets"] += 1
-            self._rejected_in_row = 0
-        counts["accepted" if ok else "rejected"] += 1
-        if len(self._bank) > 1:
-            self.heading_counts["unweighted_standing" if not walking else
-                                "unweighted_handling" if not steady else "weighted"] += 1
-        if not (ok and np.isfinite(fx.course[j]) and fx.speed[j] >= f.min_speed_for_heading_mps):
-            return
-        if not walking:
-            counts["heading_skipped_standing"] += 1
-        elif not steady:
-            counts["heading_skipped_handling"] += 1
-        elif fx.accuracy[j] > f.max_accuracy_for_heading_m:
-            counts["heading_skipped_accuracy"] += 1
-        else:
-            okh = self._update(self._model.H_psi, lambda x: np.array([wrap_angle(fx.course[j] - x[3])]), self._model.R_psi,
-                               self._gate_psi, True, "gnss_course")
-            counts["heading_accepted" if okh else "heading_rejected"] += 1
 
     def _magnetometer(self, k: int) -> None:
         """Heading update from the k-th decimated magnetometer sample (see the module docstring)."""
@@ -458,6 +420,13 @@ class HandPdr(SensorSystem):
     @property
     def heading_is_auto(self) -> bool:
         return self.config.initial.heading_deg == "auto"
+
+    def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Every GNSS fix outside the layout's outages (the phone's GNSS alone)."""
+        if self._fixes is None:
+            return None
+        use = ~self._fixes.masked
+        return (self._fixes.t[use], self._fixes.pos[use]) if use.any() else None
 
     @property
     def heading_is_absolute(self) -> bool:

@@ -1,0 +1,119 @@
+"""Findings of the evaluation against truth: what a score says went wrong, and where to look.
+
+Two kinds: a fused system whose error is no better than its own absolute sensor's alone (a
+phone's track against its GNSS fixes), and a system whose error exceeds
+:data:`LARGE_ERROR_M`, with the run's other findings about it as the likely cause (or, without
+any, the shape of its error: a drift of heading turns the track, a wrong scale stretches it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bodyfusion.base.findings import Finding
+
+
+def sensor_alone_findings(scores: dict, alone: dict) -> list[Finding]:
+    """A warning per system whose fused horizontal p75 error exceeds its sensor alone's
+    (``scores``: name → :class:`~bodyfusion.evaluation.metrics.SystemScore`; ``alone``: name →
+    :func:`~bodyfusion.evaluation.metrics.sensor_alone_score`)."""
+    out = []
+    for name, block in alone.items():
+        fused = scores[name].metrics["horizontal_error_m"]["p75"]
+        own = block["horizontal_error_m"]["p75"]
+        if fused > own:
+            t = scores[name].t
+            out.append(Finding(
+                "worse_than_sensor_alone", "warning", name, float(t[0]), float(t[-1]),
+                f"the fused track is worse than the system's absolute sensor alone: p75 horizontal error "
+                f"{fused:.2f} m against {own:.2f} m from its fixes as they came.",
+                "the dead reckoning strays (missed steps, a heading the fixes could not correct) or the fixes' "
+                "error model trusts them too little.",
+                "look at the system's reanchored count and step count in diagnostics; raise its "
+                "filter.step_scale_sd, or lower filter.gnss_correlated_fraction."))
+    return out
+
+
+LARGE_ERROR_M = 1.0
+"""A horizontal error (m, maximum over the truth epochs) above which a run must say why."""
+SCALE_TOLERANCE = 0.05
+"""A track this much larger or smaller than the truth's (relative) has a scale error."""
+HEADING_DRIFT_DEG = 5.0
+"""A turn of the track between its first and second half (degrees) that is a heading drift."""
+MAX_TRUTH_SPEED_MPS = 15.0
+"""Faster than any body part moves (m/s): a truth that jumps faster has dropped out (a marker
+lost and found again)."""
+DROPOUT_MARGIN_S = 0.5
+"""Time (s) on each side of a truth jump whose errors are the truth's."""
+
+
+def truth_jumps(t: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Times (s) at which the truth track jumps faster than :data:`MAX_TRUTH_SPEED_MPS`."""
+    if len(t) < 2:
+        return np.empty(0)
+    speed = np.hypot(*np.diff(pos[:, :2], axis=0).T) / np.maximum(np.diff(t), 1e-9)
+    return t[1:][speed > MAX_TRUTH_SPEED_MPS]
+
+
+def _similarity(est: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """(scale, rotation rad, counter-clockwise) of the 2-D similarity laying ``est`` (M, 2) onto
+    ``truth`` (M, 2) about their centroids (Umeyama)."""
+    a, b = est - est.mean(axis=0), truth - truth.mean(axis=0)
+    cross = float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+    dot = float(np.sum(a * b))
+    spread = float(np.sum(a * a))
+    return (float(np.hypot(cross, dot) / spread) if spread > 0 else 1.0), float(np.arctan2(cross, dot))
+
+
+def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]:
+    """A warning per system whose horizontal error exceeds :data:`LARGE_ERROR_M`, naming the
+    cause: the run's own findings about the system (or the run's constraints) when it has any,
+    else the shape of the error: a scale (the track larger or smaller than the truth's), a
+    heading drift (its second half turned from its first) or a jump (the error grows at once)."""
+    out = []
+    for name, score in scores.items():
+        err = score.horizontal_error_m
+        finite = np.isfinite(err)
+        if not finite.any() or float(np.max(err[finite])) <= LARGE_ERROR_M:
+            continue
+        t, worst = score.t, int(np.argmax(np.where(finite, err, -np.inf)))
+        own = [f for f in findings if f.severity == "warning" and f.system in (name, None)]
+        est, truth = score.pos_est_aligned[finite, :2], score.pos_truth[finite, :2]
+        half = max(2, len(est) // 2)
+        scale, _ = _similarity(est, truth)
+        turn = np.degrees(_similarity(est[half:], truth[half:])[1] - _similarity(est[:half], truth[:half])[1]) \
+            if len(est) >= 4 else 0.0
+        turn = (turn + 180.0) % 360.0 - 180.0
+        jumps = truth_jumps(t, score.pos_truth)
+        near = jumps[np.abs(jumps - t[worst]) <= DROPOUT_MARGIN_S]
+        if near.size:
+            out.append(Finding(
+                "truth_dropout", "info", name, float(near[0]), float(near[-1]),
+                f"the horizontal error reaches {err[worst]:.2f} m at t = {t[worst]:.1f} s, where the truth itself jumps "
+                f"faster than {MAX_TRUTH_SPEED_MPS:g} m/s (RMSE {score.metrics['horizontal_error_m']['rmse']:.2f} m).",
+                "the reference drops out there (a motion-capture marker lost and found again); the error is the "
+                "truth's.", "nothing in the run; read the maximum error with that in mind."))
+            continue
+        if own:
+            cause = "; ".join(f"{f.kind.replace('_', ' ')} at t = {f.t_start:.1f}–{f.t_end:.1f} s"
+                              if f.t_start is not None else f.kind.replace('_', ' ') for f in own[:3])
+            cause = f"what the run reported about it: {cause} (its findings)."
+            advice = "act on those findings first."
+        elif abs(scale - 1.0) > SCALE_TOLERANCE:
+            cause = (f"a scale error: the track is {scale:.2f} times the truth's size (step lengths, an "
+                     "accelerometer scale, stances missed or found where the foot moved).")
+            advice = "check the detector's stance fraction and the IMU's units; smoothing does not fix scale."
+        elif abs(turn) > HEADING_DRIFT_DEG:
+            cause = (f"a heading drift: the track's second half is turned {turn:.0f}° from its first "
+                     "(gyro bias about Up, which stance updates cannot observe).")
+            advice = ("record a still start of a few seconds (the gyro bias is taken there); add a heading "
+                      "aid (a second foot, a magnetometer, position fixes).")
+        else:
+            cause = f"a jump: the error rises at t = {t[worst]:.1f} s without a scale or heading pattern."
+            advice = "look at the input around that time (a gap, saturation, a clock jump)."
+        out.append(Finding(
+            "large_error", "warning", name, float(t[0]), float(t[-1]),
+            f"the horizontal error reaches {err[worst]:.2f} m (at t = {t[worst]:.1f} s, RMSE "
+            f"{score.metrics['horizontal_error_m']['rmse']:.2f} m), beyond {LARGE_ERROR_M:g} m.",
+            cause, advice))
+    return out
