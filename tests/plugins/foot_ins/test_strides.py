@@ -67,3 +67,14 @@ def test_the_vicon_walks_strides_are_the_truths_within_five_percent(tmp_path):
         b = np.column_stack([np.interp(s.t_end, truth.t, truth.pos_n[:, k]) for k in range(2)])
         true_length = np.hypot(*(b - a).T)
         assert np.median(np.abs(s.length_m.to_numpy() / true_length - 1.0)) < 0.05, foot
+
+
+def test_the_mounting_is_found_from_the_walk(tmp_path):
+    """The square walk's right IMU points 7° clockwise of its foot (mount_yaw_deg: the walk is 7°
+    counter-clockwise of its x axis), the left straight along: the diagnostics find both."""
+    sim = simulate(ROOT / "configs" / "sim_dual_foot_square.yaml", tmp_path, seed=1)
+    result = run_layout(load_layout(sim.config_path))
+    angles = {n: result.systems[n].diagnostics()["mounting"]["forward_from_x_deg"] for n in ("left_foot", "right_foot")}
+    assert angles["left_foot"] == pytest.approx(0.0, abs=0.5) and angles["right_foot"] == pytest.approx(7.0, abs=0.5)
+    up = result.systems["left_foot"].diagnostics()["mounting"]["up_b"]
+    assert up[2] > 0.999

@@ -72,3 +72,32 @@ def stride_table(t: np.ndarray, pos_n: np.ndarray, stance: np.ndarray) -> dict[s
     return {"stride": np.arange(a.size), "t_start": t[a], "t_end": t[b], "length_m": length,
             "duration_s": duration, "speed_mps": length / np.maximum(duration, 1e-9), "climb_m": d[:, 2],
             "clearance_m": clearance, "motion": classify(length, duration, d[:, 2])}
+
+
+def mounting(t: np.ndarray, x: np.ndarray, stance: np.ndarray, acc_b: np.ndarray) -> dict | None:
+    """How the IMU sits on the foot, from the walk itself (None without two walking strides):
+    ``up_b`` the body-frame direction of Up at rest (the mean specific force over the stances),
+    ``forward_from_x_deg`` the angle about Up from the body x axis to the direction of walking
+    (positive counter-clockwise seen from above; each walking stride's displacement against the
+    x axis's azimuth at its first stance, the median over the strides: turns do not bias it), and
+    ``forward_b`` that direction in the body frame. ``x`` (N, 16) the nominal states (q_nb at 6:10)."""
+    from scipy.spatial.transform import Rotation
+
+    table = stride_table(t, x[:, 0:3], stance)
+    walks = np.flatnonzero(table["motion"] == "walk")
+    if walks.size < 2:
+        return None
+    up_b = np.asarray(acc_b)[np.asarray(stance, dtype=bool)[:len(acc_b)]].mean(axis=0)
+    up_b = up_b / np.linalg.norm(up_b)
+    starts = np.searchsorted(t, table["t_start"][walks])
+    ends = np.searchsorted(t, table["t_end"][walks])
+    d_n = x[ends, 0:3] - x[starts, 0:3]
+    x_n = Rotation.from_quat(x[starts, 6:10], scalar_first=True).apply([1.0, 0.0, 0.0])
+    turn = np.arctan2(d_n[:, 0], d_n[:, 1]) - np.arctan2(x_n[:, 0], x_n[:, 1])  # azimuths: clockwise
+    centre = np.angle(np.mean(np.exp(-1j * turn)))  # counter-clockwise from here on
+    angle = centre + float(np.median(np.angle(np.exp(1j * (-turn - centre)))))
+    x_b = np.array([1.0, 0.0, 0.0]) - up_b[0] * up_b
+    x_b /= max(np.linalg.norm(x_b), 1e-12)
+    forward = np.cos(angle) * x_b + np.sin(angle) * np.cross(up_b, x_b)
+    return {"up_b": [float(v) for v in up_b], "forward_b": [float(v) for v in forward],
+            "forward_from_x_deg": float(np.degrees(np.angle(np.exp(1j * angle))))}

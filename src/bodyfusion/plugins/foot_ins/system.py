@@ -34,7 +34,7 @@ from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Esti
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
 from bodyfusion.plugins.foot_ins.stance import detect_stance, stance_findings
-from bodyfusion.plugins.foot_ins.strides import stride_table
+from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
@@ -541,6 +541,8 @@ class FootIns(SensorSystem):
             "missed_stances": self.stance_detection.missed_stances,
             "fallback_updates": int(self.stance_detection.fallback[:self._i + 1].sum()),
             "initialisation": self._initialisation_report(),
+            "mounting": mounting(self.stream.t[:self._i + 1], self._history()[0], self.stance[:self._i + 1],
+                                 self.stream.acc_b),
             **({"input_checks": self.stream.checks.to_dict()} if self.stream.checks is not None else {}),
             "filter_kind": self.config.filter.kind,
             **({"coloured_updates": int(self.counters[C_COLOURED])} if self.config.filter.kind == "ckf" else {}),
