@@ -79,3 +79,34 @@ def test_a_detector_that_misses_most_stances_is_caught_and_the_walk_kept(tmp_pat
     assert result.scores["left_foot"].metrics["horizontal_error_m"]["rmse"] < 0.5  # measured 0.048 (0.051 detected)
     assert any(f.kind == "missed_stances" and f.system == "left_foot" for f in result.findings)
     assert not any(f.kind == "missed_stances" and f.system == "right_foot" for f in result.findings)
+
+
+@pytest.mark.slow
+def test_a_zupt_lockout_is_broken_and_reported(tmp_path, monkeypatch):
+    """Two corrupt gyroscope samples (50 rad/s) in a swing turn the foot's attitude by a radian;
+    every update of the next stance is beyond the gate. The filter re-inflates its velocity and
+    level covariance after that stance, the next one pulls it back, and the run says so: the
+    track stays within metres (the heading the spike turned is not observable) where without the
+    recovery it runs away; the whole-run RTS smooths through the recovery."""
+    import pandas as pd
+
+    from bodyfusion.plugins.foot_ins import system
+
+    sim = simulate(ROOT / "configs" / "sim_perfect_walk.yaml", tmp_path, seed=0,
+                   overrides=["systems={left_foot: {kind: foot_imu, foot: left, imu: {preset: icm20948}}}", "layout={}"])
+    imu = pd.read_csv(tmp_path / "left_foot_imu.csv")
+    swing = int(np.flatnonzero((imu.stance.to_numpy()[:-1] == 1) & (imu.stance.to_numpy()[1:] == 0))[10]) + 10
+    imu.loc[swing:swing + 1, "gyro_x"] = 50.0
+    imu.to_csv(tmp_path / "left_foot_imu.csv", index=False)
+    adaptive = ["systems.left_foot.detector={kind: adaptive}"]
+    result = run_layout(load_layout(sim.config_path, adaptive))
+    left = result.systems["left_foot"]
+    assert left.diagnostics()["zupt_recoveries"] >= 1
+    assert any(f.kind == "zupt_lockout" and "re-inflated" in f.message for f in result.findings)
+    rmse = result.scores["left_foot"].metrics["horizontal_error_m"]["rmse"]
+    smoothed = run_layout(load_layout(sim.config_path, [*adaptive, "smoother.kind=rts"]))
+    assert smoothed.systems["left_foot"].diagnostics()["smoothing"]["warnings"] == 0
+    assert smoothed.scores["left_foot"].metrics["horizontal_error_m"]["rmse"] <= 1.05 * rmse
+    monkeypatch.setattr(system, "MIN_LOCKOUT_SAMPLES", 10**9)  # no recovery
+    locked = run_layout(load_layout(sim.config_path, adaptive)).scores["left_foot"].metrics["horizontal_error_m"]
+    assert rmse < 0.5 * locked["rmse"], (rmse, locked["rmse"])

@@ -35,7 +35,10 @@ MISSED_STRIDES = 2.0
 DEFAULT_STRIDE_S = 1.2
 """Stride period (s) assumed where the recording shows none (an ordinary walk's)."""
 LOCKOUT_STRIDES = 3.0
-"""Stance updates all beyond the gate for this many stride periods are a lockout."""
+"""Stance updates all beyond the gate for this many stride periods are a lockout (a finding)."""
+LOCKOUT_STANCES = 1
+"""Stances in a row whose every update is beyond the gate after which the foot INS re-inflates
+its velocity and level covariance (:meth:`bodyfusion.plugins.foot_ins.system.FootIns._watch_lockout`)."""
 
 
 @dataclass
@@ -142,11 +145,12 @@ def _watch(found: StanceDetection, statistic: np.ndarray, window: int, rate: flo
 
 
 def stance_findings(name: str, found: StanceDetection, t: np.ndarray, hist_nis: np.ndarray,
-                    gate: float) -> list[Finding]:
+                    gate: float, recoveries: list[float] | tuple = ()) -> list[Finding]:
     """The foot's stance findings: the stretches with missed stances (the watchdog's), and the
-    stretches of :data:`LOCKOUT_STRIDES` periods or more whose every stance update was beyond the
-    ZUPT gate (``hist_nis`` (N,): each sample's ZUPT NIS, negative where none; ``gate``: the
-    chi-square gate, 0: off)."""
+    ZUPT lockouts: stretches of :data:`LOCKOUT_STRIDES` periods or more whose every stance update
+    was beyond the gate, and every re-inflation the filter made to end one (``hist_nis`` (N,):
+    each sample's ZUPT NIS, negative where none; ``gate``: the chi-square gate, 0: off;
+    ``recoveries``: the times of the re-inflations, s)."""
     out = []
     if found.missed:
         t0, t1 = t[found.missed[0][0]], t[min(found.missed[-1][1], t.size - 1)]
@@ -165,6 +169,16 @@ def stance_findings(name: str, found: StanceDetection, t: np.ndarray, hist_nis: 
             "detector.kind labels with a stance column if the recording has them."))
     if gate > 0 and hist_nis.size:
         out += _lockouts(name, found, t, hist_nis, gate)
+    if len(recoveries):
+        out.append(Finding(
+            "zupt_lockout", "warning", name, float(recoveries[0]), float(recoveries[-1]),
+            f"{len(recoveries)} time(s) the zero-velocity updates of {LOCKOUT_STANCES} stances in a row were all "
+            f"beyond the gate (the first at t = {recoveries[0]:.1f} s); the filter re-inflated its velocity and "
+            "level covariance each time so that the next stance could pull it back.",
+            "the velocity and attitude had gone wrong in between: a corrupt or clipped sample, a gap, stances "
+            "missed before.",
+            "look at the input there (spikes beyond the body's rates, saturation, gaps); the position error made "
+            "before the recovery stays."))
     return out
 
 

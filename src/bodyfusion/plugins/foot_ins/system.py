@@ -8,7 +8,7 @@ import logging
 
 import numpy as np
 
-from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
@@ -20,31 +20,34 @@ from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
 from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.earth import earth_rate_enu
-from bodyfusion.nav.error_state import (DPOS, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY,
-                                       P_ZUPT_GATE, P_ZUPT_PIVOT, PARAMS_SIZE, rotate_about_up)
+from bodyfusion.nav.error_state import (DVEL, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY, P_ZUPT_GATE,
+                                       P_ZUPT_PIVOT, PARAMS_SIZE)
 from bodyfusion.nav.frames import apply_axis_map
-from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
-                                              find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import BODY_POSITION_SD_M, STANCE_WIDTH_M, FootInsConfig
+from bodyfusion.plugins.foot_ins.initial_state import InitialState
 from bodyfusion.plugins.foot_ins.input_policy import (covariance_increments, navigation_clock, repair_saturation,
                                                       saturation_findings)
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
-                                                 NO_RESET, NO_STANCE, NOT_PACKED, no_record, run_foot_ins)
-from bodyfusion.plugins.foot_ins.stance import detect_stance, stance_findings
+                                                 NO_RESET, NO_STANCE, NOT_PACKED)
+from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, stance_findings
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
 
-MIN_STILL_SAMPLES = 10
-"""Fewest samples in a still window: its spreads must measure the sensor's noise."""
+MIN_LOCKOUT_SAMPLES = 5
+"""Stance updates a stance needs before all of them beyond the gate count as a lockout."""
+RECOVERY_VELOCITY_SD_MPS = 0.1
+"""Velocity σ (m/s) a ZUPT lockout adds beside the velocity the filter holds."""
+RECOVERY_LEVEL_SD_RAD = 0.05
+"""Roll and pitch σ (rad, ~3°) a ZUPT lockout adds."""
 
 log = logging.getLogger(__name__)
 
 
-class FootIns(SensorSystem):
+class FootIns(InitialState, SensorSystem):
     """Foot-mounted IMU navigated by strapdown + ZUPT, closed loop.
 
     Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`bodyfusion.nav.error_state`.
@@ -83,7 +86,8 @@ class FootIns(SensorSystem):
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
-        self._gap_index, self._gap_P = covariance_increments(self.stream, context.gravity_mps2, self.clipping)
+        self._input_increments = covariance_increments(self.stream, context.gravity_mps2, self.clipping)
+        self._stance_runs = detectors.stance_events(self.stance)
         self._t_nav = navigation_clock(self.stream)
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
@@ -139,98 +143,6 @@ class FootIns(SensorSystem):
             p[index] = 0.0 if tau is None else 1.0 / tau
         return p
 
-    def _find_still_interval(self) -> StillInterval:
-        """The first still interval (:func:`bodyfusion.nav.initial_alignment.find_still_interval`);
-        without one, the quietest window, and a warning."""
-        ini = self.config.initial
-        key = f"systems.{self.name}.initial.stationary_s"
-        t = self.stream.t
-        length = round(ini.stationary_s * self._rate_hz)
-        if length < MIN_STILL_SAMPLES:
-            raise ConfigError(key, f"{ini.stationary_s:g} s holds {length} samples at {self._rate_hz:.4g} Hz; "
-                                   f"the noise of a still window needs at least {MIN_STILL_SAMPLES}")
-        if length > len(t):
-            raise ConfigError(key, f"{ini.stationary_s} s is longer than the recording ({t[-1] - t[0]:.3g} s)")
-        still = find_still_interval(self.stream.acc_b, self.stream.gyro_b, length, ini.still_acc_sd_mps2,
-                                    ini.still_gyro_sd_radps)
-        span = f"t = {t[still.start]:.2f}–{t[still.stop - 1]:.2f} s"
-        if not still.still:
-            self.stream.report.warn(
-                f"{self.name}: no still interval of {ini.stationary_s:g} s (spreads ≤ {ini.still_acc_sd_mps2:g} m/s^2, "
-                f"{ini.still_gyro_sd_radps:g} rad/s); levelled on the quietest window {span} (spreads "
-                f"{still.acc_spread_mps2:.2g} m/s^2, {still.gyro_spread_radps:.2g} rad/s), level and gyro-bias "
-                "uncertainty at least the standard errors of its means")
-        elif still.start > 0:
-            self.stream.report.notes.append(f"{self.name}: levelled on the still interval {span}; the "
-                                            f"{t[still.start] - t[0]:.2f} s before it navigated backward from there")
-        return still
-
-    def _initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """The state at the first sample: levelled (TRIAD on the mean specific force) and the
-        gyro bias (mean angular rate) on the still interval, the heading from the layout; if
-        the interval starts later, navigated backward to the first sample (:meth:`_navigate_back`)."""
-        ini = self.config.initial
-        st = self.still
-        window = slice(st.start, st.stop)
-        f_b = self.stream.acc_b[window].mean(axis=0)
-        self.heading_axis = heading_axis(f_b, ini.heading_axis)
-        if self.heading_axis != ini.heading_axis and ini.heading_deg != "auto" and not hasattr(self, "_x0"):
-            self.stream.report.warn(f"{self.name}: body axis {ini.heading_axis} is near vertical at rest; "
-                                    f"initial.heading_deg is taken as the heading of axis {self.heading_axis}")
-        level_sd = np.deg2rad(ini.level_sd_deg)
-        gyro_bias_sd = ini.gyro_bias_sd_radps
-        if not st.still:  # the mean over a moving window: the standard errors of its means
-            level_sd = max(level_sd, mean_standard_error(self.stream.acc_b[window]) / self.context.gravity_mps2)
-            gyro_bias_sd = max(gyro_bias_sd, mean_standard_error(self.stream.gyro_b[window]))
-        x = np.zeros(NOMINAL_SIZE)
-        x[6:10] = attitude_from_specific_force(f_b, self._azimuth0, self.heading_axis)
-        x[13:16] = self.stream.gyro_b[window].mean(axis=0)
-        sd = np.concatenate([
-            np.full(3, self._position_sd0), np.full(3, ini.velocity_sd_mps),
-            [level_sd, level_sd, np.deg2rad(ini.heading_sd_deg)],
-            np.full(3, ini.acc_bias_sd_mps2), np.full(3, gyro_bias_sd)])
-        P = np.diag(sd**2)
-        self._still_priors = {"level_sd_deg": float(np.degrees(level_sd)), "gyro_bias_sd_radps": float(gyro_bias_sd)}
-        if st.start > 0:
-            x, P = self._navigate_back(x, P, st.start)
-        x[0:3] = self._position0
-        return x, P
-
-    def _navigate_back(self, x_s: np.ndarray, P_s: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
-        """From the state at sample s back to sample 0: the forward kernel run on the reversed
-        record (t → −t, ω → −ω, the same specific force; velocity, gyro bias and the Earth
-        rate change sign), with the same gated ZUPTs. The result is turned about Up so that
-        the heading at sample 0 is the layout's, and its covariance doubled: the forward run
-        uses the same zero-velocity updates again (the bound for information counted twice);
-        position restarts from the layout's with its prior σ."""
-        st = self.stream
-        r = np.arange(s + 1)
-        src = np.minimum(s - r + 1, s)  # the sample whose interval is stepped back over (r ≥ 1)
-        params = self._params.copy()
-        params[P_EARTH_RATE] *= -1.0
-        sign = np.ones(15)
-        sign[3:6] = sign[12:15] = -1.0
-        flip = np.outer(sign, sign)
-        xb = x_s.copy()
-        xb[3:6] *= -1.0
-        xb[13:16] *= -1.0
-        Pb = P_s * flip
-        t_r, acc_r, gyro_r = -self._t_nav[s - r], st.acc_b[src], -st.gyro_b[src]
-        stance_r = np.ascontiguousarray(self.stance[s - r])
-        hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
-        self.backward_counters = np.zeros(COUNTERS_SIZE)
-        run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
-                     hist_x, hist_cov, np.empty(s + 1), self.backward_counters, *no_record())
-        xb[3:6] *= -1.0
-        xb[13:16] *= -1.0
-        Pb = 2.0 * (Pb * flip)
-        a_n = quat_to_dcm(xb[6:10]) @ AXIS_VECTORS[self.heading_axis]
-        x0, P0 = rotate_about_up(xb, Pb, self._azimuth0 - float(np.arctan2(a_n[0], a_n[1])))
-        P0[DPOS, :] = 0.0
-        P0[:, DPOS] = 0.0
-        P0[DPOS, DPOS] = np.eye(3) * self._position_sd0**2
-        return x0, P0
-
     def restart(self) -> None:
         """Back to the initial state at the first sample; history cleared (an ensemble redrawn from the same seed)."""
         n = len(self.stream)
@@ -244,6 +156,9 @@ class FootIns(SensorSystem):
         compile_step_ahead(self.filter, self.run_data, self.phi, self.context.compiling_ahead)
         self.filter.reset_and_record(*NO_RESET, self.run_data, 0, NOT_PACKED)
         self.corrections = CovarianceLog()  # the covariances corrections outside the compiled loop leave
+        self._gap_index, self._gap_P = self._input_increments[0].copy(), self._input_increments[1].copy()
+        self._locked_stances = 0
+        self.zupt_recoveries: list[float] = []  # times (s) the ZUPT lockout re-inflated the covariance
         self.fix_counts = GateCounts()
         self.fix_nis = NisRecord(3)
         self._next_fix = 0
@@ -296,22 +211,67 @@ class FootIns(SensorSystem):
         self._run_to(i1)
 
     def _run_to(self, i1: int) -> None:
-        """Process samples up to (excluding) index i1 in compiled chunks, split where the gap
-        policy inflates the covariance (recorded for the smoothers)."""
+        """Process samples up to (excluding) index i1 in compiled chunks, split where a covariance
+        increment applies (the gap and saturation policies, a ZUPT recovery: recorded for the
+        smoothers) and, with a ZUPT gate, at every stance's end to watch for a lockout
+        (:meth:`_watch_lockout`)."""
         i = self._i + 1
         if i1 <= i:
             return
-        g = self._gap_index  # sorted; the usual case, none ahead, costs no search
-        gaps = g[g.searchsorted(i):g.searchsorted(i1)].tolist() if g.size and g[-1] >= i else []
-        for a, b in zip([i, *gaps], [*gaps, i1]):
-            if a in gaps:
+        ends = self._stance_runs[1]
+        watch = self._params[P_ZUPT_GATE] > 0.0 and self.filter.smoothable  # the ensembles keep no NIS
+        while i < i1:
+            g = self._gap_index
+            k = int(g.searchsorted(i))
+            if k < g.size and g[k] == i:
                 dP = np.zeros_like(self.P)
-                dP[:15, :15] = self._gap_P[g.searchsorted(a)]
-                self._i = a - 1
+                dP[:15, :15] = self._gap_P[k]
+                self._i = i - 1
                 self.apply_correction(np.zeros(self.P.shape[0]), self.P + dP)
-            self.filter.run(self.run_data, a, b, self.phi)
+                k += 1
+            b = min(i1, int(g[k]) if k < g.size else i1)
+            r = int(ends.searchsorted(i, side="right"))
+            if watch and r < ends.size and ends[r] < b:
+                b = int(ends[r])
+            self.filter.run(self.run_data, i, b, self.phi)
+            if watch and r < ends.size and ends[r] == b:
+                self._watch_lockout(r)
+            i = b
         self._i = i1 - 1
         self._forward_record.capture(self._i, self.P)  # for a correction made here next
+
+    def _watch_lockout(self, r: int) -> None:
+        """After stance run r: a stance whose every zero-velocity update was beyond the gate, the
+        :data:`~bodyfusion.plugins.foot_ins.stance.LOCKOUT_STANCES`-th in a row, means the filter's
+        velocity and level disagree with rest by more than its covariance allows (a corrupt
+        sample, a missed stance before): the velocity and level variances are re-inflated before
+        the next step, by the velocity held and :data:`RECOVERY_VELOCITY_SD_MPS` beside it, and by
+        the tilt the stance's specific force shows (the angle between Up and its mean turned into
+        the navigation frame by the attitude held) and :data:`RECOVERY_LEVEL_SD_RAD` beside it, so
+        that the next stance's updates pass the gate and pull the state back."""
+        a, b = int(self._stance_runs[0][r]), int(self._stance_runs[1][r])
+        nis = self.run_data.hist_nis[a:b]
+        nis = nis[nis >= 0.0]
+        if nis.size < MIN_LOCKOUT_SAMPLES or not np.all(nis > self._params[P_ZUPT_GATE]):
+            self._locked_stances = 0
+            return
+        self._locked_stances += 1
+        if self._locked_stances < LOCKOUT_STANCES or b >= len(self.stream):
+            return
+        dP = np.zeros((15, 15))
+        v = self.hist_x[b - 1, 3:6]
+        dP[DVEL, DVEL] = np.diag(v**2) + RECOVERY_VELOCITY_SD_MPS**2 * np.eye(3)
+        up_n = quat_to_dcm(self.hist_x[b - 1, 6:10]) @ self.stream.acc_b[a:b].mean(axis=0)
+        tilt = float(np.arccos(np.clip(up_n[2] / max(np.linalg.norm(up_n), 1e-12), -1.0, 1.0)))
+        dP[6, 6] = dP[7, 7] = tilt**2 + RECOVERY_LEVEL_SD_RAD**2
+        at = int(self._gap_index.searchsorted(b))
+        if at < self._gap_index.size and self._gap_index[at] == b:
+            self._gap_P[at] = self._gap_P[at] + dP
+        else:
+            self._gap_index = np.insert(self._gap_index, at, b)
+            self._gap_P = np.insert(self._gap_P, at, dP, axis=0)
+        self.zupt_recoveries.append(float(self.stream.t[b - 1]))
+        self._locked_stances = 0
 
     # --- heading ------------------------------------------------------------------
     @property
@@ -469,21 +429,6 @@ class FootIns(SensorSystem):
         self.smoothed_pos_cov = pos_cov
         self.smoothing_diagnostics = diagnostics
 
-    def _initialisation_report(self) -> dict:
-        st, t = self.still, self.stream.t
-        P0 = self._P0
-        report = {"still_interval_s": [float(t[st.start]), float(t[st.stop - 1])], "still": st.still,
-                  "acc_spread_mps2": st.acc_spread_mps2, "gyro_spread_radps": st.gyro_spread_radps,
-                  "heading_axis": self.heading_axis, **self._still_priors,
-                  "first_sample_sd": {"level_deg": float(np.degrees(np.sqrt(max(P0[6, 6], P0[7, 7])))),
-                                      "heading_deg": float(np.degrees(np.sqrt(P0[8, 8]))),
-                                      "gyro_bias_radps": float(np.sqrt(np.max(np.diag(P0)[12:15])))}}
-        if st.start > 0:
-            report["backward_s"] = float(t[st.start] - t[0])
-            report["backward_zupts"] = int(self.backward_counters[C_ZUPTS])
-            report["backward_zupt_gated"] = int(self.backward_counters[C_GATED])
-        return report
-
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         x, cov = self._history()
@@ -540,6 +485,7 @@ class FootIns(SensorSystem):
             "zupt_gated": int(self.counters[C_GATED]),
             "missed_stances": self.stance_detection.missed_stances,
             "fallback_updates": int(self.stance_detection.fallback[:self._i + 1].sum()),
+            "zupt_recoveries": len(self.zupt_recoveries),
             "initialisation": self._initialisation_report(),
             "mounting": mounting(self.stream.t[:self._i + 1], self._history()[0], self.stance[:self._i + 1],
                                  self.stream.acc_b),
@@ -582,7 +528,7 @@ class FootIns(SensorSystem):
         levelling without rest."""
         n = self._i + 1
         out = stance_findings(self.name, self.stance_detection, self.stream.t[:n], self.run_data.hist_nis[:n],
-                              float(self._params[P_ZUPT_GATE]))
+                              float(self._params[P_ZUPT_GATE]), self.zupt_recoveries)
         out += saturation_findings(self.name, self.clipping, self.stream.t)
         if not self.still.still:
             t = self.stream.t
