@@ -49,6 +49,21 @@ def test_each_missed_stride_gets_one_fallback_at_its_stillest_instant():
     assert found.stance[marked].all() and found.missed_stances == n
 
 
+def test_a_foot_moving_without_a_gait_is_restless_not_missing_stances():
+    """No stride repeats in the stretch (the period is unknown there: turning on the spot): the
+    fallbacks are made all the same, but it is said as a restless foot, for information."""
+    statistic, stance, _ = _gait(20)
+    detected = stance.copy()
+    detected[5 * 110:15 * 110 - 20] = False
+    period = np.full(stance.size, 1.1)
+    period[5 * 110:15 * 110] = np.nan
+    found = StanceDetection(detected, detected, period, np.zeros_like(stance))
+    _watch(found, statistic, 3, RATE)
+    assert found.missed == [] and len(found.restless) == 1 and found.fallback.any()
+    (finding,) = stance_findings("left_foot", found, np.arange(stance.size) / RATE, np.full(stance.size, -1.0), 16.27)
+    assert finding.kind == "restless_foot" and finding.severity == "info"
+
+
 def test_missed_stances_and_lockouts_are_findings():
     statistic, stance, _ = _gait(20)
     detected = stance.copy()

@@ -46,13 +46,16 @@ class StanceDetection:
     """A foot's stance: ``stance`` (N,) the samples updated as at rest (the detector's and the
     watchdog's fallbacks), ``detected`` (N,) the detector's alone, ``period_s`` (N,) the stride
     period (s; NaN where no gait repeats), ``missed`` the stretches with missed stances as
-    (first sample, end sample, stances missed), ``fallback`` (N,) the fallback samples."""
+    (first sample, end sample, stances missed) where a gait repeats, ``restless`` those where
+    none does (turning on the spot, shuffling: the foot never rested, but walked no strides),
+    ``fallback`` (N,) the fallback samples of both."""
 
     stance: np.ndarray
     detected: np.ndarray
     period_s: np.ndarray
     fallback: np.ndarray
     missed: list[tuple[int, int, int]] = field(default_factory=list)
+    restless: list[tuple[int, int, int]] = field(default_factory=list)
 
     @property
     def missed_stances(self) -> int:
@@ -139,8 +142,9 @@ def _watch(found: StanceDetection, statistic: np.ndarray, window: int, rate: flo
             found.fallback[k:k + window] = True
             placed += 1
         if placed:
-            found.missed.append((int(a), int(b), placed))
-    if found.missed:
+            gait = np.mean(np.isfinite(found.period_s[a:b])) >= 0.5
+            (found.missed if gait else found.restless).append((int(a), int(b), placed))
+    if found.missed or found.restless:
         found.stance = found.detected | found.fallback
 
 
@@ -167,6 +171,16 @@ def stance_findings(name: str, found: StanceDetection, t: np.ndarray, hist_nis: 
             "sensor is not on a foot or is loose.",
             "check the sensor is strapped to the foot; keep detector.kind adaptive (it follows running); give "
             "detector.kind labels with a stance column if the recording has them."))
+    if found.restless:
+        seconds = sum(t[min(b, t.size - 1)] - t[a] for a, b, _ in found.restless)
+        where = spans([v for a, b, _ in found.restless for v in (t[a], t[min(b, t.size - 1)])])
+        out.append(Finding(
+            "restless_foot", "info", name, float(t[found.restless[0][0]]),
+            float(t[min(found.restless[-1][1], t.size - 1)]),
+            f"the foot moved for {seconds:.1f} s ({where}) without a detected stance and without a gait (no stride "
+            "repeats there); it got a loose zero-velocity update at its stillest instant of every stride period.",
+            "turning on the spot, shuffling, fidgeting, or a motion that is not walking.",
+            "nothing, if that is what the wearer did; check the stretch's track if it should have been a walk."))
     if gate > 0 and hist_nis.size:
         out += _lockouts(name, found, t, hist_nis, gate)
     if len(recoveries):
