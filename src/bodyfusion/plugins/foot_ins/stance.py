@@ -203,7 +203,11 @@ def _lockouts(name: str, found: StanceDetection, t: np.ndarray, hist_nis: np.nda
     starts, ends = detectors.stance_events(stance)
     if starts.size == 0:
         return []
-    beyond = np.array([bool(np.all(hist_nis[a:b][hist_nis[a:b] >= 0] > gate)) for a, b in zip(starts, ends)])
+    def locked(a: int, b: int) -> bool:  # a stance run with updates, every one beyond the gate
+        nis = hist_nis[a:b][hist_nis[a:b] >= 0]
+        return bool(nis.size and np.all(nis > gate))
+
+    beyond = np.array([locked(a, b) for a, b in zip(starts, ends)])
     period = found.reference_period()
     out = []
     k = 0
