@@ -105,14 +105,27 @@ def _system_rows(metrics: dict[str, Any]) -> list[list[Any]]:
         h, v = b.get("horizontal_error_m", {}), b.get("vertical_error_m", {})
         nees = (b.get("health") or {}).get("nees") or {}
         share = nees.get("in_band_fraction")
-        rows.append([name, b.get("samples"), b.get("distance_m"), h.get("rmse"), h.get("mean"), h.get("p95"),
-                     h.get("max"), v.get("rmse"), b.get("final_error_pct_distance"), b.get("loop_closure_m"),
-                     nees.get("mean"), None if share is None else 100.0 * share])
+        alone = (b.get("sensor_alone") or {}).get("horizontal_error_m") or {}
+        rows.append([name, b.get("samples"), b.get("distance_m"), h.get("rmse"), h.get("mean"), h.get("p75"),
+                     h.get("p95"), h.get("max"), alone.get("p75"), v.get("rmse"), b.get("final_error_pct_distance"),
+                     b.get("loop_closure_m"), nees.get("mean"), None if share is None else 100.0 * share])
     return rows
 
 
-SYSTEM_HEADER = ("system", "samples", "distance m", "h-RMSE m", "h-mean m", "h-p95 m", "h-max m", "v-RMSE m",
-                 "final % distance", "loop closure m", "NEES mean", "NEES % in band")
+SYSTEM_HEADER = ("system", "samples", "distance m", "h-RMSE m", "h-mean m", "h-p75 m", "h-p95 m", "h-max m",
+                 "sensor alone h-p75 m", "v-RMSE m", "final % distance", "loop closure m", "NEES mean",
+                 "NEES % in band")
+
+
+def _findings(metrics: dict[str, Any]) -> str:
+    """The run's health findings, one line each (metrics.json ``health.findings``), warnings first."""
+    found = sorted((metrics.get("health") or {}).get("findings") or [], key=lambda f: f.get("severity") != "warning")
+    if not found:
+        return _note("No finding: nothing in this run looked wrong to it.")
+    rows = [[f.get("severity"), f.get("system") or "run",
+             "" if f.get("t_start") is None else f"{f['t_start']:.1f}–{f['t_end']:.1f} s",
+             f.get("message"), f.get("cause"), f.get("advice")] for f in found]
+    return table(("severity", "system", "time", "what", "likely cause", "try"), rows)
 
 
 def _run_facts(run: RunFolder) -> list[list[Any]]:
@@ -142,6 +155,7 @@ def run_page(run: RunFolder) -> str:
                   "This folder holds no truth (truth.csv or tum/<system>_truth.txt): the plots show the estimates "
                   "and their uncertainty only; the error statistics above are those metrics.json records.")
     sections = [
+        _section("Health findings", _findings(m)),
         _section("Metrics", table(SYSTEM_HEADER, _system_rows(m)), table(("run", "value"), _run_facts(run)),
                  "".join(_note(f"warning: {w}") for w in warnings)),
         _section("Trajectory", _note(truth_note), _figure(figures.plan_view(run), "plot-trajectory", "")),
