@@ -112,3 +112,17 @@ def test_a_lone_foot_keeps_the_origin_and_its_heading(tmp_path):
     result = run_layout(load_layout(sim.config_path, ["systems.left_foot.initial={}"]))
     assert result.heading_rotations_rad == {} and result.fuser.heading_ties == []
     np.testing.assert_array_equal(result.systems["left_foot"].hist_x[0, :3], np.zeros(3))
+
+
+@pytest.mark.slow
+def test_a_foot_with_no_heading_is_turned_onto_the_phones_gnss_fixes(tmp_path):
+    """Foot + phone with GNSS, the foot's heading and position not given: the phone (its heading
+    geographic) is the reference, and the foot is turned by the rotation that lays its whole
+    track onto the phone's fixes (the truth's frame: the simulated foot needs 0°)."""
+    sim = simulate(ROOT / "configs" / "foot_hand_gnss_outage.yaml", tmp_path, seed=1)
+    result = run_layout(load_layout(sim.config_path, ["systems.left_foot.initial.heading_deg=auto",
+                                                      "systems.left_foot.initial.position_m=null"]))
+    assert abs(np.degrees(result.heading_rotations_rad["left_foot"])) < 1.0
+    (tie,) = result.fuser.heading_ties
+    assert tie.reference == "hand_phone"
+    assert result.scores["left_foot"].metrics["horizontal_error_m"]["rmse"] < 0.5
