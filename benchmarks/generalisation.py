@@ -319,7 +319,7 @@ def _extra_text(extra: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder")
+    parser.add_argument("--data", type=lambda p: Path(p).resolve(), default=DEFAULT_DATA, help="the shared data folder")
     parser.add_argument("--only", choices=sorted(DATASETS), action="append", help="run only these data sets")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="layout override applied to every recording")
