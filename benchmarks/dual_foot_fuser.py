@@ -27,7 +27,7 @@ import numpy as np
 
 from bodyfusion.core import fuser
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml"
 

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import build_systems, layout_context
+from bodyfusion.runner import build_systems, layout_context
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "dual_foot_vicon.yaml"

@@ -67,7 +67,7 @@ def write_layout(folder: Path, csv: Path) -> Path:
 def run_once(layout: Path) -> tuple[float, int]:
     """Seconds for one full pass of the foot system over its stream, and the sample count."""
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.core.run import build_systems, layout_context
+    from bodyfusion.runner import build_systems, layout_context
 
     loaded = load_layout(layout)
     system = build_systems(loaded, layout_context(loaded))["foot"]
@@ -89,7 +89,7 @@ def main() -> None:
     if args.layout is not None:  # child process: one cold run
         t0 = time.perf_counter()
         from bodyfusion.core.layout import load_layout
-        from bodyfusion.core.run import build_systems, layout_context
+        from bodyfusion.runner import build_systems, layout_context
 
         loaded = load_layout(args.layout)
         t1 = time.perf_counter()

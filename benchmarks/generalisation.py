@@ -167,7 +167,7 @@ def simulated_layout(folder: Path) -> dict:
 
 def _run(layout: dict, overrides: list[str]):
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.core.run import run_layout
+    from bodyfusion.runner import run_layout
 
     feet = [name for name, section in layout["systems"].items() if section["plugin"] == "foot_ins"]
     overrides = [o for o in overrides if not o.startswith(FOOT_PREFIX)] + [

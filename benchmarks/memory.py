@@ -86,7 +86,7 @@ def held_arrays(obj: object, prefix: str, out: dict[str, int], depth: int = 3, s
 def child(config: Path, out: Path, report: Path, trace: bool = True) -> None:
     """Run the layout with the phases marked (``trace``: and the allocations traced); the
     figures into ``report`` (JSON)."""
-    from bodyfusion.core import run as core_run
+    from bodyfusion.runner import batch as core_run
 
     if trace:
         tracemalloc.start(1)  # numpy's allocations are charged to the project line that made them

@@ -56,7 +56,7 @@ import numpy as np
 import yaml
 
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import build_systems, layout_context
+from bodyfusion.runner import build_systems, layout_context
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.system import FootIns
 from bodyfusion.sim import simulate

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 from bodyfusion.plugins.foot_ins.smoothing import smooth_record
 

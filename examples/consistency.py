@@ -45,7 +45,7 @@ import numpy as np
 import yaml
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.evaluation.consistency import NeesTrack, chi2_band
 from bodyfusion.evaluation.plots import plot_nees, save_figure
 from bodyfusion.sim import simulate

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.plugins.foot_ins.smoothing import smooth_record
 from bodyfusion.sim import simulate
 from bodyfusion.sim.imu import ImuErrorConfig

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]

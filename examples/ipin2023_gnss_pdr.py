@@ -32,7 +32,7 @@ from rich.table import Table
 from bodyfusion.core.layout import load_layout
 from bodyfusion.evaluation.metrics import score_systems
 from bodyfusion.io.phone_log import read_getsensordata
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.base.types import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]

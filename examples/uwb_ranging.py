@@ -24,7 +24,7 @@ from rich.console import Console
 from rich.table import Table
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"

@@ -1,6 +1,7 @@
-"""The package layout keeps its promises: imports run one way (no circle among modules, the core,
-the navigation toolbox, I/O and the base layer never import a plugin) and no module grows
-past the size a reader takes in at once."""
+"""The package layout keeps its promises: imports run one way, down the layers of
+docs/architecture.md (no circle among modules, counting imports inside functions and those made
+only for type checking; the core imports only the navigation toolbox and the base layer; no layer
+that knows no sensor imports a plugin) and no module grows past the size a reader takes in at once."""
 
 from __future__ import annotations
 
@@ -11,8 +12,14 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "bodyfusion"
 MAX_LINES = 600
-SENSOR_FREE = ("base", "core", "nav", "io", "evaluation")
+SENSOR_FREE = ("base", "core", "nav", "io", "evaluation", "results", "outputs", "runner")
 """Packages that know no sensor: none of them may import :mod:`bodyfusion.plugins`."""
+LAYERS = ("cli", "api", "study", "testing", "examples", "runner", "outputs", "results", "evaluation", "plugins",
+          "sim", "io", "core", "nav", "base")
+"""The packages from the top down (docs/architecture.md, "Layers"): a package imports only those
+below it."""
+CORE_MAY_IMPORT = ("core", "nav", "base")
+"""The core is the layout and the fuser: it reads no file, scores nothing, knows no sensor."""
 
 
 def _module_name(path: Path) -> str:
@@ -20,9 +27,11 @@ def _module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _top_level_imports(path: Path) -> set[str]:
+def _imports(path: Path, everywhere: bool = False) -> set[str]:
     """The bodyfusion modules a module imports when it is imported (module level and class
-    bodies; not inside functions, not under ``if TYPE_CHECKING``)."""
+    bodies; not inside functions, not under ``if TYPE_CHECKING``) or, ``everywhere``, anywhere in
+    it (inside functions and under ``if TYPE_CHECKING`` too). ``from package import name`` counts
+    as importing the module ``package.name`` where that is one."""
     tree = ast.parse(path.read_text(), str(path))
     name = _module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
@@ -39,8 +48,13 @@ def _top_level_imports(path: Path) -> set[str]:
                     base = ".".join(up + ([node.module] if node.module else []))
                 if base.startswith("bodyfusion"):
                     out.add(base)
-            elif isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                    out.update(f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in MODULE_NAMES)
+            elif isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test) and not everywhere:
                 continue
+            elif everywhere and isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.With, ast.For,
+                                                  ast.While)):
+                visit(node.body)
+                visit(getattr(node, "orelse", []))
             elif isinstance(node, (ast.If, ast.Try, ast.ClassDef)):
                 visit(node.body)
                 for extra in getattr(node, "orelse", []), getattr(node, "finalbody", []):
@@ -53,18 +67,36 @@ def _top_level_imports(path: Path) -> set[str]:
 
 
 MODULES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
-GRAPH = {name: {m for m in _top_level_imports(path) if m in MODULES and m != name} for name, path in MODULES.items()}
+MODULE_NAMES = set(MODULES)
 
 
-def test_no_import_circle_among_modules():
-    """Depth-first search for a back edge in the module-level import graph."""
+def _graph(everywhere: bool) -> dict[str, set[str]]:
+    """Module → the modules it imports, less its own parent packages (a module's import runs
+    its package's ``__init__`` first; that is no edge of the flow)."""
+    return {name: {m for m in _imports(path, everywhere) if m in MODULES and m != name and not name.startswith(m + ".")}
+            for name, path in MODULES.items()}
+
+
+GRAPH = _graph(everywhere=False)
+ALL_IMPORTS = _graph(everywhere=True)
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+@pytest.mark.parametrize("graph", [GRAPH, ALL_IMPORTS], ids=["module_level", "anywhere"])
+def test_no_import_circle_among_modules(graph):
+    """Depth-first search for a back edge in the import graph: of what importing a module runs,
+    and of every import anywhere in it (inside functions, for type checking only)."""
     state: dict[str, int] = {}
     stack: list[str] = []
 
     def visit(node: str) -> list[str] | None:
         state[node] = 1
         stack.append(node)
-        for nxt in sorted(GRAPH[node]):
+        for nxt in sorted(graph[node]):
             if state.get(nxt) == 1:
                 return [*stack[stack.index(nxt):], nxt]
             if nxt not in state and (cycle := visit(nxt)):
@@ -73,7 +105,7 @@ def test_no_import_circle_among_modules():
         state[node] = 2
         return None
 
-    for name in sorted(GRAPH):
+    for name in sorted(graph):
         if name not in state:
             cycle = visit(name)
             assert cycle is None, " -> ".join(cycle)
@@ -82,8 +114,22 @@ def test_no_import_circle_among_modules():
 @pytest.mark.parametrize("layer", SENSOR_FREE)
 def test_layers_that_know_no_sensor_import_no_plugin(layer):
     offenders = {name: sorted(m for m in imports if m.startswith("bodyfusion.plugins"))
-                 for name, imports in GRAPH.items() if name.startswith(f"bodyfusion.{layer}")}
+                 for name, imports in ALL_IMPORTS.items() if name.startswith(f"bodyfusion.{layer}")}
     assert not {k: v for k, v in offenders.items() if v}
+
+
+def test_the_core_imports_only_the_navigation_toolbox_and_the_base_layer():
+    offenders = {name: sorted(m for m in imports if _layer(m) not in CORE_MAY_IMPORT)
+                 for name, imports in ALL_IMPORTS.items() if _layer(name) == "core"}
+    assert not {k: v for k, v in offenders.items() if v}
+
+
+def test_every_package_imports_only_the_layers_below_it():
+    assert {_layer(m) for m in MODULES} - {None} <= set(LAYERS) | {"__main__"}  # every package has its layer
+    upward = sorted(f"{name} -> {m}" for name, imports in ALL_IMPORTS.items() for m in imports
+                    if _layer(name) in LAYERS and _layer(m) in LAYERS
+                    and LAYERS.index(_layer(m)) < LAYERS.index(_layer(name)))
+    assert not upward, upward
 
 
 def test_no_module_over_six_hundred_lines():
@@ -92,9 +138,13 @@ def test_no_module_over_six_hundred_lines():
 
 
 def test_the_graph_sees_imports():
-    """The checks above are not vacuous: known edges are found."""
+    """The checks above are not vacuous: known edges are found, those inside functions and under
+    ``if TYPE_CHECKING`` only in the graph of every import, and ``from package import module``."""
     assert "bodyfusion.nav.error_state" in GRAPH["bodyfusion.plugins.foot_ins.kernels"]
     assert "bodyfusion.core.layout" in GRAPH["bodyfusion.plugins.foot_ins.config"]
+    assert "bodyfusion.results.frames" not in GRAPH["bodyfusion.results.run_result"]  # inside methods
+    assert "bodyfusion.results.frames" in ALL_IMPORTS["bodyfusion.results.run_result"]
+    assert "bodyfusion.core.registry" in GRAPH["bodyfusion.core.layout"]  # from bodyfusion.core import registry
 
 
 def _layer_map() -> list[str]:

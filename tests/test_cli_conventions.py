@@ -103,7 +103,7 @@ def test_library_logs_its_stages_on_module_loggers_and_draws_no_bar(one_foot, ca
     with caplog.at_level(logging.INFO, logger="bodyfusion"):
         bodyfusion.run(one_foot)
     stages = {(r.name, r.getMessage().split(" ")[0]) for r in caplog.records}
-    assert {("bodyfusion.core.run", "reading"), ("bodyfusion.core.run", "fusing")} <= stages, stages
+    assert {("bodyfusion.runner.batch", "reading"), ("bodyfusion.runner.batch", "fusing")} <= stages, stages
     assert ("bodyfusion.plugins.foot_ins.system", "foot:") in stages
     assert capsys.readouterr().err == ""
 

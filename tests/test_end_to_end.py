@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 from tests.paths import CONFIGS
 

@@ -22,7 +22,7 @@ if str(EXAMPLE) not in sys.path:
 import bodyfusion_barometer  # noqa: E402
 
 from bodyfusion.core import registry as plugins  # noqa: E402
-from bodyfusion.core import run
+from bodyfusion import runner
 from bodyfusion.base.errors import ConfigError  # noqa: E402
 from bodyfusion.core.layout import load_layout  # noqa: E402
 
@@ -71,7 +71,7 @@ def test_layout_needs_the_plugin():
 def test_layout_validates_and_runs_with_the_plugin(registry_with_barometer):
     assert "barometer" in registry_with_barometer.names
     loaded = load_layout(EXAMPLE / "layout.yaml")
-    result = run.run_layout(loaded)
+    result = runner.run_layout(loaded)
     traj = result.trajectories["phone_baro"]
     truth = np.loadtxt(EXAMPLE / "data" / "stairs_pressure.csv", delimiter=",", skiprows=1)[:, 2]
     assert np.sqrt(np.mean((traj.pos_n[:, 2] - truth) ** 2)) < 0.25
@@ -94,7 +94,7 @@ constraints:
   - {{between: [walker, phone_baro], kind: max, distance_m: 1.0, horizontal: false}}
 fuser: {{method: projection, epochs: interval, interval_s: 1.0}}
 """)
-    result = run.run_layout(load_layout(layout))
+    result = runner.run_layout(load_layout(layout))
     assert result.fuser.activations > 0
     assert result.fuser.max_violation_before_m > 1.0
     assert result.fuser.max_violation_after_m < 1e-6

@@ -1,6 +1,6 @@
 """Griffe extension for the API reference: the docstrings' Sphinx roles as cross-references.
 
-The docstrings write ``:func:`load_layout```, ``:class:`~bodyfusion.core.result.RunResult```,
+The docstrings write ``:func:`load_layout```, ``:class:`~bodyfusion.results.run_result.RunResult```,
 ``:meth:`SensorSystem.advance```... Markdown knows no roles, so each becomes a code span linked
 to the object's entry in the reference: the name is resolved in the docstring's own scope (its
 module's imports, its class's members) as Sphinx would, and the link is an optional

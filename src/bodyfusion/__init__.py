@@ -21,7 +21,7 @@ __version__ = "0.2.0"
 
 _API = {"load_layout": "bodyfusion.api", "run": "bodyfusion.api", "simulate": "bodyfusion.api",
         "run_study": "bodyfusion.api", "Simulation": "bodyfusion.api", "Layout": "bodyfusion.core.layout",
-        "LoadedLayout": "bodyfusion.core.layout", "RunResult": "bodyfusion.core.result"}
+        "LoadedLayout": "bodyfusion.core.layout", "RunResult": "bodyfusion.results.run_result"}
 """The library's names (:mod:`bodyfusion.api`), loaded when first used: ``import bodyfusion`` and
 the command line stay quick (the compiled kernels and pandas load with a run)."""
 

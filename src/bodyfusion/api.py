@@ -2,7 +2,7 @@
 or pydantic models (:func:`load_layout`), a run in-process with data from files or in memory
 (:func:`run`), a simulation handed over in memory (:func:`simulate`) and a study
 (:func:`run_study`). A run's result has its tables as pandas
-DataFrames (:class:`~bodyfusion.core.result.RunResult`)::
+DataFrames (:class:`~bodyfusion.results.run_result.RunResult`)::
 
     import bodyfusion as bf
 
@@ -35,9 +35,9 @@ from bodyfusion.core.layout import (
     read_yaml,
     validate_layout,
 )
-from bodyfusion.core.output import write_outputs
-from bodyfusion.core.result import RunResult
-from bodyfusion.core.run import run_layout
+from bodyfusion.outputs.write import write_outputs
+from bodyfusion.results.run_result import RunResult
+from bodyfusion.runner import run_layout
 from bodyfusion.io.tables import tables_by_name
 
 if TYPE_CHECKING:  # imported where used: pandas, the simulator and the study runner are slow to import

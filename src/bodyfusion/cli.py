@@ -92,7 +92,7 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         from rich.console import Console
         from rich.table import Table
 
-        from bodyfusion.core.run import run as run_layout
+        from bodyfusion.runner import run as run_layout
 
         with _bar("fusing", "s of data") as progress:
             result, out_dir = run_layout(config, set_ or [], out, seed, progress, figure_process)
@@ -189,7 +189,8 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
     """Check a layout without reading its data: both stages (layout and each plugin's section),
     finite numbers, a feasible constraint set, the files it names exist, and their time bases
     overlap (read from each file's first and last lines)."""
-    from bodyfusion.core.layout import data_files, disjoint_time_bases, load_layout
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.runner.layout_files import data_files, disjoint_time_bases
 
     loaded = load_layout(config, set_ or [])
     for key, path in data_files(loaded):

@@ -16,7 +16,7 @@ from bodyfusion.core.constraints import (
 from bodyfusion.core.constraints.truncation import DensityTruncation, truncated_moments
 from bodyfusion.core.fuser import spread_correction
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run, run_layout
+from bodyfusion.runner import run, run_layout
 from bodyfusion.sim import simulate
 from tests.paths import ROOT
 

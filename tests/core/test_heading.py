@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from bodyfusion.core.heading import HeadingTie, heading_reference
 from bodyfusion.core.layout import HeadingAlignmentConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 from tests.paths import ROOT
 

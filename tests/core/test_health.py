@@ -13,7 +13,7 @@ from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.health import CovarianceMonitor, stride_times
 from bodyfusion.core.layout import FuserConfig, load_layout
-from bodyfusion.core.run import build_systems, layout_context, run, run_layout
+from bodyfusion.runner import build_systems, layout_context, run, run_layout
 from bodyfusion.core.system import SensorSystem
 from bodyfusion.plugins.random_walk.system import RandomWalkConfig
 from bodyfusion.plugins.uwb import UwbTag

@@ -204,7 +204,7 @@ def test_relative_data_paths_resolve_against_the_config_folder(tmp_path, monkeyp
     assert loaded.system_configs["right_foot"].data.path.resolve() == (folder / "data" / "right.csv").resolve()
     assert loaded.layout.truth.path.resolve() == (folder / "truth.csv").resolve()
     # and the systems really read their data from there
-    from bodyfusion.core.run import build_systems, layout_context
+    from bodyfusion.runner import build_systems, layout_context
 
     systems = build_systems(loaded, layout_context(loaded))
     assert systems["left_foot"].samples == systems["right_foot"].samples > 1000

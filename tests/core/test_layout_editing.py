@@ -8,7 +8,7 @@ from pydantic import ValidationError
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import FuserConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from tests.paths import CONFIGS
 
 VICON_CFG = CONFIGS / "dual_foot_vicon.yaml"

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.body import FOOT_FLOOR_SHARE, body_limit
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 from tests.paths import ROOT, needs_shared
 

@@ -10,7 +10,7 @@ from pydantic import ValidationError
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.cli import counted_policies
 from bodyfusion.core.layout import MAX_YAML_NODES, load_layout, read_yaml
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.io.tables import apply_timestamp_policy, timestamp_spikes
 from bodyfusion.io.truth import read_truth_csv
 from tests.fuzz.recording import write_recording

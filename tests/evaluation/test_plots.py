@@ -14,7 +14,7 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run
+from bodyfusion.runner import run
 from bodyfusion.evaluation.consistency import NeesTrack
 from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems

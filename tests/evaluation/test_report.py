@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.base.errors import FusionError
-from bodyfusion.core.run import run
+from bodyfusion.runner import run
 from bodyfusion.evaluation.report import write_report
 from bodyfusion.evaluation.report_data import RunFolder, read_folder
 from bodyfusion.evaluation.report_figures import nis_means, plan_view

@@ -132,7 +132,7 @@ def test_the_foot_ins_inflates_its_covariance_across_a_gap(tmp_path, write_yaml)
     """Gap policy: the step across 0.4 s of missing samples is not integrated silently; the
     velocity and attitude variances grow by the recording's own RMS motion over the gap."""
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.core.run import run_layout
+    from bodyfusion.runner import run_layout
 
     t, acc, gyro = walking_imu()
     keep = np.ones(t.size, dtype=bool)
@@ -157,7 +157,7 @@ def test_a_foot_at_rest_through_a_long_gap_stays_where_it_was(tmp_path, write_ya
     for 60 s would move the foot 36 m): the gap step holds its sample for 0.1 s at most, and the
     uncertainty the gap adds is bounded by a walker's speed."""
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.core.run import run_layout
+    from bodyfusion.runner import run_layout
     from bodyfusion.plugins.foot_ins.input_policy import GAP_SPEED_SD_MPS
 
     t, acc, gyro = walking_imu(seconds=20.0)

@@ -272,7 +272,7 @@ def test_the_default_detector_holds_on_a_running_stance_that_never_rests(tmp_pat
     threshold misses most stances (the watchdog's fallbacks catch the foot, and say so); the
     adaptive default follows the gait and misses none."""
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.core.run import run_layout
+    from bodyfusion.runner import run_layout
     from bodyfusion.sim import simulate
 
     cfg = simulate(ROOT / "configs" / "sim_running.yaml", tmp_path / "run", seed=1, overrides=[

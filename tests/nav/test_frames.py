@@ -10,7 +10,7 @@ import pytest
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.nav.frames import apply_axis_map
 from tests.paths import ROOT
 

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.nav.attitude import azimuth_pitch_roll
 from bodyfusion.nav.initial_alignment import (
     attitude_from_specific_force,

@@ -12,7 +12,7 @@ import yaml
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import Layout, load_layout, validate_section
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.sim import load_scenario, simulate
 from bodyfusion.sim.gait import GaitPlan, plan_gait

@@ -25,7 +25,7 @@ from bodyfusion.core.constraints.kernels import _all_finite
 from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.fuser import SOLVERS, distance_constraints
 from bodyfusion.core.layout import Layout
-from bodyfusion.evaluation.consistency import CovarianceHealth
+from bodyfusion.nav.filter_health import CovarianceHealth
 
 log = logging.getLogger(__name__)
 

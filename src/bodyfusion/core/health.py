@@ -2,14 +2,14 @@
 
 The fuser drives a system with ``advance`` and ``apply_correction`` at its sync epochs; the
 monitor passes every call on and checks the covariance the system holds (symmetric, positive
-semi-definite: :class:`bodyfusion.evaluation.consistency.CovarianceHealth`, kept in the
+semi-definite: :class:`bodyfusion.nav.filter_health.CovarianceHealth`, kept in the
 system's ``covariance_health`` for :meth:`~bodyfusion.core.system.SensorSystem.health`) after
 every correction — the fuser's updates are where a covariance can lose its definiteness from
 outside the system — and, while it propagates, at its own sync times at most one per
 :data:`STRIDE_S` and at its end: every system is checked at least about once a second. An
 advance is split at those times; splitting there changes nothing (the plugin contract asks that
 advancing in chunks at sync times gives the same bits, and the fuser itself syncs there).
-Checks are buffered and made in batches (:meth:`~bodyfusion.evaluation.consistency.CovarianceHealth.add_many`:
+Checks are buffered and made in batches (:meth:`~bodyfusion.nav.filter_health.CovarianceHealth.add_many`:
 compiled elementwise tests, and eigenvalue decompositions only of the covariances a Cholesky
 factorisation cannot certify above the smallest eigenvalue seen).
 """

@@ -178,39 +178,3 @@ class LimitGuard:
         stride = self.stride_m()
         return {"stride_m": stride, "follows_gait": [bool(f) for f in self.follows],
                 "fights": len(self.fights), "relaxation_m": [float(x) for x in self.relaxation]}
-
-
-def truth_separation_findings(constraints: list[ConstraintConfig], log, truths: dict) -> list[Finding]:
-    """A finding per ``max`` constraint the truth itself breaks: the two systems' truth tracks
-    (``truths``: name → :class:`~bodyfusion.base.types.TruthTrack`, dense) interpolated to the
-    epochs of the fuser's ``log`` (:class:`~bodyfusion.core.constraint_log.ConstraintLog`), their
-    separation against the limit that held at each (a wrong limit pulls right estimates)."""
-    out = []
-    if log is None or log.n == 0:
-        return out
-    t = log.t[:log.n]
-    for k, c in enumerate(constraints):
-        a, b = c.between
-        if c.kind != "max" or a not in truths or b not in truths or truths[a].sparse or truths[b].sparse:
-            continue
-        dims = 2 if c.horizontal or truths[a].pos_n.shape[1] < 3 else 3
-        inside = (t >= max(truths[a].t[0], truths[b].t[0])) & (t <= min(truths[a].t[-1], truths[b].t[-1]))
-        if not inside.any():
-            continue
-        pa = np.column_stack([np.interp(t[inside], truths[a].t, truths[a].pos_n[:, d]) for d in range(dims)])
-        pb = np.column_stack([np.interp(t[inside], truths[b].t, truths[b].pos_n[:, d]) for d in range(dims)])
-        separation = np.linalg.norm(pa - pb, axis=1)
-        limit = log.limit[:log.n, k][inside]
-        broken = separation > limit
-        if not broken.any():
-            continue
-        worst = int(np.argmax(separation - limit))
-        when = t[inside]
-        out.append(Finding(
-            "limit_broken_by_truth", "warning", None, float(when[broken][0]), float(when[broken][-1]),
-            f"the truth breaks the {a}–{b} limit at {int(broken.sum())} of {int(inside.sum())} epochs: they truly "
-            f"stood {separation[worst]:.2f} m apart at t = {when[worst]:.1f} s where the limit was {limit[worst]:.2f} m, "
-            "so the fuser pulled right estimates towards a wrong bound.",
-            "the limit is too tight for this walk (its strides, the way the systems are worn).",
-            f"set constraints.{k}.distance_m to body (it follows the gait) or above {separation.max():.2f} m."))
-    return out

@@ -25,7 +25,7 @@ from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.base.types import InputReport, Trajectory
-from bodyfusion.evaluation.consistency import CovarianceHealth
+from bodyfusion.nav.filter_health import CovarianceHealth
 
 if TYPE_CHECKING:  # pandas loads when a table is asked for
     import pandas as pd
@@ -76,10 +76,15 @@ class CovarianceHistory:
 
     def to_frame(self) -> pd.DataFrame:
         """Columns ``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle)."""
-        # pandas loads when a table is asked for
-        from bodyfusion.core.result_frames import covariance_frame
+        import pandas as pd  # pandas loads when a table is asked for
 
-        return covariance_frame(self.t, self.states, self.matrix)
+        cols: dict[str, np.ndarray] = {"t": self.t}
+        for a, name in enumerate(self.states):
+            cols[f"var_{name}"] = self.matrix[:, a, a]
+        for a, name in enumerate(self.states):
+            for b in range(a + 1, len(self.states)):
+                cols[f"cov_{name}_{self.states[b]}"] = self.matrix[:, a, b]
+        return pd.DataFrame(cols)
 
 
 def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray | None, stored: str) -> CovarianceHistory:
@@ -158,9 +163,9 @@ class Plugin(ABC):
         """Consistency figures of the filter for metrics.json ``systems.<name>.health`` (an aiding
         source's: ``aiding.<name>.health``), in the forms of :mod:`bodyfusion.evaluation.consistency`:
 
-        - ``covariance``: :class:`~bodyfusion.evaluation.consistency.CovarianceHealth` of the
+        - ``covariance``: :class:`~bodyfusion.nav.filter_health.CovarianceHealth` of the
           error-state covariance (a navigation system's default, see :meth:`SensorSystem.health`);
-        - ``nis``: {aiding type: :class:`~bodyfusion.evaluation.consistency.NisTally` dict} for
+        - ``nis``: {aiding type: :class:`~bodyfusion.nav.filter_health.NisTally` dict} for
           every aiding type the plugin applies (ZUPT, GNSS position, ranges...), its expected
           value the measurement dimension;
         - ``quaternion_norm_max_deviation``: max |‖q‖ − 1| over the run, for a quaternion state;
@@ -168,7 +173,7 @@ class Plugin(ABC):
           ``block`` they cover.
 
         The core adds ``trajectory_covariance`` and, where truth exists, ``nees`` (the
-        horizontal NEES, :meth:`bodyfusion.core.result.RunResult.health`). Default here: nothing."""
+        horizontal NEES, :meth:`bodyfusion.results.run_result.RunResult.health`). Default here: nothing."""
         return {}
 
     def findings(self) -> list[Finding]:

@@ -1,16 +1,22 @@
 """Findings of the evaluation against truth: what a score says went wrong, and where to look.
 
-Two kinds: a fused system whose error is no better than its own absolute sensor's alone (a
-phone's track against its GNSS fixes), and a system whose error exceeds
-:data:`LARGE_ERROR_M`, with the run's other findings about it as the likely cause (or, without
-any, the shape of its error: a drift of heading turns the track, a wrong scale stretches it).
+Three kinds: a fused system whose error is no better than its own absolute sensor's alone (a
+phone's track against its GNSS fixes), a system whose error exceeds :data:`LARGE_ERROR_M`, with
+the run's other findings about it as the likely cause (or, without any, the shape of its error:
+a drift of heading turns the track, a wrong scale stretches it), and a distance limit the truth
+itself breaks.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 
 from bodyfusion.base.findings import Finding
+from bodyfusion.base.types import TruthTrack
+from bodyfusion.core.constraint_log import ConstraintLog
+from bodyfusion.core.layout import ConstraintConfig
 
 
 def sensor_alone_findings(scores: dict, alone: dict) -> list[Finding]:
@@ -116,4 +122,41 @@ def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]
             f"the horizontal error reaches {err[worst]:.2f} m (at t = {t[worst]:.1f} s, RMSE "
             f"{score.metrics['horizontal_error_m']['rmse']:.2f} m), beyond {LARGE_ERROR_M:g} m.",
             cause, advice))
+    return out
+
+
+def truth_separation_findings(constraints: Sequence[ConstraintConfig], log: ConstraintLog | None,
+                              truths: Mapping[str, TruthTrack]) -> list[Finding]:
+    """A finding per ``max`` constraint the truth itself breaks: the two systems' truth tracks
+    (``truths``: name → :class:`~bodyfusion.base.types.TruthTrack`, dense) interpolated to the
+    epochs of the fuser's ``log`` (:class:`~bodyfusion.core.constraint_log.ConstraintLog`), their
+    separation against the limit that held at each (a wrong limit pulls right estimates)."""
+    out = []
+    if log is None or log.n == 0:
+        return out
+    t = log.t[:log.n]
+    for k, c in enumerate(constraints):
+        a, b = c.between
+        if c.kind != "max" or a not in truths or b not in truths or truths[a].sparse or truths[b].sparse:
+            continue
+        dims = 2 if c.horizontal or truths[a].pos_n.shape[1] < 3 else 3
+        inside = (t >= max(truths[a].t[0], truths[b].t[0])) & (t <= min(truths[a].t[-1], truths[b].t[-1]))
+        if not inside.any():
+            continue
+        pa = np.column_stack([np.interp(t[inside], truths[a].t, truths[a].pos_n[:, d]) for d in range(dims)])
+        pb = np.column_stack([np.interp(t[inside], truths[b].t, truths[b].pos_n[:, d]) for d in range(dims)])
+        separation = np.linalg.norm(pa - pb, axis=1)
+        limit = log.limit[:log.n, k][inside]
+        broken = separation > limit
+        if not broken.any():
+            continue
+        worst = int(np.argmax(separation - limit))
+        when = t[inside]
+        out.append(Finding(
+            "limit_broken_by_truth", "warning", None, float(when[broken][0]), float(when[broken][-1]),
+            f"the truth breaks the {a}–{b} limit at {int(broken.sum())} of {int(inside.sum())} epochs: they truly "
+            f"stood {separation[worst]:.2f} m apart at t = {when[worst]:.1f} s where the limit was {limit[worst]:.2f} m, "
+            "so the fuser pulled right estimates towards a wrong bound.",
+            "the limit is too tight for this walk (its strides, the way the systems are worn).",
+            f"set constraints.{k}.distance_m to body (it follows the gait) or above {separation.max():.2f} m."))
     return out

@@ -1,6 +1,6 @@
 """Readers of reference (truth) tracks: wide CSVs (one row per epoch, columns per system) and
 the long ``system,t,east_m,north_m,up_m`` files ``fusion simulate`` writes. The layout's truth
-formats (:data:`bodyfusion.core.truth.TRUTH_FORMATS`) are built on them."""
+formats (:data:`bodyfusion.runner.truth.TRUTH_FORMATS`) are built on them."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The runs of a study, in a worker process: a task of grid points in, one results row per run out.
 
 A scenario is simulated in memory (:func:`bodyfusion.sim.simulated`) and
-:func:`bodyfusion.core.run.run_layout` runs its layout on the tables the files would hold (the
+:func:`bodyfusion.runner.batch.run_layout` runs its layout on the tables the files would hold (the
 same bits as the written files, none written); a recorded layout is run as it is. Both
 in-process, writing no trajectories or plots unless the study asks for each run's files
 (``run_outputs``: :attr:`~bodyfusion.study.grid.RunSpec.run_dir`). Within a task
@@ -28,8 +28,8 @@ from typing import Any
 
 from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import load_layout, validate_layout
-from bodyfusion.core.output import metrics_document, write_outputs
-from bodyfusion.core.run import run_layout
+from bodyfusion.outputs.write import metrics_document, write_outputs
+from bodyfusion.runner import run_layout
 from bodyfusion.evaluation.metrics import outage_errors
 from bodyfusion.sim import Simulated, load_scenario, simulated
 from bodyfusion.study.grid import RunSpec

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.sim import simulate
 
 WALK = """

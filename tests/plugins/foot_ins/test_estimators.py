@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
-from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.error_state import PARAMS_SIZE, accumulate_propagation, process_noise_diag
 from bodyfusion.plugins.foot_ins import FootIns
 from bodyfusion.plugins.foot_ins.coloured import (

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.nav.saturation import ClippedRun, Clipping
 from bodyfusion.plugins.foot_ins.input_policy import covariance_increments
 from bodyfusion.base.types import ImuStream

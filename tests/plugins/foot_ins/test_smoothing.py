@@ -7,7 +7,7 @@ import pytest
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.error_state import P_EARTH_RATE
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, segment_bounds, smooth_record

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import SmootherConfig, load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.plugins.foot_ins import smoothing
 from bodyfusion.plugins.foot_ins.smoothing import CHECKPOINT_SAMPLES, MAX_BLOCK_SAMPLES, _Record, smooth_record
 from tests.paths import ROOT

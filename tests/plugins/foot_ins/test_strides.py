@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run, run_layout
+from bodyfusion.runner import run, run_layout
 from bodyfusion.plugins.foot_ins.strides import classify, stride_table
 from bodyfusion.sim import simulate
 from tests.paths import ROOT, needs_shared

@@ -1,6 +1,6 @@
 """The foot-mounted INS plugin on the vendored dual-foot Vicon walk (Hu & Hu, PLANS 2025).
 
-Runs through the public path: ``bodyfusion.core.run.run_layout(load_layout(...))``.
+Runs through the public path: ``bodyfusion.runner.batch.run_layout(load_layout(...))``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import build_systems, layout_context, run_layout
+from bodyfusion.runner import build_systems, layout_context, run_layout
 from tests.paths import ROOT
 
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"

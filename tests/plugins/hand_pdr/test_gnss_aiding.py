@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.plugins.hand_pdr.track_heading import MIN_FIXES, WINDOW_M, TrackHeading
 from tests.paths import CONFIGS, SHARED_DATA, needs_shared
 

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.io.imu import ImuCsvConfig
 from bodyfusion.plugins.hand_pdr import HandPdr
 from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig

@@ -9,7 +9,7 @@ import pymap3d
 import pytest
 
 from bodyfusion.core.layout import load_layout, read_yaml
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.plugins.hand_pdr import HandPdr
 from bodyfusion.sim import simulate
 from bodyfusion.testing import CHECKS, check_system, default_context, with_value

@@ -13,7 +13,7 @@ import yaml
 from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import build_systems, layout_context, run, run_layout
+from bodyfusion.runner import build_systems, layout_context, run, run_layout
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.uwb import UwbTag
 from bodyfusion.plugins.uwb.ranges import read_ranges

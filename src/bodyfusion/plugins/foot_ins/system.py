@@ -14,7 +14,7 @@ from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
-from bodyfusion.evaluation.consistency import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
+from bodyfusion.nav.filter_health import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors

@@ -74,7 +74,7 @@ from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
-from bodyfusion.evaluation.consistency import NisRecord, innovation_columns
+from bodyfusion.nav.filter_health import NisRecord, innovation_columns
 from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
 from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
 from bodyfusion.io.imu import read_imu

@@ -19,7 +19,7 @@ from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
-from bodyfusion.evaluation.consistency import CovarianceHealth
+from bodyfusion.nav.filter_health import CovarianceHealth
 
 
 class RandomWalkConfig(StrictModel):

@@ -25,7 +25,7 @@ from bodyfusion.core.system import (
     LayoutContext,
     ScalarMeasurement,
 )
-from bodyfusion.evaluation.consistency import NisTally
+from bodyfusion.nav.filter_health import NisTally
 from bodyfusion.io.tables import source_name
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig

@@ -1,4 +1,4 @@
-"""A run's tables (core/result_frames.py and the plugins' states, covariance histories, events and
+"""A run's tables (results/frames.py and the plugins' states, covariance histories, events and
 innovations): one set of column names for every plugin, values that are the run's own."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.run import run_layout
+from bodyfusion.runner import run_layout
 from bodyfusion.nav.attitude import quat_from_azimuth_pitch_roll
 from bodyfusion.plugins.foot_ins.results import attitude_columns
 from tests.paths import CONFIGS

@@ -1,4 +1,4 @@
-"""Compiled part of the covariance checks (:func:`bodyfusion.evaluation.consistency.covariance_defects`).
+"""Compiled part of the covariance checks (:func:`bodyfusion.nav.filter_health.covariance_defects`).
 
 One pass over each covariance instead of a dozen numpy temporaries the size of the whole batch,
 and a Cholesky certificate in place of an eigenvalue decomposition where the smallest

@@ -1,5 +1,5 @@
 """Writers of the run outputs named in docs/contract.md: metrics.json (with each system's
-consistency ``health``), the trajectory files (:mod:`bodyfusion.core.exports`: trajectories.csv
+consistency ``health``), the trajectory files (:mod:`bodyfusion.outputs.trajectories`: trajectories.csv
 and .parquet, tum/, track.geojson), plots (nees.png where truth exists)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.forking import Forked
-from bodyfusion.core.exports import (
+from bodyfusion.outputs.trajectories import (
     ROWS,
     SystemAttitudes,
     write_geojson,
@@ -21,7 +21,7 @@ from bodyfusion.core.exports import (
     write_trajectories_parquet,
     write_tum,
 )
-from bodyfusion.core.result import RunResult
+from bodyfusion.results.run_result import RunResult
 from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.metrics import loop_closure_m, outage_errors, path_length_m
 
@@ -142,7 +142,7 @@ def _write_tracks(result: RunResult, out_dir: Path) -> None:
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
                   figure_process: FigureProcess | None = None) -> None:
     """metrics.json, the trajectory files and (unless switched off) the PNG plots. With more
-    than :data:`~bodyfusion.core.exports.ROWS` rows of tracks, the TUM files and track.geojson
+    than :data:`~bodyfusion.outputs.trajectories.ROWS` rows of tracks, the TUM files and track.geojson
     are written in a forked process (:class:`~bodyfusion.base.forking.Forked`) while this one
     writes the rest; the plots by ``figure_process`` when given one."""
     try:

@@ -1,4 +1,4 @@
-"""The trajectory files other tools read (bodyfusion.core.exports): trajectories.parquet beside
+"""The trajectory files other tools read (bodyfusion.outputs.trajectories): trajectories.parquet beside
 the CSV, TUM files for evo, track.geojson with times and truth, and the reader of both tables."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import pytest
 
 import bodyfusion
 from bodyfusion.base.types import Trajectory, TruthTrack
-from bodyfusion.core import exports
-from bodyfusion.core.exports import (
+from bodyfusion.outputs import trajectories as exports
+from bodyfusion.outputs.trajectories import (
     GEOJSON_STEP_S,
     _json_floats,
     read_trajectories,
@@ -26,9 +26,9 @@ from bodyfusion.core.exports import (
     write_tum,
 )
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.output import write_outputs
-from bodyfusion.core.result import RunResult
-from bodyfusion.core.run import run_layout
+from bodyfusion.outputs.write import write_outputs
+from bodyfusion.results.run_result import RunResult
+from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 from tests.paths import CONFIGS
 

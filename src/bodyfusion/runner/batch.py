@@ -1,4 +1,6 @@
-"""``fusion run``: build a layout's systems, fuse them, smooth, score against truth, write outputs."""
+"""``fusion run``: a layout's systems built (:mod:`~bodyfusion.runner.assemble`), fused, smoothed,
+scored against truth (:mod:`bodyfusion.evaluation`), and its outputs written
+(:mod:`bodyfusion.outputs`)."""
 
 from __future__ import annotations
 
@@ -6,86 +8,29 @@ import logging
 import time
 from pathlib import Path
 
-from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.forking import Forked
 from bodyfusion.base.progress import ProgressCallback
-from bodyfusion.base.types import LOG, TruthTrack
-from bodyfusion.core import registry as plugin_registry
+from bodyfusion.base.types import LOG
 from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings, heading_ties
 from bodyfusion.core.health import CovarianceMonitor
 from bodyfusion.core.layout import LoadedLayout, load_layout
-from bodyfusion.core.limits import resolve_constraints, truth_separation_findings
-from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings
-from bodyfusion.core.output import write_outputs
+from bodyfusion.core.limits import resolve_constraints
 from bodyfusion.core.progress import FusionProgress
-from bodyfusion.core.result import RunResult
-from bodyfusion.core.smoothing import (
-    constrain_trajectories,
-    plan_smoothing,
-    smooth_systems,
-)
-from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
-from bodyfusion.core.truth import read_truth
+from bodyfusion.core.smoothing import constrain_trajectories, plan_smoothing, smooth_systems
+from bodyfusion.core.system import AidingSource
 from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.figure_process import FigureProcess
+from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings, truth_separation_findings
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
-from bodyfusion.nav.earth import normal_gravity
+from bodyfusion.outputs.write import write_outputs
+from bodyfusion.results.run_result import RunResult
+from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth
 
-__all__ = ["RunResult", "build_systems", "geodetic_origin", "layout_context", "load_truth", "run", "run_layout"]
+__all__ = ["run", "run_layout"]
 
 log = logging.getLogger(__name__)
-
-
-def layout_context(loaded: LoadedLayout, seed: int = 0,
-                   compiling_ahead: dict[str, Forked] | None = None) -> LayoutContext:
-    """The run's :class:`~bodyfusion.core.system.LayoutContext` (``compiling_ahead``: on a first
-    run, the processes compiling ahead so far, for the systems to add theirs to)."""
-    lay = loaded.layout
-    g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
-    outages: dict[str, tuple[tuple[float, float], ...]] = {}
-    for o in lay.outages:
-        outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
-    return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.base_dir,
-                         seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages,
-                         compiling_ahead=compiling_ahead)
-
-
-def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem | AidingSource]:
-    """One system (or aiding source) per layout entry; a plugin's config error is reported
-    against the layout file."""
-    registry = plugin_registry.get_registry()
-    systems = {}
-    for name, cfg in loaded.system_configs.items():
-        try:
-            systems[name] = registry.system_class(cfg.plugin)(name, cfg, context)
-        except ConfigError as err:
-            if err.path is not None:
-                raise
-            raise ConfigError(err.key, err.reason, loaded.path) from None
-    return systems
-
-
-def geodetic_origin(loaded: LoadedLayout, systems: dict[str, SensorSystem]) -> tuple[float, float, float] | None:
-    """The ENU frame's origin: the layout's, else the first system's that has one (its first fix)."""
-    if loaded.layout.geodetic_origin is not None:
-        return loaded.layout.geodetic_origin
-    return next((s.geodetic_origin for s in systems.values() if s.geodetic_origin is not None), None)
-
-
-def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None = None) -> dict[str, TruthTrack]:
-    """The layout's truth tracks (:func:`bodyfusion.io.truth.read_truth`); an error names the layout file."""
-    truth = loaded.layout.truth
-    if truth is None:
-        return {}
-    try:
-        return read_truth(truth, origin, loaded.layout.systems)
-    except ConfigError as err:
-        if err.path is not None:
-            raise
-        raise ConfigError(err.key, err.reason, loaded.path) from None
 
 
 def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None) -> RunResult:

@@ -13,7 +13,8 @@ from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, CovarianceHistory, SensorSystem
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
-from bodyfusion.evaluation.consistency import CovarianceHealth, NeesTrack
+from bodyfusion.evaluation.consistency import NeesTrack
+from bodyfusion.nav.filter_health import CovarianceHealth
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
 if TYPE_CHECKING:  # pandas loads when a table is asked for
@@ -71,7 +72,7 @@ class RunResult:
         return int(np.sum([s.samples for s in (*self.systems.values(), *self.aiding.values())]))
 
     # --- tables ------------------------------------------------------------------------
-    # Each returns a pandas DataFrame (core/result_frames.py, imported when a table is asked
+    # Each returns a pandas DataFrame (results/frames.py, imported when a table is asked
     # for: a run from the command line needs none, and pandas takes a while to load).
 
     def system(self, name: str) -> SensorSystem:
@@ -85,23 +86,23 @@ class RunResult:
         navigation frame, as trajectories.csv), ``sd_east_m``, ``sd_north_m``, ``sd_up_m``,
         ``cov_east_north_m2``, and where the system estimates them ``v_east_mps``,
         ``v_north_mps``, ``v_up_mps``, ``heading_deg``, ``pitch_deg``, ``roll_deg``
-        (:func:`bodyfusion.core.result_frames.trajectories`)."""
-        from bodyfusion.core import result_frames
+        (:func:`bodyfusion.results.frames.trajectories`)."""
+        from bodyfusion.results import frames
 
-        return result_frames.trajectories(self)
+        return frames.trajectories(self.trajectories, self.systems)
 
     def truth_frame(self) -> pd.DataFrame:
         """The truth tracks in long form: ``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m``."""
-        from bodyfusion.core import result_frames
+        from bodyfusion.results import frames
 
-        return result_frames.truth(self)
+        return frames.truth(self.truths)
 
     def errors(self) -> pd.DataFrame:
         """Errors against truth at the truth epochs, after the evaluation alignment
-        (:func:`bodyfusion.core.result_frames.errors`)."""
-        from bodyfusion.core import result_frames
+        (:func:`bodyfusion.results.frames.errors`)."""
+        from bodyfusion.results import frames
 
-        return result_frames.errors(self)
+        return frames.errors(self.scores)
 
     def states(self, name: str) -> pd.DataFrame:
         """System ``name``'s estimated states over time, in the column names every plugin shares
@@ -109,9 +110,9 @@ class RunResult:
         position, velocity, attitude and biases; the hand PDR at each step and update its
         position, walking heading, gyro bias, GNSS bias, step scale (and holding offset); the
         random walk its position."""
-        from bodyfusion.core import result_frames
+        import pandas as pd
 
-        return result_frames.states(self, name)
+        return pd.DataFrame(self.system(name).states())
 
     def covariances(self, name: str) -> CovarianceHistory:
         """System ``name``'s covariance over time as it stores it
@@ -126,33 +127,33 @@ class RunResult:
         """Gait events of every system: ``system``, ``event`` (``stance``: the foot INS's
         detected stance phases; ``step``: the hand PDR's steps), ``t``, ``t_end``, ``duration_s``
         and, for steps, ``length_m``."""
-        from bodyfusion.core import result_frames
+        from bodyfusion.results import frames
 
-        return result_frames.events(self)
+        return frames.events(self.systems)
 
     def strides(self) -> pd.DataFrame:
         """Every foot system's strides (strides.csv): ``system``, ``stride``, ``t_start``,
         ``t_end`` (s), ``length_m``, ``duration_s``, ``speed_mps``, ``climb_m``, ``clearance_m``,
         ``motion`` (:mod:`bodyfusion.plugins.foot_ins.strides` for the foot INS)."""
-        from bodyfusion.core import result_frames
+        from bodyfusion.results import frames
 
-        return result_frames.strides(self)
+        return frames.strides(self.systems)
 
     def innovations(self) -> pd.DataFrame:
         """Every recorded update: ``system``, ``t``, ``aiding`` (``zupt``, ``position_fix``,
         ``gnss_position``, ``gnss_course``, ``magnetometer``, ``anchor_range``, ``peer_range``),
         ``nis`` (before any gate), ``dof``, ``accepted`` and a range's ``end``."""
-        from bodyfusion.core import result_frames
+        from bodyfusion.results import frames
 
-        return result_frames.innovations(self)
+        return frames.innovations({**self.systems, **self.aiding})
 
     def constraint_events(self) -> pd.DataFrame:
         """Every constraint at every sync epoch: ``t``, ``pair``, ``system_a``, ``system_b``,
         ``kind``, ``limit_m``, ``distance_before_m``, ``distance_after_m``, ``multiplier``,
         ``active`` (empty without constraints or with ``fuser.method: none``)."""
-        from bodyfusion.core import result_frames
+        from bodyfusion.results import frames
 
-        return result_frames.constraint_events(self)
+        return frames.constraint_events(self.fuser.constraint_log)
 
     @property
     def input_report(self) -> InputReport:
