@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bodyfusion.core.capabilities import HeadingAlignment
 from bodyfusion.core.heading import HeadingTie, heading_reference
 from bodyfusion.core.layout import HeadingAlignmentConfig, load_layout
 from bodyfusion.runner import run_layout
@@ -62,9 +63,13 @@ def test_a_tie_waits_for_both_to_travel_its_window():
 
 
 def test_the_reference_is_the_geographic_heading_then_a_given_one():
-    class System:
+    class System(HeadingAlignment):
         def __init__(self, auto: bool, absolute: bool = False) -> None:
-            self.heading_is_auto, self.heading_is_absolute = auto, absolute
+            self.auto, self.absolute = auto, absolute
+
+        heading_is_auto = property(lambda self: self.auto)
+        heading_is_absolute = property(lambda self: self.absolute)
+        initial_travel_azimuth = rotate_initial_heading = None
 
     cfg = HeadingAlignmentConfig()
     assert heading_reference({"l": System(True), "r": System(True)}, cfg) == "l"

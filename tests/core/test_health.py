@@ -54,16 +54,6 @@ class BadCovariance(SensorSystem):
     def advance(self, t: float) -> None:
         self._i = max(self._i, int(np.searchsorted(self.t, t, side="right")) - 1)
 
-    @property
-    def heading_is_auto(self) -> bool:
-        return False
-
-    def initial_travel_azimuth(self, distance_m: float) -> float | None:
-        return None
-
-    def rotate_initial_heading(self, delta_rad: float) -> None:
-        raise NotImplementedError
-
     def position_n(self) -> np.ndarray:
         return np.zeros(3)
 

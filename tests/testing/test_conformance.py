@@ -91,7 +91,6 @@ class Toy(SensorSystem):
     t_start = property(lambda self: float(self.t[0]))
     t_end = property(lambda self: float(self.t[-1]))
     t_now = property(lambda self: float(self.t[self._i]))
-    heading_is_auto = property(lambda self: False)
     samples = property(lambda self: int(self.t.size))
     input_report = property(lambda self: InputReport())
 
@@ -102,12 +101,6 @@ class Toy(SensorSystem):
             self.step_covariance()
             self.hist.append((self.x.copy(), np.diag(self.P).copy()))
             self._i = i
-
-    def initial_travel_azimuth(self, distance_m):
-        return np.pi / 2
-
-    def rotate_initial_heading(self, delta_rad):
-        raise NotImplementedError
 
     def position_n(self):
         return self.x.copy()

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError, InputError
+from bodyfusion.core.capabilities import TransitionTracking
 from bodyfusion.core.system import JacobianCase, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion_barometer import atmosphere
@@ -66,7 +67,7 @@ def read_pressure_csv(cfg, key: str) -> tuple[np.ndarray, np.ndarray, InputRepor
     return t[keep], p[keep], report
 
 
-class Barometer(SensorSystem):
+class Barometer(SensorSystem, TransitionTracking):
     """Barometric altimeter (see the module docstring). Deterministic: no random numbers."""
 
     plugin_name = "barometer"
@@ -152,17 +153,6 @@ class Barometer(SensorSystem):
 
     def advance(self, t: float) -> None:
         self._run_to(int(np.searchsorted(self.t, t, side="right")))
-
-    # --- heading: a barometer has none ----------------------------------------------
-    @property
-    def heading_is_auto(self) -> bool:
-        return False
-
-    def initial_travel_azimuth(self, distance_m: float) -> float | None:
-        return None  # it never observes horizontal travel
-
-    def rotate_initial_heading(self, delta_rad: float) -> None:
-        self.restart()  # a rotation about Up through the start changes nothing it knows
 
     # --- fuser interface --------------------------------------------------------------
     def position_n(self) -> np.ndarray:

@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bodyfusion.base.errors import FusionError
+from bodyfusion.core.capabilities import TransitionTracking, offers
 from bodyfusion.core.heading import HeadingTie
 from bodyfusion.core.layout import BodyConfig, ConstraintConfig, FuserConfig
 from bodyfusion.core.limits import LimitGuard
@@ -188,6 +190,9 @@ class JointState:
         self._P = np.zeros_like(self.cross)
         if track:
             for s in systems:
+                if not offers(s, TransitionTracking):
+                    raise FusionError(f"system {s.name!r} ({s.plugin_name}) cannot track cross-covariances: "
+                                      "set fuser.cross_covariance false")
                 s.track_transition()
 
     def advance(self, t: float) -> None:

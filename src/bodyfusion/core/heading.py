@@ -8,7 +8,7 @@ in one frame, with no setting from the user:
   default of a foot INS) is rotated about its start point so that its first ``distance_m`` of
   travel points the way the reference's does; then every system without a given initial
   position is put where it is worn (a left foot half a stance to the left of the walking
-  direction, :meth:`~bodyfusion.core.system.SensorSystem.place_on_body`). The reference
+  direction, :meth:`~bodyfusion.core.capabilities.BodyPlacement.place_on_body`). The reference
   (:func:`heading_reference`) is the layout's ``heading_alignment.reference``, else a system
   whose heading is geographic (GNSS, a magnetometer: its fixes are metres off, so a system is
   turned by the rotation that lays its whole track onto the reference's fixes,
@@ -19,7 +19,7 @@ in one frame, with no setting from the user:
   same path, so over each stretch of ``window_m`` of travel their tracks have one shape. The
   rotation that lays the system's track onto the reference's (about their centroids) measures
   the difference of their heading errors (each the rotation about Up, counter-clockwise, that
-  turns the estimate into the truth; :meth:`~bodyfusion.core.system.SensorSystem.yaw_error_row`):
+  turns the estimate into the truth; :meth:`~bodyfusion.core.capabilities.HeadingAlignment.yaw_error_row`):
 
       z = ∠(track_S → track_R) = δθ_S − δθ_R,   σ_z² = (σ_S² + σ_R²) / r²,
 
@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.core.capabilities import AbsoluteFixes, BodyPlacement, HeadingAlignment, offers
 from bodyfusion.core.layout import HeadingAlignmentConfig
 from bodyfusion.core.system import SensorSystem
 
@@ -54,15 +55,30 @@ def wrap_angle(a: float) -> float:
     return float(-((-a + np.pi) % (2 * np.pi) - np.pi))
 
 
+def with_heading(systems: Mapping[str, SensorSystem]) -> dict[str, SensorSystem]:
+    """The systems whose heading may be aligned (:class:`~bodyfusion.core.capabilities.HeadingAlignment`)."""
+    return {name: s for name, s in systems.items() if offers(s, HeadingAlignment)}
+
+
 def heading_reference(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> str | None:
-    """The system every other is aligned to (module docstring); None without a candidate (one
-    system, or none that travels)."""
+    """The system every other is aligned to (module docstring), among those with a heading; None
+    without a candidate."""
+    aligned = with_heading(systems)
     if cfg.reference is not None:
+        if cfg.reference not in aligned:
+            raise FusionError(f"heading_alignment.reference: {cfg.reference!r} ({systems[cfg.reference].plugin_name}) "
+                              "has no heading to align to")
         return cfg.reference
-    absolute = [n for n, s in systems.items() if s.heading_is_absolute]
-    fixed = [n for n, s in systems.items() if not s.heading_is_auto and n not in absolute]
-    ordered = absolute + fixed + [n for n in systems if n not in absolute and n not in fixed]
+    absolute = [n for n, s in aligned.items() if s.heading_is_absolute]
+    fixed = [n for n, s in aligned.items() if not s.heading_is_auto and n not in absolute]
+    ordered = absolute + fixed + [n for n in aligned if n not in absolute and n not in fixed]
     return ordered[0] if ordered else None
+
+
+def lateral_offset_m(system: SensorSystem) -> float:
+    """Where the system is worn, m to the right of the body's centreline (0 for a system that
+    does not know: :class:`~bodyfusion.core.capabilities.BodyPlacement`)."""
+    return system.lateral_offset_m if offers(system, BodyPlacement) else 0.0
 
 
 def standalone_track(system: SensorSystem) -> tuple[np.ndarray, np.ndarray] | None:
@@ -79,9 +95,9 @@ def standalone_track(system: SensorSystem) -> tuple[np.ndarray, np.ndarray] | No
 
 def geographic_track(system: SensorSystem) -> tuple[np.ndarray, np.ndarray] | None:
     """What a geographic reference knows of where it was: its absolute sensor's own fixes
-    (:meth:`~bodyfusion.core.system.SensorSystem.absolute_fixes`, outside any outage), else its
-    track run alone."""
-    fixes = system.absolute_fixes()
+    (:meth:`~bodyfusion.core.capabilities.AbsoluteFixes.absolute_fixes`, outside any outage), else
+    its track run alone."""
+    fixes = system.absolute_fixes() if offers(system, AbsoluteFixes) else None
     if fixes is not None and len(fixes[0]) >= 3:
         return np.asarray(fixes[0], dtype=float), np.asarray(fixes[1], dtype=float)[:, :2]
     return standalone_track(system)
@@ -108,12 +124,14 @@ def track_rotation(moving: tuple[np.ndarray, np.ndarray], reference: tuple[np.nd
 
 def align_headings(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> dict[str, float]:
     """Rotate every ``auto`` system onto the reference, then place the systems on the body
-    (:meth:`~bodyfusion.core.system.SensorSystem.place_on_body`, about the reference's first
-    walking direction); returns the rotation applied (rad) per system. A geographic reference's
-    positions come from fixes metres apart from the truth: against it a system is turned by the
-    rotation that lays its whole track onto the reference's (:func:`track_rotation`)."""
+    (:meth:`~bodyfusion.core.capabilities.BodyPlacement.place_on_body`, about the reference's
+    first walking direction); returns the rotation applied (rad) per system. A geographic
+    reference's positions come from fixes metres apart from the truth: against it a system is
+    turned by the rotation that lays its whole track onto the reference's (:func:`track_rotation`).
+    Only systems with a heading take part (:func:`with_heading`)."""
+    systems = with_heading(systems)
     auto = [name for name, s in systems.items() if s.heading_is_auto]
-    placed = [name for name, s in systems.items() if s.wants_body_place]
+    placed = [name for name, s in systems.items() if offers(s, BodyPlacement) and s.wants_body_place]
     if (not auto and not placed) or len(systems) < 2:
         return {}
     ref = heading_reference(systems, cfg)
@@ -162,7 +180,7 @@ class HeadingTie:
     lateral_sd_m: float
     offsets_m: tuple[float, float] = (0.0, 0.0)
     """Where the reference and the system are worn, m to the right of the body's centreline
-    (:attr:`~bodyfusion.core.system.SensorSystem.lateral_offset_m`): taken out of each track
+    (:func:`lateral_offset_m`): taken out of each track
     before the two are compared, so that a left and a right foot walk one path."""
     points: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     travelled: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -240,10 +258,11 @@ def _align_to_geographic(systems: Mapping[str, SensorSystem], auto: list[str], p
 def heading_ties(systems: Mapping[str, SensorSystem], cfg: HeadingAlignmentConfig) -> list[HeadingTie]:
     """A tie of every system with a heading error state, other than the reference and those
     whose heading is geographic, to the reference (none with ``continuous`` off or one system)."""
+    systems = with_heading(systems)
     if not cfg.continuous or len(systems) < 2:
         return []
     ref = heading_reference(systems, cfg)
     if ref is None or systems[ref].yaw_error_row() is None:
         return []
-    return [HeadingTie(ref, name, cfg.window_m, cfg.lateral_sd_m, (systems[ref].lateral_offset_m, s.lateral_offset_m))
+    return [HeadingTie(ref, name, cfg.window_m, cfg.lateral_sd_m, (lateral_offset_m(systems[ref]), lateral_offset_m(s)))
             for name, s in systems.items() if name != ref and not s.heading_is_absolute and s.yaw_error_row() is not None]

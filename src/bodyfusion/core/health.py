@@ -44,7 +44,7 @@ class CovarianceMonitor:
     the fuser is done."""
 
     def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
-        self.system = system
+        self.monitored = system
         self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
         self._t_end = system.t_end  # s; the fuser asks at every epoch
         self._next = 0  # index of the first stride time after the system's time
@@ -53,7 +53,7 @@ class CovarianceMonitor:
         self._n = 0  # checks buffered
 
     def __getattr__(self, name: str):
-        value = getattr(self.system, name)
+        value = getattr(self.monitored, name)
         if inspect.ismethod(value):  # the system's bound method: looked up once (the fuser calls them per epoch)
             self.__dict__[name] = value
         return value
@@ -61,7 +61,7 @@ class CovarianceMonitor:
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split and checked at the stride times up to t, and checked
         at t when t is one of them or the system's end."""
-        s, stride = self.system, self._stride_t
+        s, stride = self.monitored, self._stride_t
         at_stride = False
         while self._next < len(stride) and stride[self._next] <= t:
             ts = stride[self._next]
@@ -79,20 +79,20 @@ class CovarianceMonitor:
 
     def apply_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """The system's ``apply_correction(dx, P)``, then a check."""
-        self.system.apply_correction(dx, P)
+        self.monitored.apply_correction(dx, P)
         self._check()
 
     def apply_relative_correction(self, dx: np.ndarray, P: np.ndarray) -> None:
         """The system's ``apply_relative_correction(dx, P)``, then a check."""
-        self.system.apply_relative_correction(dx, P)
+        self.monitored.apply_relative_correction(dx, P)
         self._check()
 
     def _check(self) -> None:
-        P = self.system.covariance()
+        P = self.monitored.covariance()
         if self._covs is None:
             self._covs = np.empty((BATCH, *P.shape))
         k = self._n
-        self._t[k] = self.system.t_now
+        self._t[k] = self.monitored.t_now
         self._covs[k] = P
         self._n = k + 1
         if self._n == BATCH:
@@ -101,5 +101,5 @@ class CovarianceMonitor:
     def flush(self) -> None:
         """Check the buffered covariances into the system's ``covariance_health``."""
         if self._n:
-            self.system.covariance_health.add_many(self._covs[:self._n], self._t[:self._n])
+            self.monitored.covariance_health.add_many(self._covs[:self._n], self._t[:self._n])
         self._n = 0

@@ -35,12 +35,12 @@ class _Tracked:
     """Every attribute is the system's own; ``advance`` also reports the progress."""
 
     def __init__(self, system: SensorSystem, progress: FusionProgress) -> None:
-        self.system = system
+        self.monitored = system
         self._progress = progress
 
     def __getattr__(self, name: str):
-        return getattr(self.system, name)
+        return getattr(self.monitored, name)
 
     def advance(self, t: float) -> None:
-        self.system.advance(t)
+        self.monitored.advance(t)
         self._progress.update()

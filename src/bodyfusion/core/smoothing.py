@@ -1,9 +1,9 @@
 """Smoothing after the fuser: each system's own smoother, then (by default) the layout's distance
 constraints on the smoothed tracks.
 
-The core knows no smoother: it calls every system's :meth:`~bodyfusion.core.system.SensorSystem.smooth`
-hook with the layout's ``smoother`` section, and a system that smooths (the foot INS: RTS, FB,
-FB-RTS) returns its diagnostics, one that does not returns None. With
+The core knows no smoother: it calls the :meth:`~bodyfusion.core.capabilities.Smoothing.smooth`
+hook of every system that offers one with the layout's ``smoother`` section (the foot INS: RTS,
+FB, FB-RTS), which returns its diagnostics, or None when it did not smooth. With
 ``smoother.constrain_smoothed`` the constraints are applied once more to the smoothed trajectories
 (:func:`constrain_trajectories`), in position space, with the fuser's solver.
 """
@@ -15,6 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from bodyfusion.core.capabilities import Smoothing, offers
 from bodyfusion.core.constraints import violations
 from bodyfusion.core.fuser import SOLVERS, distance_constraints
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
@@ -22,19 +23,25 @@ from bodyfusion.core.system import SensorSystem
 from bodyfusion.base.types import LOG, Trajectory
 
 
+def smoothing_systems(systems: Mapping[str, SensorSystem]) -> dict[str, SensorSystem]:
+    """The systems that smooth their own run (:class:`~bodyfusion.core.capabilities.Smoothing`)."""
+    return {name: s for name, s in systems.items() if offers(s, Smoothing)}
+
+
 def plan_smoothing(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> None:
-    """Before the run, tell every system the layout's smoother
-    (:meth:`~bodyfusion.core.system.SensorSystem.plan_smoothing`: the foot INS then records what
-    its smoother needs as it runs)."""
-    for system in systems.values():
+    """Before the run, tell every system that smooths the layout's smoother
+    (:meth:`~bodyfusion.core.capabilities.Smoothing.plan_smoothing`: the foot INS then records
+    what its smoother needs as it runs)."""
+    for system in smoothing_systems(systems).values():
         system.plan_smoothing(cfg)
 
 
 def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:
     """Smooth every system that smooths; returns {system: its smoothing diagnostics}, in the
     layout's order. Systems that smooth in a thread
-    (:attr:`~bodyfusion.core.system.SensorSystem.smooths_in_a_thread`) are smoothed at the same
-    time, one thread each; the others here, one after another."""
+    (:attr:`~bodyfusion.core.capabilities.Smoothing.smooths_in_a_thread`) are smoothed at the
+    same time, one thread each; the others here, one after another."""
+    systems = smoothing_systems(systems)
     threaded = [name for name, system in systems.items() if system.smooths_in_a_thread]
     done = {}
     with ThreadPoolExecutor(max_workers=max(1, len(threaded) - 1)) as pool:

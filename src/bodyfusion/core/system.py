@@ -3,7 +3,10 @@
 A system owns its data stream, its nominal navigation state and error-state filter,
 its own aiding, and its history. The fuser drives it forward in time with
 :meth:`SensorSystem.advance` and, at sync epochs, reads its position and covariance
-and hands back a correction with :meth:`SensorSystem.apply_correction`.
+and hands back a correction with :meth:`SensorSystem.apply_correction`. That, its times, its
+trajectory, its sample count and input report are the whole required contract (ten members);
+what else a system may offer (heading alignment, a place on the body, cross-covariances, its own
+smoother, an absolute sensor) is in :mod:`bodyfusion.core.capabilities`.
 
 An :class:`AidingSource` (a UWB tag) navigates nothing: it gives the fuser scalar
 measurements of one or two systems' positions, which the fuser applies to them through
@@ -21,9 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 from pydantic import BaseModel
 
-from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
-from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.nav.filter_health import CovarianceHealth
 
@@ -206,10 +207,6 @@ class SensorSystem(Plugin):
     error_model: ClassVar[str | None] = None
     """Name of a shared error-state model the system uses (e.g. ``strapdown15``), so that
     :func:`bodyfusion.testing.check_system` can check its Jacobians."""
-    smooths_in_a_thread: ClassVar[bool] = False
-    """True for a system whose :meth:`smooth` may run in a thread beside the other systems' (it
-    touches only its own state and its compiled kernels release the GIL): the core then smooths
-    such systems at the same time, one thread each."""
 
     def __init__(self, name: str, config: BaseModel, context: LayoutContext) -> None:
         super().__init__(name, config, context)
@@ -236,59 +233,6 @@ class SensorSystem(Plugin):
     def advance(self, t: float) -> None:
         """Propagate and apply own aiding for every sample with time <= t."""
 
-    # --- heading --------------------------------------------------------------
-    @abstractmethod
-    def initial_travel_azimuth(self, distance_m: float) -> float | None:
-        """Azimuth (rad, clockwise from North) of the start-to-here vector once the
-        system has travelled ``distance_m`` horizontally, with the current initial
-        heading; None if it never travels that far. Leaves the system at its start."""
-
-    @abstractmethod
-    def rotate_initial_heading(self, delta_rad: float) -> None:
-        """Rotate the initial attitude about Up by ``delta_rad`` (clockwise from North
-        positive, as azimuth) and restart from the first sample."""
-
-    @property
-    @abstractmethod
-    def heading_is_auto(self) -> bool:
-        """True if the layout asks for the heading to be aligned to the other systems."""
-
-    @property
-    def heading_is_absolute(self) -> bool:
-        """True for a system whose heading is geographic (from GNSS or a magnetometer): it is the
-        reference other systems' headings are aligned to. Default: False."""
-        return False
-
-    def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The system's absolute position sensor alone, for comparison (a phone's GNSS): fix
-        times (K,) s and ENU positions (K, 3) m, every fix its user would have (outages
-        masked); None (the default) without such a sensor."""
-        return None
-
-    @property
-    def wants_body_place(self) -> bool:
-        """True for a system whose initial position is not given and that knows where on the body
-        it is worn (:meth:`place_on_body`). Default: False."""
-        return False
-
-    @property
-    def lateral_offset_m(self) -> float:
-        """Where the system is worn across the body: metres to the right of its centreline (a
-        left foot about −0.1, a right foot +0.1); 0 (the default) on it or unknown."""
-        return 0.0
-
-    def place_on_body(self, walking_azimuth_rad: float) -> None:
-        """Set the initial position (and its σ) where the system is worn, the body at the origin
-        facing ``walking_azimuth_rad`` (clockwise from North), and restart. Called for a system
-        of a layout of several when :attr:`wants_body_place`. Default: nothing."""
-
-    def yaw_error_row(self) -> np.ndarray | None:
-        """The row h (n,) of the error state with h δx = the rotation about Up (rad,
-        counter-clockwise positive) that turns the estimated attitude into the true one, for a
-        system whose heading drifts (:class:`bodyfusion.core.heading.HeadingTie` keeps systems
-        worn together in one frame through it); None (the default): no heading error state."""
-        return None
-
     # --- fuser interface ----------------------------------------------------------
     @abstractmethod
     def position_n(self) -> np.ndarray:
@@ -312,16 +256,6 @@ class SensorSystem(Plugin):
         its own state (see :mod:`bodyfusion.plugins.foot_ins.smoothing`)."""
         self.apply_correction(dx, P)
 
-    def track_transition(self) -> None:
-        """Start accumulating the error-state transition Φ between the fuser's syncs
-        (needed when the fuser tracks cross-covariances between systems)."""
-        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
-
-    def transition_since_sync(self) -> np.ndarray:
-        """Φ (n, n) that maps the error state at the previous call to now (propagation and
-        own updates, x_now = Φ x_then + independent terms); restarts the accumulation."""
-        raise FusionError(f"system {self.name!r} ({self.plugin_name}) cannot track cross-covariances")
-
     @abstractmethod
     def sync_times(self) -> np.ndarray:
         """Times (s) of events the fuser may sync on (e.g. stance starts)."""
@@ -329,17 +263,6 @@ class SensorSystem(Plugin):
     @abstractmethod
     def sample_times(self) -> np.ndarray:
         """Times (s) of every sample the system processes."""
-
-    # --- smoothing ----------------------------------------------------------------
-    def plan_smoothing(self, cfg: SmootherConfig) -> None:
-        """Before the run: the layout's ``smoother`` section, for a system that records what its
-        smoother needs as it runs instead of replaying itself afterwards (the default: nothing)."""
-
-    def smooth(self, cfg: SmootherConfig) -> dict | None:
-        """Smooth the run once the fuser is done (the layout's ``smoother`` section); afterwards
-        :meth:`trajectory` returns the smoothed track. Returns the smoother's diagnostics, or
-        None for a system that is not smoothed (the default)."""
-        return None
 
     # --- results ----------------------------------------------------------------
     @abstractmethod

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG
+from bodyfusion.core.capabilities import AbsoluteFixes, offers
 from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.fuser import Fuser
@@ -100,8 +101,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
         transform, scores = PlanarTransform.identity(), {}
     nees = {name: horizontal_nees(trajectories[name], score, transform, truth_cfg.alignment)
             for name, score in scores.items()}
-    alone = {name: sensor_alone_score(*fixes, truths[name]) for name in scores
-             if truth_cfg.alignment == "none" and (fixes := systems[name].absolute_fixes()) is not None}
+    alone = {name: sensor_alone_score(*fixes, truths[name]) for name in scores if truth_cfg.alignment == "none"
+             and offers(systems[name], AbsoluteFixes) and (fixes := systems[name].absolute_fixes()) is not None}
     timings["scoring_s"] = time.perf_counter() - t0
     log.debug("stage times: %s", ", ".join(f"{k} {v:.3f}" for k, v in timings.items()))
     result = RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,

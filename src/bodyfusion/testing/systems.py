@@ -21,8 +21,9 @@ The checks, by name (see ``docs/plugin_guide.md`` for the contract they enforce)
 ``advance``
     time bookkeeping: starts at ``t_start``; ``sample_times`` strictly increasing from
     ``t_start`` to ``t_end``; ``advance(t)`` processes exactly the samples with time ≤ t,
-    never goes back, stops at ``t_end``; ``sync_times`` inside the span;
-    ``initial_travel_azimuth`` leaves a fresh system at its start.
+    never goes back, stops at ``t_end``; ``sync_times`` inside the span; for a system with
+    :class:`~bodyfusion.core.capabilities.HeadingAlignment`, ``initial_travel_azimuth`` leaves a
+    fresh system at its start.
 ``position_indices``
     select 3 valid states of the covariance.
 ``covariance``
@@ -45,7 +46,8 @@ The checks, by name (see ``docs/plugin_guide.md`` for the contract they enforce)
     ``t_start`` to ``t_end``; finite positions; ``pos_sd ≥ 0``; last row equals
     ``position_n()`` and the square root of the covariance's position diagonal.
 ``cross_covariance``
-    only for systems whose ``track_transition`` does not raise: the accumulated Φ is
+    only for systems with :class:`~bodyfusion.core.capabilities.TransitionTracking` whose
+    ``track_transition`` does not raise: the accumulated Φ is
     (n, n) and finite, a second call without advancing returns I, and
     P_now − Φ P_then Φᵀ is positive semi-definite (the process and measurement noise
     added between syncs).
@@ -71,6 +73,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.core.capabilities import HeadingAlignment, TransitionTracking, offers
 from bodyfusion.core.layout import validate_section
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
@@ -296,11 +299,12 @@ class SystemChecker:
             fail("advance", f"samples must be a positive int, got {s.samples!r}")
         if not isinstance(s.input_report, InputReport):
             fail("advance", "input_report must be a bodyfusion.base.types.InputReport")
-        az = s.initial_travel_azimuth(1.0)
-        if az is not None and not math.isfinite(az):
-            fail("advance", f"initial_travel_azimuth returned {az!r}")
-        if s.t_now != s.t_start or len(s.trajectory().t) != 1:
-            fail("advance", "initial_travel_azimuth did not leave the system at its start")
+        if offers(s, HeadingAlignment):
+            az = s.initial_travel_azimuth(1.0)
+            if az is not None and not math.isfinite(az):
+                fail("advance", f"initial_travel_azimuth returned {az!r}")
+            if s.t_now != s.t_start or len(s.trajectory().t) != 1:
+                fail("advance", "initial_travel_azimuth did not leave the system at its start")
         s.advance(s.t_start)
         if s.t_now != s.t_start:
             fail("advance", "advance(t_start) moved the system")
@@ -446,6 +450,8 @@ class SystemChecker:
 
     def check_cross_covariance(self) -> str:
         s = self.build()
+        if not offers(s, TransitionTracking):
+            raise Skip("the system does not track cross-covariances (no TransitionTracking)")
         try:
             s.track_transition()
         except FusionError as err:

@@ -12,6 +12,7 @@ from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
+from bodyfusion.core.capabilities import BodyPlacement, HeadingAlignment, Smoothing, TransitionTracking
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.nav.filter_health import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
@@ -47,7 +48,7 @@ RECOVERY_LEVEL_SD_RAD = 0.05
 log = logging.getLogger(__name__)
 
 
-class FootIns(InitialState, SensorSystem):
+class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, TransitionTracking, Smoothing):
     """Foot-mounted IMU navigated by strapdown + ZUPT, closed loop.
 
     Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`bodyfusion.nav.error_state`.

@@ -73,6 +73,7 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
+from bodyfusion.core.capabilities import AbsoluteFixes, HeadingAlignment, TransitionTracking
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.nav.filter_health import NisRecord, innovation_columns
 from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
@@ -107,7 +108,7 @@ STEP, GNSS, MAGNETOMETER, STEADY = range(4)
 """Event kinds, in the order they are processed at one time."""
 
 
-class HandPdr(GnssAiding, SensorSystem):
+class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes):
     """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
     with the magnetometer's holding offset), or a bank of them while the heading is unknown.
 

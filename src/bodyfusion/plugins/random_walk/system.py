@@ -17,6 +17,7 @@ from pydantic import Field
 
 from bodyfusion.base.sections import StrictModel
 from bodyfusion.base.seeding import system_seed
+from bodyfusion.core.capabilities import TransitionTracking
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.nav.filter_health import CovarianceHealth
@@ -37,7 +38,7 @@ class RandomWalkConfig(StrictModel):
     """Initial position variance, m² per axis."""
 
 
-class RandomWalk(SensorSystem):
+class RandomWalk(SensorSystem, TransitionTracking):
     """Position-only dead reckoning with white increment noise (error state: δp, 3)."""
 
     plugin_name = "random_walk"
@@ -88,17 +89,6 @@ class RandomWalk(SensorSystem):
         self.x = self.hist_pos[i1 - 1].copy()
         self.P = self.hist_cov[i1 - 1].copy()
         self._i = i1 - 1
-
-    @property
-    def heading_is_auto(self) -> bool:
-        return False
-
-    def initial_travel_azimuth(self, distance_m: float) -> float | None:
-        v = np.asarray(self.config.velocity_mps)
-        return float(np.arctan2(v[0], v[1])) if np.hypot(v[0], v[1]) * self.config.duration_s >= distance_m else None
-
-    def rotate_initial_heading(self, delta_rad: float) -> None:
-        raise NotImplementedError("a random-walk system's heading is its configured velocity")
 
     def position_n(self) -> np.ndarray:
         return self.x.copy()

@@ -1,0 +1,133 @@
+"""What a sensor system may offer beyond the base contract, discovered by the core.
+
+The base contract (:class:`~bodyfusion.core.system.SensorSystem`) is what the fuser needs of every
+system: advance in time, its position and covariance, take a correction, its times and its
+trajectory. A system offers more by deriving from one of these classes as well; the core asks
+:func:`offers` before it uses one, so a plugin implements only what its sensor has:
+
+- :class:`HeadingAlignment`: its heading is relative (an INS, a PDR) and may be turned, so that
+  every worn system navigates in one frame (:mod:`bodyfusion.core.heading`), or it is
+  geographic and the others are turned to it; a heading error state lets the fuser tie the
+  systems' headings through the run.
+- :class:`BodyPlacement`: it knows where on the body it is worn and starts there.
+- :class:`TransitionTracking`: it gives its error-state transition Φ between the fuser's syncs,
+  for the cross-covariances a constraint creates (``fuser.cross_covariance``).
+- :class:`Smoothing`: it smooths its own run once the fuser is done (the layout's ``smoother``).
+- :class:`AbsoluteFixes`: it carries an absolute position sensor (a phone's GNSS): its fixes
+  alone are what the fused track is scored beside, and what a geographic frame is fitted to.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+from pydantic import BaseModel
+
+Capability = TypeVar("Capability")
+
+
+def offers(system: Any, capability: type[Capability]) -> bool:
+    """True when ``system`` offers ``capability``; a wrapper the fuser sees a system through (a
+    covariance monitor, a progress tracker: whatever passes calls on to its ``monitored``) offers
+    what the system inside it offers."""
+    while (inner := getattr(system, "monitored", None)) is not None:
+        system = inner
+    return isinstance(system, capability)
+
+
+class HeadingAlignment(ABC):
+    """A system whose heading the core may align to the other systems' (azimuths clockwise from
+    North, rad)."""
+
+    @property
+    @abstractmethod
+    def heading_is_auto(self) -> bool:
+        """True if the layout asks for the heading to be aligned to the other systems."""
+
+    @property
+    def heading_is_absolute(self) -> bool:
+        """True for a geographic heading (from GNSS or a magnetometer): the reference the other
+        systems' headings are aligned to. Default: False."""
+        return False
+
+    @abstractmethod
+    def initial_travel_azimuth(self, distance_m: float) -> float | None:
+        """Azimuth (rad) of the start-to-here vector once the system has travelled ``distance_m``
+        horizontally with its current initial heading; None if it never travels that far. Leaves
+        the system at its start."""
+
+    @abstractmethod
+    def rotate_initial_heading(self, delta_rad: float) -> None:
+        """Rotate the initial attitude about Up by ``delta_rad`` (clockwise from North positive,
+        as azimuth) and restart from the first sample."""
+
+    def yaw_error_row(self) -> np.ndarray | None:
+        """The row h (n,) of the error state with h δx = the rotation about Up (rad,
+        counter-clockwise positive) that turns the estimated attitude into the true one
+        (:class:`bodyfusion.core.heading.HeadingTie` keeps systems worn together in one frame
+        through it); None (the default): no heading error state."""
+        return None
+
+
+class BodyPlacement(ABC):
+    """A system that knows where on the body it is worn, placed there at the start when the
+    layout gives no initial position."""
+
+    @property
+    @abstractmethod
+    def wants_body_place(self) -> bool:
+        """True when the initial position is not given: :meth:`place_on_body` sets it."""
+
+    @property
+    @abstractmethod
+    def lateral_offset_m(self) -> float:
+        """Metres to the right of the body's centreline (a left foot about −0.1, a right foot
+        +0.1; 0 on it or unknown)."""
+
+    @abstractmethod
+    def place_on_body(self, walking_azimuth_rad: float) -> None:
+        """Set the initial position (and its σ) where the system is worn, the body at the origin
+        facing ``walking_azimuth_rad`` (clockwise from North), and restart."""
+
+
+class TransitionTracking(ABC):
+    """A system that gives its error-state transition between the fuser's syncs, so that the
+    fuser can carry the cross-covariances its constraints create."""
+
+    @abstractmethod
+    def track_transition(self) -> None:
+        """Start accumulating the error-state transition Φ (a system that can do so only in
+        some configurations raises :class:`~bodyfusion.base.errors.FusionError` naming the key)."""
+
+    @abstractmethod
+    def transition_since_sync(self) -> np.ndarray:
+        """Φ (n, n) that maps the error state at the previous call to now (propagation and own
+        updates, x_now = Φ x_then + independent terms); restarts the accumulation."""
+
+
+class Smoothing(ABC):
+    """A system that smooths its own run once the fuser is done."""
+
+    smooths_in_a_thread: ClassVar[bool] = False
+    """True when :meth:`smooth` may run in a thread beside the other systems' (it touches only
+    its own state and its compiled kernels release the GIL)."""
+
+    def plan_smoothing(self, cfg: BaseModel) -> None:
+        """Before the run: the layout's ``smoother`` section, for a system that records what its
+        smoother needs as it runs instead of replaying itself afterwards. Default: nothing."""
+
+    @abstractmethod
+    def smooth(self, cfg: BaseModel) -> dict | None:
+        """Smooth the run (the layout's ``smoother`` section); afterwards ``trajectory()`` is the
+        smoothed track. Returns the smoother's diagnostics, None when it did not smooth."""
+
+
+class AbsoluteFixes(ABC):
+    """A system carrying an absolute position sensor (a phone's GNSS)."""
+
+    @abstractmethod
+    def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The sensor alone: fix times (K,) s and ENU positions (K, 3) m, every fix its user would
+        have (outages masked); None when the run has none."""
