@@ -9,15 +9,28 @@ from hypothesis import strategies as st
 
 from bodyfusion.nav.detectors import (
     acceleration_magnitude,
+    adaptive_shoe_threshold,
     axes_sum_band,
     debounce,
-    shoe,
     shoe_statistic,
     stance_events,
 )
+from bodyfusion.nav.stance_detectors import AdaptiveShoe, Shoe
 from tests.paths import ROOT, SHARED_DATA, needs_shared
 
 G = 9.81
+
+
+def shoe(acc: np.ndarray, gyro: np.ndarray, **params) -> np.ndarray:
+    """The SHOE detector's stance at its defaults (``params``: others)."""
+    return Shoe(**params).detect(acc, gyro, 100.0, G).stance
+
+
+def default_threshold(statistic: np.ndarray, period_s: np.ndarray, rate_hz: float) -> np.ndarray:
+    """The adaptive threshold at the adaptive detector's defaults."""
+    d = AdaptiveShoe()
+    return adaptive_shoe_threshold(statistic, period_s, rate_hz, gamma_still=d.threshold, gamma_motion=d.motion_threshold,
+                                   margin_decades=d.margin_decades, prominence_decades=d.prominence_decades)
 VICON = SHARED_DATA / "dual_foot_vicon_hu2025"
 
 
@@ -68,7 +81,7 @@ def test_shoe_recovers_stance_tilted_sensor():
 def test_acceleration_magnitude_recovers_stance():
     acc, _, truth = synthetic(seed=3)
     for window in (1, 5):
-        det = acceleration_magnitude(acc, threshold=0.5, window=window)
+        det = acceleration_magnitude(acc, threshold=0.5, gravity=G, window=window)
         assert (det == truth).mean() > 0.95
 
 
@@ -110,10 +123,10 @@ def test_threshold_detectors_exact():
     # the axes-sum band low < sum < high is strict (as printed in the papers).
     acc = np.array([[0, 0, 10], [0, 0, 10.5], [0, 0, 10.75], [0, 0, 9.5], [0, 0, 9.25], [3, 3, 3]], float)
     np.testing.assert_array_equal(
-        acceleration_magnitude(acc, threshold=0.5, gravity=10.0), [True, True, False, True, False, False]
+        acceleration_magnitude(acc, threshold=0.5, gravity=10.0, window=1), [True, True, False, True, False, False]
     )
     np.testing.assert_array_equal(
-        axes_sum_band(acc, low=9.5, high=10.5), [True, False, False, False, False, False]
+        axes_sum_band(acc, low=9.5, high=10.5, window=1), [True, False, False, False, False, False]
     )
     # moving average over 3 samples (centred, shrinking at the ends)
     mag = np.array([10.0, 10.0, 13.0, 10.0, 10.0, 10.0])
@@ -127,9 +140,9 @@ def test_bad_shapes_rejected():
     with pytest.raises(ValueError):
         shoe(np.zeros((5, 2)), np.zeros((5, 3)))
     with pytest.raises(ValueError):
-        acceleration_magnitude(np.zeros((5, 3)), threshold=1.0, window=0)
+        acceleration_magnitude(np.zeros((5, 3)), threshold=1.0, gravity=G, window=0)
     with pytest.raises(ValueError):
-        axes_sum_band(np.zeros((5, 3)), low=1.0, high=0.0)
+        axes_sum_band(np.zeros((5, 3)), low=1.0, high=0.0, window=1)
 
 
 def test_stance_events_exact():
@@ -216,20 +229,16 @@ def _statistic_of(stance_floor: float, swing: float, rate: float, stance_s: floa
 
 
 def test_adaptive_threshold_keeps_the_fixed_one_where_stance_is_still():
-    from bodyfusion.nav.detectors import adaptive_shoe_threshold
-
     stat, _ = _statistic_of(3e2, 1e7, 200.0, 0.6, 0.5)
-    assert np.allclose(adaptive_shoe_threshold(stat, np.full(stat.size, 1.1), 200.0), 3e4)
+    assert np.allclose(default_threshold(stat, np.full(stat.size, 1.1), 200.0), 3e4)
 
 
 @pytest.mark.parametrize("floor", [5e4, 1.2e5, 3e5])
 def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it(floor):
     """Running stances whose least statistic is 0.5-3e5 (above any fixed walking threshold):
     each cycle's threshold sits half a decade above its own floor, and finds every stance."""
-    from bodyfusion.nav.detectors import adaptive_shoe_threshold
-
     stat, truth = _statistic_of(floor, 1e8, 200.0, 0.15, 0.55)
-    gamma = adaptive_shoe_threshold(stat, np.full(stat.size, 0.7), 200.0)
+    gamma = default_threshold(stat, np.full(stat.size, 0.7), 200.0)
     assert np.all(gamma > 3e4) and np.all(gamma <= 1e7)
     np.testing.assert_array_equal(stat < gamma, truth)
 
@@ -237,34 +246,29 @@ def test_adaptive_threshold_rises_to_a_running_stance_and_finds_it(floor):
 def test_adaptive_threshold_never_makes_stance_of_aperiodic_motion():
     """A sensor that never rests and repeats nothing (RMS rate > 1 rad/s): no gait period is
     found, and nothing is stance."""
-    from bodyfusion.nav.detectors import adaptive_shoe
     from bodyfusion.nav.gait import stride_period
 
     rng = np.random.default_rng(0)
     gyro = rng.normal(0.0, 1.5, (4000, 3))
     acc = np.tile([0.0, 0.0, 9.81], (4000, 1)) + rng.normal(0.0, 2.0, (4000, 3))
     assert np.isnan(stride_period(np.linalg.norm(gyro, axis=1), 200.0)).all()
-    stance, _, _ = adaptive_shoe(acc, gyro, 200.0, gravity=9.81)
-    assert not stance.any()
+    assert not AdaptiveShoe().detect(acc, gyro, 200.0, 9.81).stance.any()
 
 
 def test_adaptive_threshold_ignores_cycles_whose_floor_does_not_stand_out():
     """A cycle whose swing rises less than ``prominence_decades`` above its floor is no gait
     (fidgeting, a shuffle): only the fixed threshold applies there."""
-    from bodyfusion.nav.detectors import adaptive_shoe_threshold
-
     stat, _ = _statistic_of(2e5, 1e6, 200.0, 0.2, 0.5)  # 0.7 decades of swing
-    assert np.allclose(adaptive_shoe_threshold(stat, np.full(stat.size, 0.7), 200.0), 3e4)
+    assert np.allclose(default_threshold(stat, np.full(stat.size, 0.7), 200.0), 3e4)
 
 
 def test_adaptive_shoe_window_spans_the_same_time_at_any_rate():
-    from bodyfusion.nav.detectors import adaptive_shoe
 
     for rate, w in ((60.0, 3), (200.0, 5), (400.0, 10)):
         n = int(5 * rate)
         acc = np.tile([0.0, 0.0, 9.81], (n, 1))
-        stance, gamma, period = adaptive_shoe(acc, np.zeros((n, 3)), rate, gravity=9.81)
-        assert stance.all() and gamma.size == n - w + 1 and period.size == n
+        d = AdaptiveShoe().detect(acc, np.zeros((n, 3)), rate, 9.81)
+        assert d.stance.all() and d.gamma.size == n - w + 1 and d.period_s.size == n and d.statistic_window == w
 
 
 def test_the_default_detector_holds_on_a_running_stance_that_never_rests(tmp_path):

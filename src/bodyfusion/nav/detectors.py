@@ -1,12 +1,10 @@
-"""Zero-velocity (stance) detectors for foot-mounted IMUs.
+"""The statistics and tests of the zero-velocity (stance) detectors, and stance post-processing.
 
-Every detector takes body-frame specific force ``acc_b`` (N, 3) in m/s^2 (about
-+9.8 m/s^2 along the up-pointing axis at rest) and/or angular rate ``gyro_b``
-(N, 3) in rad/s, and returns an (N,) bool array, True = stance (foot at rest).
-Thresholds are in samples and SI units, so they do not depend on the rate
-except through window lengths (choose windows in samples for your rate).
-
-Per-sample work is done in numba kernels or vectorised numpy.
+The detectors themselves, with their parameters' defaults, are the model classes of
+:mod:`bodyfusion.nav.stance_detectors`; these functions take every parameter explicitly.
+Inputs: body-frame specific force ``acc_b`` (N, 3) in m/s^2 (about +g along the up-pointing
+axis at rest) and angular rate ``gyro_b`` (N, 3) in rad/s; a stance array is (N,) bool, True =
+the foot at rest. Per-sample work is done in numba kernels or vectorised numpy.
 
 Sources
 -------
@@ -32,12 +30,11 @@ import numpy as np
 
 __all__ = [
     "acceleration_magnitude",
-    "adaptive_shoe",
     "adaptive_shoe_threshold",
     "axes_sum_band",
     "debounce",
-    "shoe",
     "shoe_statistic",
+    "spread_windows",
     "stance_events",
 ]
 
@@ -110,8 +107,9 @@ def _shoe_kernel(acc, gyro, window, inv_var_a, inv_var_g, g):  # pragma: no cove
 
 
 @numba.njit(cache=True)
-def _spread_windows(passed, window, n):  # pragma: no cover - compiled
-    """stance[i] = any(passed[k] for windows k = i-window+1 .. i that exist)."""
+def spread_windows(passed, window, n):  # pragma: no cover - compiled
+    """Stance flags (N,) from per-window verdicts ``passed`` (N − W + 1,): as OpenShoe marks them,
+    stance[i] = any(passed[k] for the windows k = i − W + 1 .. i that exist)."""
     out = np.zeros(n, dtype=np.bool_)
     last = -1  # last window start that passed, seen so far
     m = passed.shape[0]
@@ -123,15 +121,8 @@ def _spread_windows(passed, window, n):  # pragma: no cover - compiled
     return out
 
 
-def shoe_statistic(
-    acc_b: np.ndarray,
-    gyro_b: np.ndarray,
-    *,
-    window: int = 5,
-    sigma_acc: float = 0.01,
-    sigma_gyro: float = 0.1 * math.pi / 180.0,
-    gravity: float = 9.81,
-) -> np.ndarray:
+def shoe_statistic(acc_b: np.ndarray, gyro_b: np.ndarray, *, window: int, sigma_acc: float, sigma_gyro: float,
+                   gravity: float) -> np.ndarray:
     """SHOE (GLRT) test statistic of Skog et al. (2010), one value per window.
 
     For the window of ``W`` samples starting at sample ``k`` (k = 0 .. N-W)::
@@ -155,57 +146,11 @@ def shoe_statistic(
     return _shoe_kernel(acc, gyro, w, 1.0 / sigma_acc**2, 1.0 / sigma_gyro**2, float(gravity))
 
 
-def shoe(
-    acc_b: np.ndarray,
-    gyro_b: np.ndarray,
-    *,
-    window: int = 5,
-    sigma_acc: float = 0.01,
-    sigma_gyro: float = 0.1 * math.pi / 180.0,
-    threshold: float = 0.3e5,
-    gravity: float = 9.81,
-) -> np.ndarray:
-    """SHOE / GLRT zero-velocity detector (Skog et al., IEEE TBME 2010).
-
-    Computes :func:`shoe_statistic` ``T_k`` (window mean, the OpenShoe scaling
-    ``T = T ./ W``) and, as OpenShoe's ``zero_velocity_detector.m`` does, marks
-    all ``W`` samples of every window with ``T_k < threshold`` as stance.
-    Samples covered by no passing window (including all of a record shorter
-    than ``W``) are swing.
-
-    Parameters (units): ``window`` W in samples; ``sigma_acc`` accelerometer
-    noise standard deviation in m/s^2; ``sigma_gyro`` gyroscope noise standard
-    deviation in rad/s; ``threshold`` gamma, dimensionless; ``gravity`` m/s^2.
-
-    Default gamma = 0.3e5 is OpenShoe's published threshold (``setting.m``:
-    W = 3, sigma_acc = 0.01 m/s^2, sigma_gyro = 0.1 deg/s, gamma = 0.3e5),
-    which belongs to this same 1/W-scaled statistic.  Since the sigmas only
-    scale ``T``, the decision depends on ``gamma * sigma^2``: at the
-    defaults, stance means roughly
-    ``mean ||w||^2 + (sigma_gyro/sigma_acc)^2 mean ||a - g u||^2 < 0.091 (rad/s)^2``,
-    i.e. an RMS angular rate below ~0.30 rad/s (17 deg/s) with a steady
-    specific force, or an RMS specific-force deviation below ~1.7 m/s^2
-    without rotation.  A 10x larger gamma (3e5) lets through ~1 rad/s.
-
-    On the shared 60 Hz Vicon walk ([Hu2025]) these defaults agree with
-    the authors' stance labels on 92.8 % (left) and 88.3 % (right) of the
-    samples (gamma = 3e5: 84.0 % / 78.1 %).  Labelled stance is almost never
-    missed; the disagreements are stance declared in short (1-3 sample)
-    labelled swing flickers and at the edges of the labelled stance phases.
-    """
-    t = shoe_statistic(
-        acc_b, gyro_b, window=window, sigma_acc=sigma_acc, sigma_gyro=sigma_gyro, gravity=gravity
-    )
-    n = np.asarray(acc_b).shape[0]
-    return _spread_windows(t < threshold, int(window), n)
-
-
 # --------------------------------------------------------------------------- adaptive SHOE
 
 
-def adaptive_shoe_threshold(statistic: np.ndarray, period_s: np.ndarray, rate_hz: float, *,
-                            gamma_still: float = 0.3e5, gamma_motion: float = 1e7, margin_decades: float = 1.0,
-                            prominence_decades: float = 1.0) -> np.ndarray:
+def adaptive_shoe_threshold(statistic: np.ndarray, period_s: np.ndarray, rate_hz: float, *, gamma_still: float,
+                            gamma_motion: float, margin_decades: float, prominence_decades: float) -> np.ndarray:
     """Per-window threshold γ_k for the SHOE statistic T_k, from the gait cycle around each window.
 
     The statistic of a foot at rest sits at the sensor's noise level; in a walking stance the
@@ -250,32 +195,10 @@ PERIOD_STEP_SAMPLES = 8
 """Cycle windows (:func:`adaptive_shoe_threshold`) are whole multiples of this many samples."""
 
 
-def adaptive_shoe(acc_b: np.ndarray, gyro_b: np.ndarray, rate_hz: float, *, window: int | None = None,
-                  sigma_acc: float = 0.01, sigma_gyro: float = 0.1 * math.pi / 180.0, gravity: float = 9.81,
-                  **threshold_options: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """SHOE with a threshold that follows the gait (:func:`adaptive_shoe_threshold`), the stride
-    period from the angular rate (:func:`bodyfusion.nav.gait.stride_period`).
-
-    ``window`` W in samples (default: 25 ms at ``rate_hz``, at least 3, so the test spans the
-    same time at any rate); σ_a (m/s^2), σ_ω (rad/s), ``gravity`` (m/s^2) as in :func:`shoe`.
-    Returns the stance flags (N,), the threshold per window (N − W + 1,) and the stride period
-    per sample (N,; s, NaN where no gait repeats).
-    """
-    from bodyfusion.nav.gait import stride_period
-
-    w = window if window is not None else max(3, int(round(0.025 * rate_hz)))
-    t = shoe_statistic(acc_b, gyro_b, window=w, sigma_acc=sigma_acc, sigma_gyro=sigma_gyro, gravity=gravity)
-    period = stride_period(np.linalg.norm(np.asarray(gyro_b, dtype=float), axis=1), rate_hz)
-    gamma = adaptive_shoe_threshold(t, period[w // 2:w // 2 + t.size], rate_hz, **threshold_options)
-    return _spread_windows(t < gamma, int(w), np.asarray(acc_b).shape[0]), gamma, period
-
-
 # --------------------------------------------------------------------------- magnitude
 
 
-def acceleration_magnitude(
-    acc_b: np.ndarray, *, threshold: float, gravity: float = 9.81, window: int = 1
-) -> np.ndarray:
+def acceleration_magnitude(acc_b: np.ndarray, *, threshold: float, gravity: float, window: int) -> np.ndarray:
     """Acceleration-magnitude stance detector of [Xu2024].
 
     The paper (Sec. 2, Eq. for ``VAcc``) computes ``VAcc_t = sqrt(ax^2 + ay^2 +
@@ -299,7 +222,7 @@ def acceleration_magnitude(
 # --------------------------------------------------------------------------- axes sum
 
 
-def axes_sum_band(acc_b: np.ndarray, *, low: float, high: float, window: int = 1) -> np.ndarray:
+def axes_sum_band(acc_b: np.ndarray, *, low: float, high: float, window: int) -> np.ndarray:
     """Axes-sum band stance detector of [Deng2026].
 
     Sec. 2.2: "the sum of the values along the three axes in the b-frame is

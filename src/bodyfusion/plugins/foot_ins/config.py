@@ -9,6 +9,7 @@ from pydantic import Field, model_validator
 from bodyfusion.base.sections import DataPath, KeyedError, StrictModel
 from bodyfusion.core.layout import PositionFrame
 from bodyfusion.io.imu import ImuCsvConfig
+from bodyfusion.nav.stance_detectors import STANCE_DETECTORS, StanceDetector
 
 
 ENSEMBLE_KINDS = ("enekf", "cenekf")
@@ -70,41 +71,68 @@ class FootFilterConfig(StrictModel):
 
 
 class DetectorConfig(StrictModel):
-    """Zero-velocity detector. ``labels`` uses the data's stance column.
+    """Zero-velocity detector: ``kind`` selects one of :mod:`bodyfusion.nav.stance_detectors`
+    (``adaptive``, the default: SHOE with a threshold that follows the gait; ``shoe``: OpenShoe's
+    fixed threshold; ``magnitude``; ``axes_band``; ``labels``: the data's stance column; or a
+    registered one), and the fields below set its parameters; a field left unset is the
+    detector's own default, a field the detector does not take is refused. Stance runs shorter
+    than ``min_stance_s`` and swing gaps shorter than ``min_swing_s`` are then removed."""
 
-    adaptive (the default): the SHOE statistic with a threshold that follows the gait
-    (:func:`bodyfusion.nav.detectors.adaptive_shoe_threshold`: ``margin_decades`` above the floor
-    of each gait cycle, the stride period measured in the recording
-    (:func:`bodyfusion.nav.gait.stride_period`), never below ``threshold`` (default 3e4) nor above
-    ``motion_threshold``), window 25 ms at the recording's rate unless ``window`` is set; it
-    follows walking, running and stair stances at any rate. shoe: Skog et al. 2010 GLRT with ``window`` samples, σ_a
-    (m/s^2), σ_ω (rad/s) and the fixed ``threshold`` γ; magnitude: | ‖f‖ − g | ≤
-    ``threshold`` (m/s^2); axes_band: ``low`` ≤ f_x + f_y + f_z ≤ ``high`` (m/s^2). Stance
-    runs shorter than ``min_stance_s`` and swing gaps shorter than ``min_swing_s`` are removed.
-    """
-
-    kind: Literal["adaptive", "labels", "shoe", "magnitude", "axes_band"] = "adaptive"
-    """adaptive, labels, shoe, magnitude or axes_band."""
+    kind: str = "adaptive"
+    """The detector (:data:`bodyfusion.nav.stance_detectors.STANCE_DETECTORS`)."""
     window: int | None = Field(default=None, ge=1, le=MAX_WINDOW)
-    """Samples per test window, at most :data:`MAX_WINDOW` (shoe, magnitude, axes_band:
-    default 5; adaptive: 25 ms)."""
-    motion_threshold: float = Field(default=1e7, gt=0)
+    """Samples per test window, at most :data:`MAX_WINDOW` (shoe, magnitude, axes_band: 5;
+    adaptive: 25 ms at the recording's rate)."""
+    threshold: float | None = Field(default=None, gt=0)
+    """shoe, adaptive: the SHOE γ below which a window is stance (3e4, OpenShoe's); magnitude:
+    the largest | ‖f‖ − g |, m/s^2 (0.5)."""
+    motion_threshold: float | None = Field(default=None, gt=0)
     """adaptive: the SHOE statistic above which a sample is never stance (1e7: an RMS angular
     rate of ~5.5 rad/s at the default σ_ω)."""
-    margin_decades: float = Field(default=0.5, gt=0)
-    """adaptive: how far (decades of the statistic) above its gait cycle's floor stance reaches."""
-    prominence_decades: float = Field(default=1.0, gt=0)
+    margin_decades: float | None = Field(default=None, gt=0)
+    """adaptive: how far (decades of the statistic) above its gait cycle's floor stance reaches (0.5)."""
+    prominence_decades: float | None = Field(default=None, gt=0)
     """adaptive: how far (decades) a cycle's swing must rise above its floor for the cycle to
-    be a gait (below it only ``threshold`` applies: standing, fidgeting)."""
-    threshold: float | None = Field(default=None, gt=0)
-    sigma_acc: float = Field(default=0.01, gt=0)
-    """SHOE accelerometer noise σ_a, m/s^2."""
-    sigma_gyro: float = Field(default=0.1 * 3.141592653589793 / 180, gt=0)
-    """SHOE gyroscope noise σ_ω, rad/s."""
+    be a gait (1.0; below it only ``threshold`` applies: standing, fidgeting)."""
+    sigma_acc: float | None = Field(default=None, gt=0)
+    """shoe, adaptive: accelerometer noise σ_a, m/s^2 (0.01)."""
+    sigma_gyro: float | None = Field(default=None, gt=0)
+    """shoe, adaptive: gyroscope noise σ_ω, rad/s (0.1 °/s)."""
     low: float | None = None
+    """axes_band: the band's lower edge, m/s^2 (g − 1)."""
     high: float | None = None
+    """axes_band: the band's upper edge, m/s^2 (g + 1)."""
     min_stance_s: float = Field(default=0.0, ge=0)
+    """Shortest stance kept, s (0: every one)."""
     min_swing_s: float = Field(default=0.0, ge=0)
+    """Shortest swing kept between two stances, s (0: every one)."""
+
+    @model_validator(mode="after")
+    def _known_detector(self) -> DetectorConfig:
+        detector = STANCE_DETECTORS.get(self.kind)
+        if detector is None:
+            raise KeyedError("kind", f"unknown stance detector {self.kind!r} (have {', '.join(sorted(STANCE_DETECTORS))})")
+        taken = set(detector.parameters())
+        for name in DETECTOR_PARAMETERS:
+            if getattr(self, name) is not None and name not in taken:
+                raise KeyedError(name, f"the {self.kind} detector takes no {name} (it takes "
+                                       f"{', '.join(detector.parameters()) or 'nothing'})")
+        try:
+            self.detector()
+        except ValueError as err:  # the detector's own checks: the first parameter it names is the key
+            named = [name for name in DETECTOR_PARAMETERS if name in str(err) and getattr(self, name) is not None]
+            raise KeyedError(named[0] if named else "kind", str(err)) from None
+        return self
+
+    def detector(self) -> StanceDetector:
+        """The detector, made with the parameters set here (ValueError from its own checks)."""
+        params = {name: getattr(self, name) for name in DETECTOR_PARAMETERS if getattr(self, name) is not None}
+        return STANCE_DETECTORS[self.kind](**params)
+
+
+DETECTOR_PARAMETERS = ("window", "threshold", "motion_threshold", "margin_decades", "prominence_decades", "sigma_acc",
+                       "sigma_gyro", "low", "high")
+"""The fields of :class:`DetectorConfig` that are a detector's parameters (by the same names)."""
 
 
 class InitialStateConfig(StrictModel):

@@ -1,6 +1,6 @@
 """Stance of a foot: the configured detector, and a watchdog for the stances it missed.
 
-:func:`detect_stance` runs the layout's ``detector`` (:mod:`bodyfusion.nav.detectors`) and then
+:func:`detect_stance` runs the layout's ``detector`` (:mod:`bodyfusion.nav.stance_detectors`) and then
 the *missed-stance watchdog*: a foot that walks, runs or climbs is at rest once per stride, so
 a stretch with no detected stance longer than :data:`MISSED_STRIDES` of its own stride periods
 (:func:`bodyfusion.nav.gait.stride_period`; where no gait repeats, the recording's median
@@ -25,11 +25,9 @@ from bodyfusion.base.findings import Finding, spans
 from bodyfusion.base.types import ImuStream
 from bodyfusion.nav import detectors
 from bodyfusion.nav.gait import stride_period
+from bodyfusion.nav.stance_detectors import ADAPTIVE_WINDOW_S, SIGMA_ACC_MPS2, SIGMA_GYRO_RADPS, AdaptiveShoe
 from bodyfusion.plugins.foot_ins.config import DetectorConfig
 
-DEFAULT_THRESHOLDS = {"shoe": 0.3e5, "adaptive": 0.3e5, "magnitude": 0.5}
-"""The detectors' thresholds when the layout gives none: SHOE γ (OpenShoe scaling), the
-magnitude test's m/s^2."""
 MISSED_STRIDES = 2.0
 """A stretch without stance longer than this many stride periods has missed stances."""
 DEFAULT_STRIDE_S = 1.2
@@ -70,48 +68,33 @@ class StanceDetection:
         return np.where(known, self.period_s, fill)
 
 
-def _detector_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str,
-                     rate: float) -> tuple[np.ndarray, np.ndarray | None]:
-    """The configured detector's stance flags (N,) and, for the adaptive one, its stride period."""
-    threshold = cfg.threshold if cfg.threshold is not None else DEFAULT_THRESHOLDS.get(cfg.kind)
-    window = cfg.window if cfg.window is not None else 5
-    if cfg.kind == "labels":  # the config model ensures the data have a stance column
-        return stream.stance.copy(), None
-    if cfg.kind == "adaptive":
-        if threshold >= cfg.motion_threshold:
-            raise ConfigError(f"{key}.threshold", f"must be below motion_threshold ({cfg.motion_threshold:g})")
-        stance, _, period = detectors.adaptive_shoe(
-            stream.acc_b, stream.gyro_b, rate, window=cfg.window, sigma_acc=cfg.sigma_acc, sigma_gyro=cfg.sigma_gyro,
-            gravity=gravity, gamma_still=threshold, gamma_motion=cfg.motion_threshold,
-            margin_decades=cfg.margin_decades, prominence_decades=cfg.prominence_decades)
-        return stance, period
-    if cfg.kind == "shoe":
-        return detectors.shoe(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
-                              sigma_gyro=cfg.sigma_gyro, threshold=threshold, gravity=gravity), None
-    if cfg.kind == "magnitude":
-        return detectors.acceleration_magnitude(stream.acc_b, threshold=threshold, gravity=gravity, window=window), None
-    low = cfg.low if cfg.low is not None else gravity - 1.0
-    high = cfg.high if cfg.high is not None else gravity + 1.0
-    if not low < high:
-        raise ConfigError(f"{key}.low", f"need low < high, got {low} and {high}")
-    return detectors.axes_sum_band(stream.acc_b, low=low, high=high, window=window), None
-
-
 def detect_stance(stream: ImuStream, cfg: DetectorConfig, gravity: float, key: str) -> StanceDetection:
-    """The configured detector's stance (debounced: durations in s), then the missed-stance
-    watchdog's fallbacks (module docstring)."""
+    """The configured detector's stance (:meth:`DetectorConfig.detector`, debounced: durations in
+    s), then the missed-stance watchdog's fallbacks (module docstring), on the SHOE statistic
+    over :data:`~bodyfusion.nav.stance_detectors.ADAPTIVE_WINDOW_S` (the detector's own when it
+    computed that one)."""
     rate = float(1.0 / np.median(np.diff(stream.t)))
-    stance, period = _detector_stance(stream, cfg, gravity, key, rate)
+    detector = cfg.detector()
+    try:
+        detector.detect(stream.acc_b, stream.gyro_b, rate, gravity, labels=stream.stance)
+    except ValueError as err:
+        raise ConfigError(key, str(err)) from None
+    stance = detector.stance
     if cfg.min_stance_s > 0 or cfg.min_swing_s > 0:
         stance = detectors.debounce(stance, min_stance=max(1, round(cfg.min_stance_s * rate)),
                                     min_swing=max(1, round(cfg.min_swing_s * rate)))
     stance = np.ascontiguousarray(stance, dtype=np.bool_)
+    period = detector.period_s
     if period is None:
         period = stride_period(np.linalg.norm(stream.gyro_b, axis=1), rate)
     found = StanceDetection(stance, stance, period, np.zeros_like(stance))
-    window = cfg.window if cfg.window is not None and cfg.kind == "adaptive" else max(3, round(0.025 * rate))
-    statistic = detectors.shoe_statistic(stream.acc_b, stream.gyro_b, window=window, sigma_acc=cfg.sigma_acc,
-                                         sigma_gyro=cfg.sigma_gyro, gravity=gravity)
+    if isinstance(detector, AdaptiveShoe):
+        window, statistic = detector.statistic_window, detector.statistic
+    else:
+        window = max(3, round(ADAPTIVE_WINDOW_S * rate))
+        shoe = getattr(detector, "sigma_acc", SIGMA_ACC_MPS2), getattr(detector, "sigma_gyro", SIGMA_GYRO_RADPS)
+        statistic = detectors.shoe_statistic(stream.acc_b, stream.gyro_b, window=window, sigma_acc=shoe[0],
+                                             sigma_gyro=shoe[1], gravity=gravity)
     _watch(found, statistic, window, rate)
     return found
 
