@@ -656,3 +656,20 @@ def test_constraint_validation_and_equality():
 def test_module_exports():
     for name in fc.__all__:
         assert hasattr(fc, name)
+
+
+@pytest.mark.parametrize("method", ["projection", "qp", "socp"])
+def test_every_method_is_a_constraint_solver_built_from_the_layout(method):
+    """One protocol: the fuser, the smoothed tracks' constraints and the compile-ahead build any
+    method the same way, and each reaches the same point on the same problem."""
+    from bodyfusion.core.constraints.solvers import ConstraintSolver, constraint_solver, distance_constraints
+    from bodyfusion.core.layout import ConstraintConfig, FuserConfig
+
+    if method == "socp":
+        pytest.importorskip("cvxpy")
+    cons = distance_constraints([ConstraintConfig(between=["a", "b"], kind="max", distance_m=1.0)], ["a", "b"])
+    solver = constraint_solver(method, 2, cons, FuserConfig(method=method))
+    assert isinstance(solver, ConstraintSolver) and solver.method == method
+    p_hat = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0])
+    reference = constraint_solver("projection", 2, cons, FuserConfig()).solve(p_hat, np.eye(6))
+    np.testing.assert_allclose(solver.solve(p_hat, np.eye(6)).p, reference.p, atol=1e-6)

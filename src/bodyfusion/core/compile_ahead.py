@@ -23,7 +23,7 @@ import numpy as np
 from bodyfusion.base.forking import Forked, fork_is_safe
 from bodyfusion.core.constraints.kernels import _all_finite
 from bodyfusion.core.constraints.truncation import DensityTruncation
-from bodyfusion.core.fuser import SOLVERS, distance_constraints
+from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.layout import Layout
 from bodyfusion.nav.filter_health import CovarianceHealth
 
@@ -44,8 +44,7 @@ def compile_fuser_kernels(layout: Layout) -> None:
     numeric = [c.model_copy(update={"distance_m": 1.0}) if c.distance_m == "body" else c for c in layout.constraints]
     limits = distance_constraints(numeric, order)  # a body limit's value does not change what compiles
     n = len(order)
-    solver = SOLVERS[layout.fuser.method](n, limits, tol_m=layout.fuser.tolerance_m,
-                                          max_iter=layout.fuser.max_iterations)
+    solver = constraint_solver(layout.fuser.method, n, limits, layout.fuser)
     truncation = DensityTruncation(limits, n, layout.fuser.correct == "positions")
     spacing = 2.0 * max(c.distance_m for c in limits) + 1.0
     pos = np.arange(3 * n, dtype=np.int64)

@@ -47,13 +47,12 @@ from bodyfusion.core.heading import HeadingTie
 from bodyfusion.core.layout import BodyConfig, ConstraintConfig, FuserConfig
 from bodyfusion.core.limits import LimitGuard
 from bodyfusion.nav.measurements import chi2_gate
-from bodyfusion.core.constraints import (ConstraintSolution, DistanceConstraint, ProjectionSolver, QpSolver,
-                                         SocpSolver)
+from bodyfusion.core.constraints import ConstraintSolution
+from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.constraint_log import ConstraintLog
 from bodyfusion.core.system import AidingSource, SensorSystem
 
-SOLVERS = {"projection": ProjectionSolver, "qp": QpSolver, "socp": SocpSolver}
 LIMIT_STEP_M = 0.05
 """A limit that follows the gait is rounded up to a multiple of this (m): one solver per step."""
 TIE_GATE_PROBABILITY = 0.999
@@ -97,17 +96,6 @@ class FuserReport:
     def solve_times_us(self) -> np.ndarray:
         """The solver's wall time (µs) at every epoch (empty without constraints)."""
         return np.empty(0) if self.constraint_log is None else self.constraint_log.solve_us[:self.constraint_log.n]
-
-
-def distance_constraints(configs: list[ConstraintConfig], order: list[str]) -> list[DistanceConstraint]:
-    """Layout constraints as solver constraints over the systems in ``order``."""
-    out = []
-    for c in configs:
-        a, b = c.between
-        lever = {k: np.asarray(v, dtype=float) for k, v in c.lever_arms_m.items()}
-        out.append(DistanceConstraint(i=order.index(a), j=order.index(b), kind=c.kind, distance_m=c.distance_m,
-                                      horizontal=c.horizontal, lever_i_m=lever.get(a), lever_j_m=lever.get(b)))
-    return out
 
 
 def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
@@ -426,8 +414,7 @@ class Fuser:
             cons = distance_constraints([c.model_copy(update={"distance_m": d}) for c, d in zip(self.constraints, key)],
                                         self._order)
             n = len(self._order)
-            built = (SOLVERS[self.config.method](n, cons, tol_m=self.config.tolerance_m,
-                                                 max_iter=self.config.max_iterations),
+            built = (constraint_solver(self.config.method, n, cons, self.config),
                      DensityTruncation(cons, n, self.config.correct == "positions"))
             self._solvers[key] = built
         limits[:] = key

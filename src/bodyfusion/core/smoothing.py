@@ -17,7 +17,7 @@ import numpy as np
 
 from bodyfusion.core.capabilities import Smoothing, offers
 from bodyfusion.core.constraints import violations
-from bodyfusion.core.fuser import SOLVERS, distance_constraints
+from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
 from bodyfusion.core.system import SensorSystem
 from bodyfusion.base.types import LOG, Trajectory
@@ -69,7 +69,7 @@ def constrain_trajectories(trajectories: Mapping[str, Trajectory], smoothed: Set
     method = fuser.method if fuser.method != "none" else "projection"
     try:
         cons = distance_constraints(constraints, order)
-        solver = SOLVERS[method](len(order), cons, tol_m=fuser.tolerance_m, max_iter=fuser.max_iterations)
+        solver = constraint_solver(method, len(order), cons, fuser)
         trajs = [trajectories[name] for name in order]
         grid = trajs[0].t
         pos = np.column_stack([np.interp(grid, tr.t, tr.pos_n[:, ax]) for tr in trajs for ax in range(3)])

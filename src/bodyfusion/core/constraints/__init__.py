@@ -42,7 +42,9 @@ Modules, each importing only those above it:
 * :mod:`.linearisation` — eqs. 58–60 on a linearised active set, certification of
   another solver's point;
 * :mod:`.sqp` — whitening and the sequential QP with a pluggable QP solver;
-* :mod:`.projection`, :mod:`.qp`, :mod:`.socp` — the three methods.
+* :mod:`.projection`, :mod:`.qp`, :mod:`.socp` — the three methods;
+* :mod:`.solvers` — the :class:`~.solvers.ConstraintSolver` protocol they share, the methods by
+  name, and the layout's constraints and solver built from its sections.
 * :mod:`.truncation` — the fuser's density truncation of the joint error state at the
   limits, compiled ([Simon2010]).
 """
