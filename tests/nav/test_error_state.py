@@ -11,20 +11,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.nav.error_state import (
-    ERROR_SIZE,
-    P_GYRO_BIAS_DECAY,
-    P_GYRO_RW,
-    PARAMS_SIZE,
-    closed_loop_reset,
-    decay_biases,
-    error_between,
-    inject,
-    inv3_sym,
-    process_noise_diag,
-    propagate_covariance,
-    update_selected,
-)
+from bodyfusion.nav.error_state import (ERROR_SIZE, P_GYRO_BIAS_DECAY, P_GYRO_RW, PARAMS_SIZE, closed_loop_reset,
+                                       decay_biases, error_between, inject, process_noise_diag, propagate_covariance)
+from bodyfusion.nav.kalman import inv3_sym, update_selected
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import zero_angular_rate_update, zero_velocity_update
 from bodyfusion.testing import random_nominal_state

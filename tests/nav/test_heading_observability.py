@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.nav.error_state import ERROR_SIZE, accumulate_propagation, selection_moments, selection_update
+from bodyfusion.nav.error_state import ERROR_SIZE, accumulate_propagation
+from bodyfusion.nav.kalman import selection_moments, selection_update
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import zero_angular_rate_update, zero_velocity_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update

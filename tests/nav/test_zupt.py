@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyfusion.nav.error_state import nis_selected
+from bodyfusion.nav.kalman import nis_selected
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.nav.zupt import gated_noise_variance, zero_velocity_update
 

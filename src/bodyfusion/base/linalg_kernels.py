@@ -29,3 +29,39 @@ def cholesky(S: np.ndarray, L: np.ndarray) -> bool:
                 acc -= L[i, t] * L[j, t]
             L[i, j] = acc / ljj
     return True
+
+
+@numba.njit(inline="always")
+def assign(M: np.ndarray, work: np.ndarray) -> None:
+    """M ← work element by element (n, n): a slice assignment would compile numba's
+    shape-mismatch error message with it, string formatting that cost ~3 s of a cold start."""
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            M[i, j] = work[i, j]
+
+
+@numba.njit(cache=True)
+def left_multiply(A: np.ndarray, M: np.ndarray, work: np.ndarray) -> None:
+    """M ← A M in place (n, n), through ``work`` (n, n); zero entries of A skipped."""
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            work[i, j] = 0.0
+        for k in range(n):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(n):
+                    work[i, j] += a * M[k, j]
+    assign(M, work)
+
+
+@numba.njit(inline="always")
+def symmetrise(P: np.ndarray) -> None:
+    """P ← (P + Pᵀ) / 2 in place."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            v = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = v
+            P[j, i] = v

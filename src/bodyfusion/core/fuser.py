@@ -20,7 +20,8 @@ Aiding sources (:class:`bodyfusion.core.system.AidingSource`, e.g. a UWB tag) gi
 measurements of one system's position (a range to an anchor) or of two systems'
 positions (a range between two body-worn tags). At each measurement time the fuser
 advances the measured systems to it (their state refers to their last sample at or
-before it) and applies a gated EKF update on their stacked error states:
+before it) and applies a gated EKF update on their stacked error states (the project's one,
+:func:`bodyfusion.nav.kalman.gated_update`):
 
     y = z − h(p̂),  H = [∂h/∂p_i S_i ...],  s = H P Hᵀ + r,  NIS = y²/s,
     K = P Hᵀ / s,  δx = K y,  P* = (I − K H) P (I − K H)ᵀ + K r Kᵀ  (Joseph form),
@@ -46,6 +47,7 @@ from bodyfusion.core.capabilities import TransitionTracking, offers
 from bodyfusion.core.heading import HeadingTie
 from bodyfusion.core.layout import BodyConfig, ConstraintConfig, FuserConfig
 from bodyfusion.core.limits import LimitGuard
+from bodyfusion.nav.kalman import gated_update
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.core.constraints import ConstraintSolution
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
@@ -136,25 +138,6 @@ def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSoluti
     IM = np.eye(P.shape[0]) - M
     P_new = IM @ P @ IM.T
     return dx, 0.5 * (P_new + P_new.T)
-
-
-def scalar_update(P: np.ndarray, H: np.ndarray, y: float, r_var: float,
-                  gate_nis: float) -> tuple[float, np.ndarray | None, np.ndarray | None]:
-    """Gated scalar EKF update of an error state with covariance P (n, n).
-
-    H (n,) the measurement row, y the innovation z − h(x̂), r_var the noise variance.
-    Returns (NIS, δx, P*) with P* in Joseph form; δx and P* are None when the NIS
-    y²/(H P Hᵀ + r) exceeds ``gate_nis``.
-    """
-    PHt = P @ H
-    s = float(H @ PHt) + r_var
-    nis = y * y / s
-    if not nis <= gate_nis:
-        return nis, None, None
-    K = PHt / s
-    IKH = np.eye(P.shape[0]) - np.outer(K, H)
-    P_new = IKH @ P @ IKH.T + r_var * np.outer(K, K)
-    return nis, K * y, 0.5 * (P_new + P_new.T)
 
 
 class JointState:
@@ -323,9 +306,9 @@ class Fuser:
         H = np.zeros(P.shape[0])
         for row, s, off in zip(np.atleast_2d(m.H_p), measured, offsets):
             H[off + s.position_indices.start:off + s.position_indices.stop] += row
-        nis, dx, P_new = scalar_update(P, H, m.z - m.predicted, m.r_var, src.gate_nis)
-        src.record(k, nis, dx is not None)
-        if dx is None:
+        nis, accepted, dx, P_new = gated_update(P, H, m.r_var, m.z - m.predicted, src.gate_nis)
+        src.record(k, nis, accepted)
+        if not accepted:
             return
         if joint:
             # a measurement of one system is its own; one between systems (or spread to the
@@ -351,9 +334,9 @@ class Fuser:
             H = np.zeros(P.shape[0])
             H[joint.blocks[b]] += sys.yaw_error_row()
             H[joint.blocks[a]] -= ref.yaw_error_row()
-            nis, dx, P_new = scalar_update(P, H, z, r_var, self._tie_gate)
-            tie.log.append((t, z, float(np.sqrt(r_var)), nis, dx is not None))
-            if dx is not None:
+            nis, accepted, dx, P_new = gated_update(P, H, r_var, z, self._tie_gate)
+            tie.log.append((t, z, float(np.sqrt(r_var)), nis, accepted))
+            if accepted:
                 joint.correct(dx, P_new, list(range(len(joint.systems))) if joint.track else [a, b])
             tie.restart_at(ref.position_n(), sys.position_n())
 

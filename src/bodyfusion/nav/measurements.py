@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyfusion.nav.error_state import inject, inv3_sym, update_selected
+from bodyfusion.nav.error_state import inject
+from bodyfusion.nav.kalman import inv3_sym, update_selected
 
 
 def chi2_gate(probability: float, dof: int) -> float:
@@ -35,7 +36,7 @@ class GateCounts:
 def position_fix_update(x: np.ndarray, P: np.ndarray, z_n: np.ndarray, sigma_m: float, gate_nis: float,
                         counts: GateCounts, phi: np.ndarray) -> float:
     """Gated position update of the 15-state filter; x (16,), P (15, 15) and the
-    transition accumulator phi (see :func:`bodyfusion.nav.error_state.update_selected`) in place.
+    transition accumulator phi (see :func:`bodyfusion.nav.kalman.update_selected`) in place.
 
     Returns the NIS; a fix whose NIS exceeds ``gate_nis`` changes nothing.
     """

@@ -35,8 +35,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_PIVOT, P_ZUPT_SIGMA, inject, keep_yaw_unobservable, nis3,
-                                       selection_moments, selection_update)
+from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_PIVOT,
+                                       P_ZUPT_SIGMA, inject, keep_yaw_unobservable)
+from bodyfusion.nav.kalman import nis3, selection_moments, selection_update
 
 ZUPT_COLUMNS = np.array([3, 4, 5, 8], dtype=np.int64)
 """The error states a ZUPT's Jacobian touches: δv (3:6) and the heading δψ (8)."""
@@ -46,7 +47,7 @@ ZUPT_COLUMNS = np.array([3, 4, 5, 8], dtype=np.int64)
 def gated_variance(S0: tuple[float, float, float, float, float, float], y: tuple[float, float, float], r_var: float,
                    gate: float) -> float:
     """The noise variance (isotropic, unit of y squared) of a 3-D measurement with
-    H P Hᵀ = ``S0`` (its upper triangle, :func:`bodyfusion.nav.error_state.nis3`) and
+    H P Hᵀ = ``S0`` (its upper triangle, :func:`bodyfusion.nav.kalman.nis3`) and
     innovation y: ``r_var`` when its NIS is within ``gate`` (or the gate is off, 0), else the
     r ≥ r_var with yᵀ (S0 + r I)⁻¹ y = gate (the NIS falls monotonically in r; bisection on
     log r to 1e-6 relative)."""
@@ -91,7 +92,7 @@ def zero_velocity_update(x: np.ndarray, P: np.ndarray, sigma_v: float, gate: flo
     H = [0 I h 0 0] with the heading column h = −(e_z × v̂) = (v̂_N, −v̂_E, 0) of the prior
     velocity (:func:`unobservable_yaw_column` of H_v = I; module docstring). Corrects x and P
     (and the transition accumulator phi) in place by
-    :func:`bodyfusion.nav.error_state.selection_update` (``work`` (15, 15) scratch), then the
+    :func:`bodyfusion.nav.kalman.selection_update` (``work`` (15, 15) scratch), then the
     reset of :func:`bodyfusion.nav.error_state.keep_yaw_unobservable`; returns the NIS before
     gating (the caller counts NIS > gate as gated)."""
     y = (-x[3], -x[4], -x[5])

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from bodyfusion.core.fuser import scalar_update
+from bodyfusion.nav.kalman import gated_update
 from bodyfusion.core.system import AidingSource, ScalarMeasurement
 from bodyfusion.base.types import InputReport
 from bodyfusion.testing.compare import as_bytes
@@ -26,7 +26,7 @@ the systems the config names and gives a finite z, h(p̂), ∂h/∂p (m, 3) and 
 ``samples``, ``input_report``, JSON-serialisable ``diagnostics()`` before and after the
 fuser's verdicts; ``seed``: two builds give the same bits (and, with ``stochastic``,
 another seed differs or not); ``jacobians``: the ``jacobian_cases()`` against central
-differences; ``gating``: through the fuser's update (:func:`bodyfusion.core.fuser.scalar_update`)
+differences; ``gating``: through the fuser's update (:func:`bodyfusion.nav.kalman.gated_update`)
 with position variances of 0.01 m², a measurement equal to its prediction is accepted and
 one 10 innovation sigmas beyond the gate is rejected."""
 
@@ -109,11 +109,11 @@ class AidingChecker(SystemChecker):
             H = np.asarray(m.H_p, dtype=float).ravel()
             P = 0.01 * np.eye(H.size)
             sd = math.sqrt(float(H @ P @ H) + m.r_var)
-            nis, dx, P_new = scalar_update(P, H, 0.0, m.r_var, s.gate_nis)
-            if dx is None or np.linalg.eigvalsh(P_new).min() < -1e-12:
+            nis, accepted, _, P_new = gated_update(P, H, m.r_var, 0.0, s.gate_nis)
+            if not accepted or np.linalg.eigvalsh(P_new).min() < -1e-12:
                 fail("gating", f"measurement {k} equal to its prediction was rejected (NIS {nis:.3g})")
-            nis, dx, _ = scalar_update(P, H, 10.0 * sd * (1.0 + math.sqrt(s.gate_nis)), m.r_var, s.gate_nis)
-            if dx is not None:
+            nis, accepted, _, _ = gated_update(P, H, m.r_var, 10.0 * sd * (1.0 + math.sqrt(s.gate_nis)), s.gate_nis)
+            if accepted:
                 fail("gating", f"measurement {k} far beyond the gate was accepted (NIS {nis:.3g}, gate "
                                f"{s.gate_nis:.3g})")
         return f"gate NIS {s.gate_nis:.3g}: {len(kinds)} measurement kinds accepted at 0, rejected far out"

@@ -34,7 +34,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import inject, inv3_sym, keep_yaw_unobservable
+from bodyfusion.nav.error_state import inject, keep_yaw_unobservable
+from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.zupt import unobservable_yaw_column
 
 

@@ -41,7 +41,8 @@ import math
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import P_ACC_ND, P_ACC_RW, P_GRAVITY, P_GYRO_ND, P_GYRO_RW, P_ZARU_SIGMA, P_ZUPT_SIGMA, inv3_sym
+from bodyfusion.nav.error_state import P_ACC_ND, P_ACC_RW, P_GRAVITY, P_GYRO_ND, P_GYRO_RW, P_ZARU_SIGMA, P_ZUPT_SIGMA
+from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised
 from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus
 from bodyfusion.nav.strapdown import mechanise

@@ -25,7 +25,7 @@ import numpy as np
 
 from bodyfusion.base.forking import Forked, fork_is_safe
 from bodyfusion.base.records import GrowingArray
-from bodyfusion.nav.error_state import inv3_sym
+from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig

@@ -22,8 +22,9 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm_into
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, Q_DECAY, congruence_by_yaw_reset, inject,
-                                       inv3_sym_into, process_noise_diag, transition_transpose_left)
+from bodyfusion.nav.error_state import (P_ZUPT_GATE, Q_DECAY, congruence_by_yaw_reset,
+                                       inject, process_noise_diag, transition_transpose_left)
+from bodyfusion.nav.kalman import inv3_sym_into
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance, stance_velocity_sigma
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
@@ -59,7 +60,7 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
 def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
     """``S`` (3, 3) ← H P⁻ Hᵀ of the ZUPT from the prior's columns ``Pc`` (15, 4) at
     :data:`~bodyfusion.nav.zupt.ZUPT_COLUMNS`: the sums of
-    :func:`bodyfusion.nav.error_state.selection_moments` (their zero terms too, which add
+    :func:`bodyfusion.nav.kalman.selection_moments` (their zero terms too, which add
     nothing), so the same number and the same gate decision as the filter's."""
     for r in range(3):
         for c in range(r, 3):

@@ -30,7 +30,8 @@ import numpy as np
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.plugins.hand_pdr.hypotheses import (Hypothesis, affine_map, collapse_if_resolved, mixture_moments,
                                                     normalise, spread_headings)
-from bodyfusion.plugins.hand_pdr.kernels import kalman_update, transition
+from bodyfusion.nav.kalman import kalman_update
+from bodyfusion.plugins.hand_pdr.kernels import transition
 
 NOT_TRACKED = np.zeros((0, 0))
 """The kernels' ``phi`` when Φ is not chained (not tracked, or the bank is open)."""
@@ -98,7 +99,7 @@ class BankFilter:
                weigh: bool) -> bool:
         """Gated Kalman update (Joseph form) of every hypothesis, closed-loop reset; y = residual(x).
         Rejected (False) when the innovation fails the chi-square gate of every hypothesis
-        (:func:`~bodyfusion.plugins.hand_pdr.kernels.kalman_update` with gate −∞ gives the NIS
+        (:func:`~bodyfusion.nav.kalman.kalman_update` with gate −∞ gives the NIS
         alone, with +∞ updates). With ``weigh`` the log-weights gain log N(y; 0, S) (see
         :mod:`~bodyfusion.plugins.hand_pdr.hypotheses`)."""
         ys = [residual(h.x) for h in self.hypotheses]
