@@ -5,85 +5,23 @@ that knows no sensor imports a plugin) and no module grows past the size a reade
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import pytest
+
+from bodyfusion.testing.imports import LAYERS, ImportGraph
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "bodyfusion"
 MAX_LINES = 600
 SENSOR_FREE = ("base", "core", "nav", "io", "evaluation", "results", "outputs", "runner")
 """Packages that know no sensor: none of them may import :mod:`bodyfusion.plugins`."""
-LAYERS = ("cli", "api", "study", "testing", "examples", "runner", "outputs", "results", "evaluation", "plugins",
-          "sim", "io", "core", "nav", "base")
-"""The packages from the top down (docs/architecture.md, "Layers"): a package imports only those
-below it."""
 CORE_MAY_IMPORT = ("core", "nav", "base")
 """The core is the layout and the fuser: it reads no file, scores nothing, knows no sensor."""
-
-
-def _module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
-def _imports(path: Path, everywhere: bool = False) -> set[str]:
-    """The bodyfusion modules a module imports when it is imported (module level and class
-    bodies; not inside functions, not under ``if TYPE_CHECKING``) or, ``everywhere``, anywhere in
-    it (inside functions and under ``if TYPE_CHECKING`` too). ``from package import name`` counts
-    as importing the module ``package.name`` where that is one."""
-    tree = ast.parse(path.read_text(), str(path))
-    name = _module_name(path)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    out: set[str] = set()
-
-    def visit(nodes: list[ast.stmt]) -> None:
-        for node in nodes:
-            if isinstance(node, ast.Import):
-                out.update(a.name for a in node.names if a.name.startswith("bodyfusion"))
-            elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
-                    base = ".".join(up + ([node.module] if node.module else []))
-                if base.startswith("bodyfusion"):
-                    out.add(base)
-                    out.update(f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in MODULE_NAMES)
-            elif isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test) and not everywhere:
-                continue
-            elif everywhere and isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.With, ast.For,
-                                                  ast.While)):
-                visit(node.body)
-                visit(getattr(node, "orelse", []))
-            elif isinstance(node, (ast.If, ast.Try, ast.ClassDef)):
-                visit(node.body)
-                for extra in getattr(node, "orelse", []), getattr(node, "finalbody", []):
-                    visit(extra)
-                for handler in getattr(node, "handlers", []):
-                    visit(handler.body)
-
-    visit(tree.body)
-    return out
-
-
-MODULES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
-MODULE_NAMES = set(MODULES)
-
-
-def _graph(everywhere: bool) -> dict[str, set[str]]:
-    """Module → the modules it imports, less its own parent packages (a module's import runs
-    its package's ``__init__`` first; that is no edge of the flow)."""
-    return {name: {m for m in _imports(path, everywhere) if m in MODULES and m != name and not name.startswith(m + ".")}
-            for name, path in MODULES.items()}
-
-
-GRAPH = _graph(everywhere=False)
-ALL_IMPORTS = _graph(everywhere=True)
-
-
-def _layer(module: str) -> str | None:
-    parts = module.split(".")
-    return parts[1] if len(parts) > 1 else None
+IMPORTS = ImportGraph(PACKAGE)
+MODULES = IMPORTS.modules
+GRAPH = IMPORTS.graph(everywhere=False)
+ALL_IMPORTS = IMPORTS.graph(everywhere=True)
+_layer = IMPORTS.layer
 
 
 @pytest.mark.parametrize("graph", [GRAPH, ALL_IMPORTS], ids=["module_level", "anywhere"])
