@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.nav.error_state import (ERROR_SIZE, P_GYRO_BIAS_DECAY, P_GYRO_RW, PARAMS_SIZE, closed_loop_reset,
+from bodyfusion.nav.error_state import (ERROR_SIZE, closed_loop_reset, filter_params,
                                        decay_biases, error_between, inject, process_noise_diag, propagate_covariance)
 from bodyfusion.nav.kalman import inv3_sym, update_selected
 from bodyfusion.nav.strapdown import mechanise
@@ -185,10 +185,8 @@ def test_propagate_covariance_with_gauss_markov_biases_equals_dense_F_P_Ft_plus_
 def test_an_unobserved_gauss_markov_bias_settles_at_its_stationary_variance():
     """Driving density σ √(2/τ) and decay 1/τ: the bias variance tends to σ² (first-order
     discretisation: σ² / (1 − β dt / 2)), and the estimate decays as e^(−t/τ)."""
-    params = np.zeros(PARAMS_SIZE)
     sigma, tau, dt = 6e-5, 100.0, 0.01
-    params[P_GYRO_RW] = sigma * np.sqrt(2.0 / tau)
-    params[P_GYRO_BIAS_DECAY] = 1.0 / tau
+    params = filter_params(gyro_bias_walk=sigma * np.sqrt(2.0 / tau), gyro_bias_decay=1.0 / tau)
     q = process_noise_diag(params)
     P = np.zeros((ERROR_SIZE, ERROR_SIZE))
     x = np.zeros(16)

@@ -63,15 +63,13 @@ def test_a_wrong_velocity_is_still_pulled_back_over_a_stance():
 def test_a_rolling_foot_gets_a_looser_zero_velocity():
     """σ_v² = σ² + (r |ω − b_g|)²: a foot rolling at ω about a heel or ball r from the IMU moves
     it at up to r |ω|; a still foot keeps the configured σ; pivot 0 switches it off."""
-    from bodyfusion.nav.error_state import P_ZUPT_PIVOT, P_ZUPT_SIGMA, PARAMS_SIZE
+    from bodyfusion.nav.error_state import filter_params
     from bodyfusion.nav.zupt import stance_velocity_sigma
 
-    params = np.zeros(PARAMS_SIZE)
-    params[P_ZUPT_SIGMA], params[P_ZUPT_PIVOT] = 0.01, 0.1
+    params = filter_params(zupt_sigma=0.01, zupt_pivot=0.1)
     x, _ = state([0.0, 0.0, 0.0])
     x[13:16] = [0.01, 0.0, -0.01]  # gyro bias estimate
     assert stance_velocity_sigma(params, x[13:16].copy(), x) == pytest.approx(0.01)
     rolling = x[13:16] + [0.0, 0.8, 0.0]
     assert stance_velocity_sigma(params, rolling, x) == pytest.approx(np.hypot(0.01, 0.08))
-    params[P_ZUPT_PIVOT] = 0.0
-    assert stance_velocity_sigma(params, rolling, x) == pytest.approx(0.01)
+    assert stance_velocity_sigma(params._replace(zupt_pivot=0.0), rolling, x) == pytest.approx(0.01)

@@ -16,6 +16,8 @@ The propagation exploits the block sparsity of A (no dense 15×15 products).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -24,16 +26,42 @@ from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normal
 
 ERROR_SIZE = 15
 
-# The filter parameter vector ``params`` of the compiled 15-state kernels (the foot INS
-# and its smoothers): noise densities, stance-update σs, gravity (m/s^2), Earth rate (ENU),
-# the zero-velocity gate (chi-square threshold, 0: off; see :mod:`bodyfusion.nav.zupt`) and
-# the bias decay rates β = 1/τ (1/s; 0: random walk).
-P_ACC_ND, P_GYRO_ND, P_ACC_RW, P_GYRO_RW, P_ZUPT_SIGMA, P_ZARU_SIGMA, P_GRAVITY = range(7)
-P_EARTH_RATE = slice(7, 10)
-P_ZUPT_GATE = 10
-P_ACC_BIAS_DECAY, P_GYRO_BIAS_DECAY = 11, 12
-P_ZUPT_PIVOT = 13
-PARAMS_SIZE = 14
+
+
+class FilterParams(NamedTuple):
+    """The model parameters of the compiled 15-state kernels (the foot INS and its smoothers),
+    by name: noise densities (accelerometer m/s^2/√Hz, gyroscope rad/s/√Hz), bias random walks
+    (m/s^3/√Hz, rad/s^2/√Hz), the stance updates' σ (ZUPT m/s, ZARU rad/s; 0: no ZARU), gravity
+    (m/s^2), the Earth rate in ENU (rad/s, (3,)), the zero-velocity gate (chi-square threshold,
+    0: off; :mod:`bodyfusion.nav.zupt`), the bias decay rates β = 1/τ (1/s; 0: random walk) and
+    the rolling foot's pivot (m; :func:`bodyfusion.nav.zupt.stance_velocity_sigma`)."""
+
+    acc_noise_density: float
+    gyro_noise_density: float
+    acc_bias_walk: float
+    gyro_bias_walk: float
+    zupt_sigma: float
+    zaru_sigma: float
+    gravity: float
+    earth_rate: np.ndarray
+    zupt_gate: float
+    acc_bias_decay: float
+    gyro_bias_decay: float
+    zupt_pivot: float
+
+    def backward(self) -> FilterParams:
+        """The parameters of the run navigated back in time: the Earth rate changes sign."""
+        return self._replace(earth_rate=-self.earth_rate)
+
+
+def filter_params(**values: float | np.ndarray) -> FilterParams:
+    """:class:`FilterParams` with every field not given zero (the Earth rate (0, 0, 0))."""
+    fields = {name: 0.0 for name in FilterParams._fields}
+    fields["earth_rate"] = np.zeros(3)
+    fields.update(values)
+    fields["earth_rate"] = np.ascontiguousarray(fields["earth_rate"], dtype=np.float64)
+    return FilterParams(**{name: (fields[name] if name == "earth_rate" else float(fields[name]))
+                           for name in FilterParams._fields})
 Q_DECAY = 15
 """Index in the :func:`process_noise_diag` vector of the decay rates β_a, β_g (after the 15 densities²)."""
 DPOS = slice(0, 3)
@@ -44,17 +72,17 @@ DGYRO_BIAS = slice(12, 15)
 
 
 @numba.njit(cache=True)
-def process_noise_diag(params: np.ndarray) -> np.ndarray:
+def process_noise_diag(params: FilterParams) -> np.ndarray:
     """The process model (17,) from ``params``: the diagonal of the continuous process noise
     of the 15 error states (densities², per Hz), then the bias decay rates β_a, β_g (1/s)."""
     q = np.zeros(Q_DECAY + 2)
-    q[Q_DECAY] = params[P_ACC_BIAS_DECAY]
-    q[Q_DECAY + 1] = params[P_GYRO_BIAS_DECAY]
+    q[Q_DECAY] = params.acc_bias_decay
+    q[Q_DECAY + 1] = params.gyro_bias_decay
     for k in range(3):
-        q[3 + k] = params[P_ACC_ND] ** 2
-        q[6 + k] = params[P_GYRO_ND] ** 2
-        q[9 + k] = params[P_ACC_RW] ** 2
-        q[12 + k] = params[P_GYRO_RW] ** 2
+        q[3 + k] = params.acc_noise_density ** 2
+        q[6 + k] = params.gyro_noise_density ** 2
+        q[9 + k] = params.acc_bias_walk ** 2
+        q[12 + k] = params.gyro_bias_walk ** 2
     return q
 
 

@@ -35,8 +35,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_PIVOT,
-                                       P_ZUPT_SIGMA, inject, keep_yaw_unobservable)
+from bodyfusion.nav.error_state import FilterParams, inject, keep_yaw_unobservable
 from bodyfusion.nav.kalman import nis3, selection_moments, selection_update
 
 ZUPT_COLUMNS = np.array([3, 4, 5, 8], dtype=np.int64)
@@ -124,24 +123,24 @@ def zero_angular_rate_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, s
 
 
 @numba.njit(cache=True)
-def stance_velocity_sigma(params: np.ndarray, gyro_b: np.ndarray, x: np.ndarray) -> float:
+def stance_velocity_sigma(params: FilterParams, gyro_b: np.ndarray, x: np.ndarray) -> float:
     """σ (m/s) of a stance sample's zero velocity: √(σ_v² + (r |ω̃_b − b̂_g|)²), a foot rolling
-    at ω about a pivot r = ``params[P_ZUPT_PIVOT]`` m from the IMU moves it at up to r |ω|."""
-    r = params[P_ZUPT_PIVOT]
+    at ω about a pivot r = ``params.zupt_pivot`` m from the IMU moves it at up to r |ω|."""
+    r = params.zupt_pivot
     w0 = gyro_b[0] - x[13]
     w1 = gyro_b[1] - x[14]
     w2 = gyro_b[2] - x[15]
-    return np.sqrt(params[P_ZUPT_SIGMA] ** 2 + r * r * (w0 * w0 + w1 * w1 + w2 * w2))
+    return np.sqrt(params.zupt_sigma ** 2 + r * r * (w0 * w0 + w1 * w1 + w2 * w2))
 
 
 @numba.njit(cache=True)
-def stance_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, params: np.ndarray, dx: np.ndarray,
+def stance_update(x: np.ndarray, P: np.ndarray, gyro_b: np.ndarray, params: FilterParams, dx: np.ndarray,
                   phi: np.ndarray, work: np.ndarray) -> float:
     """The update of a stance sample with the filter parameters ``params`` (layout in
     :mod:`bodyfusion.nav.error_state`): the gated ZUPT, then, when its NIS is within the gate and
     the ZARU σ > 0, the ZARU with the sample's angular rate ``gyro_b`` (rad/s); ``work``
     (15, 15) scratch. Returns the ZUPT's NIS before gating."""
-    nis = zero_velocity_update(x, P, stance_velocity_sigma(params, gyro_b, x), params[P_ZUPT_GATE], dx, phi, work)
-    if params[P_ZARU_SIGMA] > 0 and (params[P_ZUPT_GATE] <= 0.0 or nis <= params[P_ZUPT_GATE]):
-        zero_angular_rate_update(x, P, gyro_b, params[P_ZARU_SIGMA], dx, phi, work)
+    nis = zero_velocity_update(x, P, stance_velocity_sigma(params, gyro_b, x), params.zupt_gate, dx, phi, work)
+    if params.zaru_sigma > 0 and (params.zupt_gate <= 0.0 or nis <= params.zupt_gate):
+        zero_angular_rate_update(x, P, gyro_b, params.zaru_sigma, dx, phi, work)
     return nis

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import load_layout, read_yaml
 from bodyfusion.runner import build_systems, layout_context, run_layout
-from bodyfusion.nav.error_state import PARAMS_SIZE, accumulate_propagation, process_noise_diag
+from bodyfusion.nav.error_state import FilterParams, accumulate_propagation, filter_params, process_noise_diag
 from bodyfusion.plugins.foot_ins import FootIns
 from bodyfusion.plugins.foot_ins.coloured import (
     coloured_zero_velocity_update,
@@ -80,12 +80,11 @@ def test_inverse_transition_rows_are_exact():
     np.testing.assert_allclose(rows, np.linalg.inv(F)[3:6], atol=1e-15)
 
 
-def filter_params(zupt_sigma: float) -> np.ndarray:
-    """A ``params`` vector (bodyfusion.nav.error_state layout): the default densities, ZUPT σ
-    (m/s), no ZARU, g = 9.8 m/s², no Earth rate, no gate, random-walk biases."""
-    params = np.zeros(PARAMS_SIZE)
-    params[:7] = (0.02, 0.002, 1e-4, 1e-5, zupt_sigma, 0.0, 9.8)
-    return params
+def walk_params(zupt_sigma: float) -> FilterParams:
+    """The filter's parameters: the default densities, ZUPT σ (m/s), no ZARU, g = 9.8 m/s², no
+    Earth rate, no gate, random-walk biases."""
+    return filter_params(acc_noise_density=0.02, gyro_noise_density=0.002, acc_bias_walk=1e-4, gyro_bias_walk=1e-5,
+                         zupt_sigma=zupt_sigma, gravity=9.8)
 
 
 def test_coloured_update_matches_the_dense_equations():
@@ -98,7 +97,7 @@ def test_coloured_update_matches_the_dense_equations():
     C = Rotation.random(random_state=1).as_matrix()
     f_n = np.array([0.2, 0.1, 9.8])
     dt, alpha, sigma = 0.01, 0.7, 0.005
-    q = process_noise_diag(filter_params(sigma))
+    q = process_noise_diag(walk_params(sigma))
     x = np.zeros(16)
     x[3:6] = [0.01, -0.02, 0.005]
     x[6] = 1.0
@@ -143,7 +142,7 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
     A = rng.normal(0, 0.03, (15, 15))
     P0 = A @ A.T + 1e-6 * np.eye(15)
     alpha, sigma = 0.9, 0.005
-    params = filter_params(sigma)
+    params = walk_params(sigma)
 
     def run(kernel, sigma_ekf: float | None = None):
         x, P = x0.copy(), P0.copy()
@@ -153,7 +152,7 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
             kernel(x, P, t, acc, gyro, stance, 1, 2, params, alpha, np.zeros(6), np.empty((0, 0)), hist_x, hist_cov,
                    hist_nis, counters, post_idx, post_P)
             return x, P, counters, post_idx, post_P
-        kernel(x, P, t, acc, gyro, stance, 1, 2, filter_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
+        kernel(x, P, t, acc, gyro, stance, 1, 2, walk_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
                hist_cov, hist_nis, counters, *no_record())
         return x, P
 

@@ -8,7 +8,6 @@ import pytest
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.runner import build_systems, layout_context, run_layout
-from bodyfusion.nav.error_state import P_EARTH_RATE
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, segment_bounds, smooth_record
 from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, backward_prior, fb_segment, filter_pass,
@@ -267,8 +266,7 @@ def test_only_the_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):
 def _segment(r: _Record, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: _Pass, fused_P: np.ndarray,
              out_x: np.ndarray, out_var: np.ndarray) -> tuple:
     """FB (FB-RTS) of the segment a … b, the passes into ``buf`` (forward [0], backward [1])."""
-    params_bw = r.params.copy()
-    params_bw[P_EARTH_RATE] *= -1.0
+    params_bw = r.params.backward()
     return fb_segment(r.hist_x, r.t, r.acc, r.gyro, r.stance, r.params, params_bw, r.P0, r.ov_idx, r.ov_P, r.kept_idx,
                       r.kept_x, r.gap_idx, r.gap_dP, a, b, P_a, r.memory([a])[0], with_rts, buf.xs, buf.xp,
                       buf.Ppost, buf.Pprior, buf.Phi, buf.dx, buf.jump, buf.yaw_reset, buf.dxs, buf.Ps, buf.smoothed,
@@ -280,7 +278,7 @@ def test_backward_navigation_retraces_a_forward_trajectory(walk):
     a, b = 150, 650  # through a swing
     r = _Record(dict(rec, stance=np.zeros_like(rec["stance"]), hist_x=rec["hist_x"].copy()))  # no update
     params = r.params
-    fwd = integrate(r.hist_x[a].copy(), r.t[a:b + 1], r.acc[a:b + 1], r.gyro[a:b + 1], params[6], params[7:10].copy())
+    fwd = integrate(r.hist_x[a].copy(), r.t[a:b + 1], r.acc[a:b + 1], r.gyro[a:b + 1], params.gravity, params.earth_rate.copy())
     r.hist_x[b] = fwd[-1]  # the backward pass starts from the forward nominal state at b
     buf = _Pass(b - a + 1, 2)
     _segment(r, a, b, r.P0, False, buf, np.zeros((b - a + 1, 3, 3)), r.hist_x.copy(), np.zeros((r.n, 4)))
@@ -382,8 +380,7 @@ def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
     size = int(np.max(np.diff(bounds))) + 1
     fw, bw, fused_P = _Pass(size), _Pass(size), np.zeros((size, 15, 15))
     out_x, out_var = r.hist_x.copy(), np.zeros((r.n, 4))
-    params_bw = r.params.copy()
-    params_bw[P_EARTH_RATE] *= -1.0
+    params_bw = r.params.backward()
     sign = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]
     sign = np.outer(sign, sign)
     P = r.P0.copy()

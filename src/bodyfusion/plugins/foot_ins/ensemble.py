@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bodyfusion.nav.error_state import inject
+from bodyfusion.nav.error_state import FilterParams, inject
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.foot_ins.ensemble_kernels import (NOISE_WIDTH, NOMINAL, ensemble_covariance, ensemble_deviations,
                                                       ensemble_mean, place_members, run_ensemble)
@@ -91,7 +91,7 @@ class Ensemble:
         ensemble_mean(self.ens, self.mean)
 
     def run(self, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, stance: np.ndarray, i0: int, i1: int,
-            params: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
+            params: FilterParams, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1 (see :func:`run_ensemble`), noise drawn block by block."""
         alpha = -1.0 if self.alpha is None else float(self.alpha)
         for a in range(i0, i1, NOISE_BLOCK):

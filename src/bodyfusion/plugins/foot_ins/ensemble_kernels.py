@@ -41,7 +41,7 @@ import math
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import P_ACC_ND, P_ACC_RW, P_GRAVITY, P_GYRO_ND, P_GYRO_RW, P_ZARU_SIGMA, P_ZUPT_SIGMA
+from bodyfusion.nav.error_state import FilterParams
 from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised
 from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus
@@ -240,7 +240,7 @@ def ensemble_analysis(ens: np.ndarray, first: int, second: int, z: np.ndarray, r
 
 @numba.njit(cache=True)
 def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float, noise: np.ndarray,
+                 stance: np.ndarray, i0: int, i1: int, params: FilterParams, alpha: float, noise: np.ndarray,
                  mean: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1) as the module docstring says; ``alpha`` < 0:
     enekf, ``alpha`` ≥ 0: cenekf with colour factor α (``ens`` then has 19 columns).
@@ -253,10 +253,10 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
     ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS].
     """
     M = ens.shape[0]
-    g = params[P_GRAVITY]
-    w_ie = params[7:10].copy()
-    zupt_sigma = params[P_ZUPT_SIGMA]
-    zaru_sigma = params[P_ZARU_SIGMA]
+    g = params.gravity
+    w_ie = params.earth_rate.copy()
+    zupt_sigma = params.zupt_sigma
+    zaru_sigma = params.zaru_sigma
     coloured = alpha >= 0.0
     f_n = np.empty(3)
     C_nb = np.empty((3, 3))  # C_nb of a member's step (not used here)
@@ -278,10 +278,10 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.n
         nz = noise[i - i0]
         if exact:
             improve_sampling(ens, nz, used, basis)
-        sa = params[P_ACC_ND] / math.sqrt(dt)
-        sg = params[P_GYRO_ND] / math.sqrt(dt)
-        sba = params[P_ACC_RW] * math.sqrt(dt)
-        sbg = params[P_GYRO_RW] * math.sqrt(dt)
+        sa = params.acc_noise_density / math.sqrt(dt)
+        sg = params.gyro_noise_density / math.sqrt(dt)
+        sba = params.acc_bias_walk * math.sqrt(dt)
+        sbg = params.gyro_bias_walk * math.sqrt(dt)
         for j in range(M):
             for k in range(3):
                 a[k] = acc_b[i, k] + sa * nz[j, k]

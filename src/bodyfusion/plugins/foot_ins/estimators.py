@@ -23,6 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bodyfusion.nav.error_state import FilterParams
 from bodyfusion.base.forking import Forked, fork_is_safe
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.nav.kalman import inv3_sym
@@ -53,7 +54,7 @@ class RunData:
     acc_b: np.ndarray
     gyro_b: np.ndarray
     stance: np.ndarray
-    params: np.ndarray
+    params: FilterParams
     hist_x: np.ndarray
     hist_pos_cov: np.ndarray
     hist_nis: np.ndarray

@@ -20,7 +20,7 @@ import numpy as np
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.nav.attitude import quat_to_dcm
-from bodyfusion.nav.error_state import DPOS, P_EARTH_RATE, rotate_about_up
+from bodyfusion.nav.error_state import DPOS, rotate_about_up
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
@@ -100,8 +100,7 @@ class InitialState:
         st = self.stream
         r = np.arange(s + 1)
         src = np.minimum(s - r + 1, s)  # the sample whose interval is stepped back over (r ≥ 1)
-        params = self._params.copy()
-        params[P_EARTH_RATE] *= -1.0
+        params = self._params.backward()
         sign = np.ones(15)
         sign[3:6] = sign[12:15] = -1.0
         flip = np.outer(sign, sign)

@@ -18,7 +18,7 @@ For the whole-run RTS the ekf can record, as it runs, what the backward sweep of
 :func:`record_stance`; the arrays of :func:`no_record` when it records nothing): the sweep then
 needs no replay of the filter.
 
-Every stance update is chi-square gated with bounded influence (``params[P_ZUPT_GATE]``,
+Every stance update is chi-square gated with bounded influence (``params.zupt_gate``,
 0: off; :mod:`bodyfusion.nav.zupt`): a stance sample whose NIS exceeds the gate is counted and
 de-weighted, and gets no ZARU (the foot is not at rest there).
 """
@@ -28,9 +28,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bodyfusion.nav.error_state import (P_GRAVITY, P_ZARU_SIGMA, P_ZUPT_GATE, P_ZUPT_SIGMA, bias_decay,
-                                       closed_loop_reset, decay_biases, process_noise_diag, propagate_covariance,
-                                       transition_left)
+from bodyfusion.nav.error_state import (FilterParams, bias_decay, closed_loop_reset, decay_biases,
+                                       process_noise_diag, propagate_covariance, transition_left)
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, stance_velocity_sigma, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
@@ -45,22 +44,23 @@ PACKED_SIZE = 120
 
 
 @numba.njit(cache=True)
-def stationary_zupt_params(params: np.ndarray, alpha: float) -> np.ndarray:
+def stationary_zupt_params(params: FilterParams, alpha: float) -> FilterParams:
     """``params`` with the ZUPT σ of the ordinary update under AR(1) noise of colour factor α:
-    the stationary σ_ξ / √(1 − α²) of v_k = α v_{k−1} + ξ_k (σ_ξ = ``params[P_ZUPT_SIGMA]``)."""
-    out = params.copy()
-    out[P_ZUPT_SIGMA] = params[P_ZUPT_SIGMA] / np.sqrt(1.0 - alpha * alpha)
-    return out
+    the stationary σ_ξ / √(1 − α²) of v_k = α v_{k−1} + ξ_k (σ_ξ = ``params.zupt_sigma``)."""
+    return FilterParams(params.acc_noise_density, params.gyro_noise_density, params.acc_bias_walk,
+                        params.gyro_bias_walk, params.zupt_sigma / np.sqrt(1.0 - alpha * alpha), params.zaru_sigma,
+                        params.gravity, params.earth_rate, params.zupt_gate, params.acc_bias_decay,
+                        params.gyro_bias_decay, params.zupt_pivot)
 
 
 @numba.njit(inline="always")
 def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                      i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray, mech_memory: np.ndarray,
+                      i: int, params: FilterParams, q_diag: np.ndarray, f_n: np.ndarray, mech_memory: np.ndarray,
                       phi: np.ndarray, C: np.ndarray) -> None:
     """Mechanise sample i (from t[i-1] to t[i]), decay the bias estimates and propagate P
     (and Φ when tracked); C_nb (3, 3) of the step is left in ``C``, f_n (3,) in ``f_n``."""
     dt = t[i] - t[i - 1]
-    mechanise(x, acc_b[i], gyro_b[i], dt, params[P_GRAVITY], params[7:10], f_n, mech_memory, C)
+    mechanise(x, acc_b[i], gyro_b[i], dt, params.gravity, params.earth_rate, f_n, mech_memory, C)
     decay_biases(x, q_diag, dt)
     if phi.shape[0] > 0:
         da, dg = bias_decay(q_diag, dt)
@@ -87,7 +87,7 @@ NO_STANCE = -1.0
 
 @numba.njit(inline="always")
 def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-             stance: np.ndarray, i: int, params: np.ndarray, q_diag: np.ndarray, f_n: np.ndarray,
+             stance: np.ndarray, i: int, params: FilterParams, q_diag: np.ndarray, f_n: np.ndarray,
              mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, C: np.ndarray,
              x_prior: np.ndarray | None, P_prior: np.ndarray | None, Phi: np.ndarray | None) -> float:
     """One sample i of the ekf: mechanise from t[i-1] to t[i], propagate P, and at a stance
@@ -117,13 +117,13 @@ def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyr
 
 
 @numba.njit(inline="always")
-def _count(params: np.ndarray, nis: float, counters: np.ndarray) -> None:
+def _count(params: FilterParams, nis: float, counters: np.ndarray) -> None:
     """Count a stance sample's updates: ZUPT, its NIS, gated or ZARU."""
     counters[C_ZUPTS] += 1
     counters[C_NIS_SUM] += nis
-    if params[P_ZUPT_GATE] > 0.0 and nis > params[P_ZUPT_GATE]:
+    if params.zupt_gate > 0.0 and nis > params.zupt_gate:
         counters[C_GATED] += 1
-    elif params[P_ZARU_SIGMA] > 0:
+    elif params.zaru_sigma > 0:
         counters[C_ZARUS] += 1
 
 
@@ -233,7 +233,7 @@ def no_record() -> tuple[np.ndarray, ...]:
 
 @numba.njit(cache=True)
 def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: np.ndarray, mech_memory: np.ndarray,
+                 stance: np.ndarray, i0: int, i1: int, params: FilterParams, mech_memory: np.ndarray,
                  phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, hist_nis: np.ndarray,
                  counters: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
                  x_prior: np.ndarray, P_prior: np.ndarray) -> None:
@@ -277,7 +277,7 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
 
 @numba.njit(cache=True)
 def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                          stance: np.ndarray, i0: int, i1: int, params: np.ndarray, alpha: float,
+                          stance: np.ndarray, i0: int, i1: int, params: FilterParams, alpha: float,
                           mech_memory: np.ndarray, phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
                           hist_nis: np.ndarray, counters: np.ndarray, post_idx: np.ndarray, post_P: np.ndarray) -> None:
     """The ``ckf`` with colour factor α: as :func:`run_foot_ins`, with the coloured-noise
@@ -295,7 +295,7 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     C = np.empty((3, 3))
     dx = np.empty(15)
     v_prev = np.empty(3)
-    gate = params[P_ZUPT_GATE]
+    gate = params.zupt_gate
     counters[C_CALL_RECORDS] = 0
     for i in range(i0, i1):
         for k in range(3):
@@ -308,8 +308,8 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
                 nis = coloured_zero_velocity_update(x, P, v_prev, C, f_n, t[i] - t[i - 1], q_diag, alpha,
                                                     stance_velocity_sigma(params, gyro_b[i], x), gate, dx, phi)
                 coloured = gate <= 0.0 or nis <= gate
-                if coloured and params[P_ZARU_SIGMA] > 0:
-                    zero_angular_rate_update(x, P, gyro_b[i], params[P_ZARU_SIGMA], dx, phi, work)
+                if coloured and params.zaru_sigma > 0:
+                    zero_angular_rate_update(x, P, gyro_b[i], params.zaru_sigma, dx, phi, work)
             if not coloured:
                 nis = stance_update(x, P, gyro_b[i], ordinary, dx, phi, work)
             _count(params, nis, counters)

@@ -112,7 +112,7 @@ import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
-from bodyfusion.nav.error_state import P_EARTH_RATE, P_ZARU_SIGMA
+from bodyfusion.nav.error_state import FilterParams
 from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
 from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, fb_segment, filter_pass
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep, record_pass
@@ -216,7 +216,7 @@ class _Record:
         self.acc = np.ascontiguousarray(rec["acc"], dtype=f64)
         self.gyro = np.ascontiguousarray(rec["gyro"], dtype=f64)
         self.stance = np.ascontiguousarray(rec["stance"], dtype=np.bool_)
-        self.params = np.ascontiguousarray(rec["params"], dtype=f64)
+        self.params = rec["params"]
         self.P0 = np.ascontiguousarray(rec["P0"], dtype=f64)
         self.P_end = np.asarray(rec["P_end"], dtype=f64)
         self.ov_idx = np.ascontiguousarray(rec["override_idx"], dtype=np.int64)
@@ -235,7 +235,7 @@ class _Record:
         """(n,) bool: the samples whose update is more than the ekf's ZUPT (a correction outside
         the filter's loop, or the ZARU after the ZUPT), which the whole-run smoother steps back
         through in general form (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`)."""
-        out = self.stance.copy() if self.params[P_ZARU_SIGMA] > 0 else np.zeros(self.n, dtype=np.bool_)
+        out = self.stance.copy() if self.params.zaru_sigma > 0 else np.zeros(self.n, dtype=np.bool_)
         out[self.ov_idx] = True
         return out
 
@@ -291,14 +291,14 @@ class ForwardRecord:
         self.captured: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.kept = 0
 
-    def plan(self, cfg: SmootherConfig, filter_kind: str, params: np.ndarray, stance: np.ndarray) -> bool:
+    def plan(self, cfg: SmootherConfig, filter_kind: str, params: FilterParams, stance: np.ndarray) -> bool:
         """Active for the RTS (``kind: rts``, either span) of an ``ekf`` without the ZARU (whose
         every stance update the sweep takes in general form) whose record of the run with these
         ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other whole-run RTS.
         True when either changed."""
         samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
         whole = cfg.kind == "rts" and not cfg.segmented
-        active = (cfg.kind == "rts" and filter_kind == "ekf" and params[P_ZARU_SIGMA] == 0.0
+        active = (cfg.kind == "rts" and filter_kind == "ekf" and params.zaru_sigma == 0.0
                   and record_bytes(samples, n_stance) <= STORE_BYTES)
         checkpointing = whole and not active
         if (active, checkpointing) == (self.active, self.checkpointing):
@@ -505,8 +505,7 @@ def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_v
     size = int(np.max(np.diff(bounds))) + 1
     buf = _Pass(size, 2)
     fused_P = np.zeros((size, 0, 0) if with_rts else (size, 3, 3))  # the fused position block (FB)
-    params_bw = r.params.copy()
-    params_bw[P_EARTH_RATE] *= -1.0
+    params_bw = r.params.backward()
     gain_failures = fusion_failures = 0
     latencies: list[float] = []
     P = r.P0.copy()

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_multiply
-from bodyfusion.nav.error_state import congruence_by_yaw_reset, inject, process_noise_diag
+from bodyfusion.nav.error_state import FilterParams, congruence_by_yaw_reset, inject, process_noise_diag
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step
 
 YAW = 8
@@ -122,7 +122,7 @@ def chol_solve(A: np.ndarray, B: np.ndarray, X: np.ndarray, Lw: np.ndarray) -> b
 
 @numba.njit(cache=True, nogil=True)
 def filter_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
-                gyro: np.ndarray, stance: np.ndarray, params: np.ndarray, i0: int, i1: int, recorded_x: np.ndarray,
+                gyro: np.ndarray, stance: np.ndarray, params: FilterParams, i0: int, i1: int, recorded_x: np.ndarray,
                 ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray, kept_x: np.ndarray,
                 gap_idx: np.ndarray, gap_dP: np.ndarray, store: bool, xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray, Pprior: np.ndarray, Phi: np.ndarray,
                 dx: np.ndarray, jump: np.ndarray, yaw_reset: np.ndarray) -> np.ndarray:
@@ -502,7 +502,7 @@ def backward_prior(P_end: np.ndarray, P0: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def fb_segment(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
-               params: np.ndarray, params_bw: np.ndarray, P0: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray,
+               params: FilterParams, params_bw: FilterParams, P0: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray,
                kept_idx: np.ndarray, kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, a: int, b: int,
                P_a: np.ndarray, memory_a: np.ndarray, with_rts: bool, xs: np.ndarray, xp: np.ndarray, Ppost: np.ndarray,
                Pprior: np.ndarray, Phi: np.ndarray, dx: np.ndarray, jump: np.ndarray, yaw_reset: np.ndarray,

@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.attitude import quat_to_dcm_into
-from bodyfusion.nav.error_state import (P_ZUPT_GATE, Q_DECAY, congruence_by_yaw_reset,
+from bodyfusion.nav.error_state import (FilterParams, Q_DECAY, congruence_by_yaw_reset,
                                        inject, process_noise_diag, transition_transpose_left)
 from bodyfusion.nav.kalman import inv3_sym_into
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance, stance_velocity_sigma
@@ -75,7 +75,7 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
-def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.ndarray, Lam: np.ndarray,
+def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.ndarray, Lam: np.ndarray,
                   Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
     """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
     G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (6,): the prior velocity v⁻ (m/s),
@@ -99,7 +99,7 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: np.ndarray, lam: np.nda
     Hc[1, 3] = -v[0]
     Hc[2, 3] = 0.0
     _zupt_innovation(Pc, Hc, S)
-    r_var = gated_variance((S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]), y, v[5], params[P_ZUPT_GATE])
+    r_var = gated_variance((S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]), y, v[5], params.zupt_gate)
     for k in range(3):
         S[k, k] += r_var
     inv3_sym_into(S, Si)
@@ -248,7 +248,7 @@ def _smoothed_error_columns(P: np.ndarray, lam: np.ndarray, Lam: np.ndarray, r0:
 
 @numba.njit(cache=True, nogil=True)
 def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
-                gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray, i0: int, i1: int,
+                gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: FilterParams, i0: int, i1: int,
                 recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
                 kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
                 gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray,
@@ -332,7 +332,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
 
 
 @numba.njit(cache=True, nogil=True)
-def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: np.ndarray,
+def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: FilterParams,
               i0: int, L: int, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
               gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
               lam: np.ndarray, Lam: np.ndarray,
@@ -425,7 +425,7 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
 
 @numba.njit(cache=True, nogil=True)
 def block_sweep(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
-                general: np.ndarray, params: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
+                general: np.ndarray, params: FilterParams, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
                 kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, starts: np.ndarray, P_start: np.ndarray,
                 memory: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
                 gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,

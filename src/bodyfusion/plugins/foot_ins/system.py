@@ -21,8 +21,7 @@ from bodyfusion.io.truth import read_truth_csv
 from bodyfusion.nav import detectors
 from bodyfusion.nav.attitude import quat_to_dcm
 from bodyfusion.nav.earth import earth_rate_enu
-from bodyfusion.nav.error_state import (DVEL, P_ACC_BIAS_DECAY, P_EARTH_RATE, P_GYRO_BIAS_DECAY, P_ZUPT_GATE,
-                                       P_ZUPT_PIVOT, PARAMS_SIZE)
+from bodyfusion.nav.error_state import DVEL, FilterParams, filter_params
 from bodyfusion.nav.frames import apply_axis_map
 from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
@@ -130,19 +129,17 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         usable = index >= 1
         return index[usable].astype(np.int64), apply_axis_map(fx.axes, track.pos_n[usable])
 
-    def _filter_params(self) -> np.ndarray:
+    def _filter_params(self) -> FilterParams:
         f = self.config.filter
-        p = np.zeros(PARAMS_SIZE)
-        p[:7] = (f.acc_noise_density, f.gyro_noise_density, f.acc_bias_random_walk, f.gyro_bias_random_walk,
-                 f.zupt_sigma_mps, f.zaru_sigma_radps or 0.0, self.context.gravity_mps2)
-        if f.earth_rate:
-            p[P_EARTH_RATE] = earth_rate_enu(self.context.latitude_deg)
-        if f.zupt_gate_probability is not None:
-            p[P_ZUPT_GATE] = chi2_gate(f.zupt_gate_probability, 3)
-        p[P_ZUPT_PIVOT] = f.zupt_pivot_m
-        for index, tau in ((P_ACC_BIAS_DECAY, f.acc_bias_tau_s), (P_GYRO_BIAS_DECAY, f.gyro_bias_tau_s)):
-            p[index] = 0.0 if tau is None else 1.0 / tau
-        return p
+        return filter_params(
+            acc_noise_density=f.acc_noise_density, gyro_noise_density=f.gyro_noise_density,
+            acc_bias_walk=f.acc_bias_random_walk, gyro_bias_walk=f.gyro_bias_random_walk, zupt_sigma=f.zupt_sigma_mps,
+            zaru_sigma=f.zaru_sigma_radps or 0.0, gravity=self.context.gravity_mps2,
+            earth_rate=earth_rate_enu(self.context.latitude_deg) if f.earth_rate else np.zeros(3),
+            zupt_gate=chi2_gate(f.zupt_gate_probability, 3) if f.zupt_gate_probability is not None else 0.0,
+            acc_bias_decay=0.0 if f.acc_bias_tau_s is None else 1.0 / f.acc_bias_tau_s,
+            gyro_bias_decay=0.0 if f.gyro_bias_tau_s is None else 1.0 / f.gyro_bias_tau_s,
+            zupt_pivot=f.zupt_pivot_m)
 
     def restart(self) -> None:
         """Back to the initial state at the first sample; history cleared (an ensemble redrawn from the same seed)."""
@@ -220,7 +217,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         if i1 <= i:
             return
         ends = self._stance_runs[1]
-        watch = self._params[P_ZUPT_GATE] > 0.0 and self.filter.smoothable  # the ensembles keep no NIS
+        watch = self._params.zupt_gate > 0.0 and self.filter.smoothable  # the ensembles keep no NIS
         while i < i1:
             g = self._gap_index
             k = int(g.searchsorted(i))
@@ -253,7 +250,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         a, b = int(self._stance_runs[0][r]), int(self._stance_runs[1][r])
         nis = self.run_data.hist_nis[a:b]
         nis = nis[nis >= 0.0]
-        if nis.size < MIN_LOCKOUT_SAMPLES or not np.all(nis > self._params[P_ZUPT_GATE]):
+        if nis.size < MIN_LOCKOUT_SAMPLES or not np.all(nis > self._params.zupt_gate):
             self._locked_stances = 0
             return
         self._locked_stances += 1
@@ -463,7 +460,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
     def innovations(self) -> dict[str, np.ndarray]:
         """Every stance update's NIS (``zupt``, 3 dof, before the gate; beyond it: de-weighted; the
         ensemble kinds keep none) and every position fix's (``position_fix``, 3 dof)."""
-        parts = {"zupt": zupt_columns(self.stream.t, self.run_data.hist_nis[:self._i + 1], self._params[P_ZUPT_GATE])}
+        parts = {"zupt": zupt_columns(self.stream.t, self.run_data.hist_nis[:self._i + 1], self._params.zupt_gate)}
         if self.config.position_fixes is not None:
             parts["position_fix"] = self.fix_nis.columns()
         return innovation_columns(parts)
@@ -529,7 +526,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         levelling without rest."""
         n = self._i + 1
         out = stance_findings(self.name, self.stance_detection, self.stream.t[:n], self.run_data.hist_nis[:n],
-                              float(self._params[P_ZUPT_GATE]), self.zupt_recoveries)
+                              float(self._params.zupt_gate), self.zupt_recoveries)
         out += saturation_findings(self.name, self.clipping, self.stream.t)
         if not self.still.still:
             t = self.stream.t
