@@ -70,6 +70,24 @@ def test_every_package_imports_only_the_layers_below_it():
     assert not upward, upward
 
 
+MAX_POSITIONAL = 10
+"""The most positional parameters a function or kernel takes: more travel as named records."""
+
+
+def test_no_function_takes_more_than_ten_positional_parameters():
+    import ast
+
+    many = {}
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = [*node.args.posonlyargs, *node.args.args]
+                count = len(args) - (1 if args and args[0].arg in ("self", "cls") else 0)
+                if count > MAX_POSITIONAL:
+                    many[f"{name}.{node.name}"] = count
+    assert not many, many
+
+
 def test_no_module_over_six_hundred_lines():
     long = {name: n for name, path in MODULES.items() if (n := len(path.read_text().splitlines())) > MAX_LINES}
     assert not long, long

@@ -477,7 +477,7 @@ def test_qp_certifies_with_osqp(monkeypatch):
 
     def start_off(*args):
         out = certify_start(*args)
-        args[9][:] += 1e-3  # the projection p0
+        args[6].p0[:] += 1e-3  # the projection p0 (the start record's)
         return out
 
     def projection_off(*args, **kwargs):

@@ -14,6 +14,7 @@ from bodyfusion.nav.kalman import selection_moments, selection_update
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import zero_angular_rate_update, zero_velocity_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
+from bodyfusion.plugins.foot_ins.records import FilterState, StepScratch
 from bodyfusion.testing import random_nominal_state
 
 EMPTY = np.empty((0, 0))
@@ -104,8 +105,9 @@ def test_coloured_update_adds_no_information_about_a_rotation_about_up():
     x, P = moving_state(rng)
     before = information(P, heading_direction(x))
     C = Rotation.random(random_state=6).as_matrix()
-    coloured_zero_velocity_update(x, P, np.array([0.02, -0.01, 0.0]), C, np.array([0.3, -0.2, 9.8]), 0.01,
-                                  np.zeros(17), 0.8, 1e-3, 0.0, np.empty(ERROR_SIZE), EMPTY)
+    step = StepScratch(np.zeros(17), np.array([0.3, -0.2, 9.8]), C, np.empty((15, 15)), np.empty(ERROR_SIZE))
+    coloured_zero_velocity_update(FilterState(x, P, np.zeros(6), EMPTY), np.array([0.02, -0.01, 0.0]), step, 0.01,
+                                  0.8, 1e-3, 0.0)
     assert information(P, heading_direction(x)) == pytest.approx(before, rel=1e-7)
 
 

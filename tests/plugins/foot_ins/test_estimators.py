@@ -24,8 +24,9 @@ from bodyfusion.plugins.foot_ins.coloured import (
     coloured_zero_velocity_update,
     velocity_rows_of_inverse_transition,
 )
-from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE, no_record,
+from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE,
                                                  run_foot_ins, run_foot_ins_coloured)
+from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, StepScratch, no_record
 from bodyfusion.testing import check_system, default_context, random_nominal_state, with_value
 from tests.paths import ROOT
 
@@ -122,7 +123,9 @@ def test_coloured_update_matches_the_dense_equations():
     P_got = P.copy()
     dx = np.empty(15)
     phi = np.eye(15)
-    nis = coloured_zero_velocity_update(x.copy(), P_got, v_prev, C, f_n, dt, q, alpha, sigma, 0.0, dx, phi)
+    step = StepScratch(q, f_n, C, np.empty((15, 15)), dx)
+    nis = coloured_zero_velocity_update(FilterState(x.copy(), P_got, np.zeros(6), phi), v_prev, step, dt, alpha, sigma,
+                                        0.0)
     np.testing.assert_allclose(dx, K @ y, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(P_got, P_want, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(phi, G @ E, rtol=1e-12, atol=1e-15)
@@ -149,11 +152,11 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
         hist_x, hist_cov, hist_nis, counters = np.zeros((2, 16)), np.zeros((2, 4)), np.zeros(2), np.zeros(COUNTERS_SIZE)
         if sigma_ekf is None:
             post_idx, post_P = np.zeros(1, dtype=np.int64), np.zeros((1, 15, 15))
-            kernel(x, P, t, acc, gyro, stance, 1, 2, params, alpha, np.zeros(6), np.empty((0, 0)), hist_x, hist_cov,
-                   hist_nis, counters, post_idx, post_P)
+            kernel(FilterState(x, P, np.zeros(6), np.empty((0, 0))), ImuSamples(t, acc, gyro, stance), 1, 2, params,
+                   alpha, FilterHistory(hist_x, hist_cov, hist_nis, counters), post_idx, post_P)
             return x, P, counters, post_idx, post_P
-        kernel(x, P, t, acc, gyro, stance, 1, 2, walk_params(sigma_ekf), np.zeros(6), np.empty((0, 0)), hist_x,
-               hist_cov, hist_nis, counters, *no_record())
+        kernel(FilterState(x, P, np.zeros(6), np.empty((0, 0))), ImuSamples(t, acc, gyro, stance), 1, 2,
+               walk_params(sigma_ekf), FilterHistory(hist_x, hist_cov, hist_nis, counters), no_record())
         return x, P
 
     x, P, counters, post_idx, post_P = run(run_foot_ins_coloured)

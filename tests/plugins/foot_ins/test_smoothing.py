@@ -10,9 +10,11 @@ from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, segment_bounds, smooth_record
-from bodyfusion.plugins.foot_ins.smoothing_kernels import (apply_smoothed, backward_prior, fb_segment, filter_pass,
-                                                           fuse_block, integrate_position, rts_block,
-                                                           rts_block_after_position)
+from bodyfusion.plugins.foot_ins.records import (FilterReplay, FilterState, ImuSamples, PassBuffers,
+                                                 SmoothedOutput)
+from bodyfusion.plugins.foot_ins.smoothing_fb import backward_prior, fb_segment, fuse_block, integrate_position
+from bodyfusion.plugins.foot_ins.smoothing_replay import filter_pass
+from bodyfusion.plugins.foot_ins.smoothing_rts import apply_smoothed, rts_block, rts_block_after_position
 from bodyfusion.sim import simulate
 from tests.paths import ROOT
 
@@ -133,7 +135,9 @@ def test_rts_kernel_equals_textbook_rts_on_a_linear_gaussian_toy():
     Pprior = np.asarray([np.eye(n)] + Pp_f[1:])
     dxs = np.zeros((L + 1, n))
     Pss = np.zeros((L + 1, n, n))
-    assert rts_block(Ppost, Pprior, Phis, dx, np.zeros((L + 1, 2)), L, np.zeros(n), Ppost[L].copy(), dxs, Pss) == 0
+    unused = np.zeros((L + 1, 16))
+    passes = PassBuffers(unused, unused, Ppost, Pprior, Phis, dx, np.zeros((L + 1, 3)), np.zeros((L + 1, 2)))
+    assert rts_block(passes, L, np.zeros(n), Ppost[L].copy(), dxs, Pss) == 0
     for j in range(L + 1):
         np.testing.assert_allclose(xs_f[j] + dxs[j], xs[j], atol=1e-9)
         np.testing.assert_allclose(Pss[j], Ps[j], atol=1e-9)
@@ -143,8 +147,7 @@ def _rts(buf: _Pass, L: int, position: bool = True) -> int:
     """The textbook RTS of the first pass's block a … a + L from its end (rts_block; without
     ``position``, the states after it: rts_block_after_position), the states into ``smoothed``."""
     sweep = rts_block if position else rts_block_after_position
-    failed = sweep(buf.Ppost[0], buf.Pprior[0], buf.Phi[0], buf.dx[0], buf.yaw_reset[0], L, np.zeros(15),
-                   buf.Ppost[0, L].copy(), buf.dxs[0], buf.Ps[0])
+    failed = sweep(buf.buffers(0), L, np.zeros(15), buf.Ppost[0, L].copy(), buf.dxs[0], buf.Ps[0])
     apply_smoothed(buf.xs[0], 0, L, buf.dxs[0], buf.smoothed[0], 0)
     return failed
 
@@ -267,10 +270,8 @@ def _segment(r: _Record, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: _
              out_x: np.ndarray, out_var: np.ndarray) -> tuple:
     """FB (FB-RTS) of the segment a … b, the passes into ``buf`` (forward [0], backward [1])."""
     params_bw = r.params.backward()
-    return fb_segment(r.hist_x, r.t, r.acc, r.gyro, r.stance, r.params, params_bw, r.P0, r.ov_idx, r.ov_P, r.kept_idx,
-                      r.kept_x, r.gap_idx, r.gap_dP, a, b, P_a, r.memory([a])[0], with_rts, buf.xs, buf.xp,
-                      buf.Ppost, buf.Pprior, buf.Phi, buf.dx, buf.jump, buf.yaw_reset, buf.dxs, buf.Ps, buf.smoothed,
-                      fused_P, out_x, out_var)
+    return fb_segment(r.run, params_bw, a, b, P_a, r.memory([a])[0], with_rts, buf.buffers(), buf.smoothing(fused_P),
+                      SmoothedOutput(out_x, out_var))
 
 
 def test_backward_navigation_retraces_a_forward_trajectory(walk):
@@ -394,12 +395,12 @@ def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
         x0[3:6] *= -1.0
         x0[13:16] *= -1.0
         gaps = (r.gap_idx > a) & (r.gap_idx <= b)
-        filter_pass(x0, backward_prior(P_b, r.P0) * sign, np.zeros(6), -r.t[i], r.acc[src], -r.gyro[src],
-                    np.ascontiguousarray(r.stance[i]), params_bw, 0, L, r.hist_x, np.empty(0, dtype=np.int64),
-                    np.empty((0, 15, 15)), np.empty(0, dtype=np.int64), np.empty((0, 16)),
-                    np.ascontiguousarray((b - r.gap_idx[gaps] + 1)[::-1]),
-                    np.ascontiguousarray((r.gap_dP[gaps] * sign)[::-1]), True, bw.xs[0], bw.xp[0], bw.Ppost[0],
-                    bw.Pprior[0], bw.Phi[0], bw.dx[0], bw.jump[0], bw.yaw_reset[0])
+        filter_pass(FilterState(x0, backward_prior(P_b, r.P0) * sign, np.zeros(6), np.empty((0, 0))),
+                    ImuSamples(-r.t[i], r.acc[src], -r.gyro[src], np.ascontiguousarray(r.stance[i])), params_bw, 0, L,
+                    FilterReplay(r.hist_x, np.empty(0, dtype=np.int64), np.empty((0, 15, 15)),
+                                 np.empty(0, dtype=np.int64), np.empty((0, 16)),
+                                 np.ascontiguousarray((b - r.gap_idx[gaps] + 1)[::-1]),
+                                 np.ascontiguousarray((r.gap_dP[gaps] * sign)[::-1])), True, bw.buffers(0))
         if with_rts:
             _rts(fw, L)
             _rts(bw, L, position=False)

@@ -25,6 +25,7 @@ g_k, the multiplier sign and the hint directions are defined in
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -38,6 +39,48 @@ _CURVATURE_FLOOR = 1e-2  # least eigenvalue of the SQP's whitened Hessian I + H 
 # scalar loops only (array expressions cost numba compile time); the numpy error model
 # gives IEEE inf/nan instead of exceptions, results carry a status instead
 _kernel = numba.njit(cache=True, error_model="numpy")
+
+
+class StackedLimits(NamedTuple):
+    """The constraints as the kernels take them (:class:`~bodyfusion.core.constraints.model._Layout`):
+    ``idx`` (m, 4) int64 per constraint its two systems' stacked offsets, dimensions (2 or 3)
+    and kind (0 max, 1 min, 2 fixed); ``geo`` (m, ·) its limit (m) and lever arms; ``hints``
+    (m, 3) the direction remembered for a zero separation."""
+
+    idx: np.ndarray
+    geo: np.ndarray
+    hints: np.ndarray
+
+
+class PairSolution(NamedTuple):
+    """Where a one-constraint solve writes: the point ``p`` (3n,) m, the gain ``gain``
+    (3n, 3n) of Σ* = (I − gain) Σ (I − gain)ᵀ, the constraint's Jacobian ``jac`` (1, 3n)."""
+
+    p: np.ndarray
+    gain: np.ndarray
+    jac: np.ndarray
+
+
+class QpArrays(NamedTuple):
+    """One SQP step's QP in OSQP's form on the whitened variable: constraint rows ``A`` (m, 3n),
+    bounds ``lo``, ``hi`` (m,), Hessian ``P`` (3n, 3n) and linear term ``q`` (3n,)."""
+
+    A: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    P: np.ndarray
+    q: np.ndarray
+
+
+class PairStart(NamedTuple):
+    """A one-constraint QP's start (:func:`_qp_start_pair`): Σ's Cholesky factor ``L``
+    (3n, 3n), the projection ``p0`` (3n,), the multipliers ``duals`` (m,) and the whitened
+    point ``y0`` (3n,)."""
+
+    L: np.ndarray
+    p0: np.ndarray
+    duals: np.ndarray
+    y0: np.ndarray
 
 
 @_kernel
@@ -310,8 +353,7 @@ def _secular(
 
 @_kernel
 def _project_pair(
-    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
-    tol: float, max_iter: int, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+    p_hat: np.ndarray, sigma: np.ndarray, limits: StackedLimits, k: int, tol: float, max_iter: int, out: PairSolution,
 ) -> tuple[int, float, float, float, int, float, float, float]:
     """Constraint k alone: g_k(p̂); when it is violated (or ``fixed``), the direction u
     of the solution from the secular equation (:func:`_secular`, S = E B Σ Bᵀ Eᵀ) and
@@ -322,6 +364,8 @@ def _project_pair(
     violations as in ``violation_before_m``; status _INACTIVE (g_k(p̂) ≤ 0, nothing
     written), _FAILED (nothing meaningful) or _SOLVED.
     """
+    idx, geo, hints = limits
+    p, gain, jac = out
     i3, j3, D, code = idx[k, 0], idx[k, 1], idx[k, 2], idx[k, 3]
     d = geo[k, 0]
     rhat = np.empty(3)
@@ -394,8 +438,7 @@ def _curvature_scale(H: np.ndarray, neg: np.ndarray) -> float:
 
 @_kernel
 def _linearise(
-    p_hat: np.ndarray, L: np.ndarray, idx: np.ndarray, geo: np.ndarray, hints: np.ndarray,
-    p: np.ndarray, duals: np.ndarray, A: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray,
+    p_hat: np.ndarray, L: np.ndarray, limits: StackedLimits, p: np.ndarray, duals: np.ndarray, qp: QpArrays,
 ) -> None:
     """The constraints of one SQP step (:func:`~bodyfusion.core.constraints.sqp._sqp`)
     linearised at p, and its Hessian.
@@ -404,8 +447,11 @@ def _linearise(
     (:func:`_pair_direction`); bound lin_k = d_k − u_k·r̂_k into lo/hi on the side(s)
     of its kind (±1e30, OSQP's infinity, on the other). P = I + H with the curvature
     H = Σ_k duals_k (BL_kᵀBL_k − a_k a_kᵀ)/‖r_k‖ = Σ_k duals_k Lᵀ∇²‖r_k‖L; its
-    negative part (duals < 0: active ``min``) scaled by :func:`_curvature_scale`.
+    negative part (duals < 0: active ``min``) scaled by :func:`_curvature_scale`; written into
+    ``qp``'s A, lo, hi and P.
     """
+    idx, geo, hints = limits
+    A, lo, hi, P, _ = qp
     n3 = p.shape[0]
     neg = np.zeros((n3, n3))
     has_neg = False
@@ -500,25 +546,26 @@ def _advance(
 
 @_kernel
 def _qp_start_pair(
-    p_hat: np.ndarray, sigma: np.ndarray, idx: np.ndarray, geo: np.ndarray, k: int, hints: np.ndarray,
-    tol: float, max_iter: int, L: np.ndarray, p0: np.ndarray, duals: np.ndarray, y0: np.ndarray,
-    A: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray, q: np.ndarray,
+    p_hat: np.ndarray, sigma: np.ndarray, limits: StackedLimits, k: int, tol: float, max_iter: int, start: PairStart,
+    qp: QpArrays,
 ) -> tuple[int, float]:
     """The QP that certifies the projection onto constraint k, the only one: the
     projection p0 (:func:`_project_pair`), its multiplier in OSQP's sign to duals[k],
     Σ = L Lᵀ (:func:`~bodyfusion.base.linalg_kernels.cholesky`) and the SQP's QP at p0, started from that KKT point
     (:func:`_linearise`, :func:`_stationary_point` to y0, :func:`_linear_term`).
     Returns (status, violation at p̂); _FAILED also when Σ is not positive definite."""
+    L, p0, duals, y0 = start
+    A, _, _, P, q = qp
+    idx = limits.idx
     n3 = p_hat.shape[0]
-    gain = np.empty((n3, n3))
-    jac = np.empty((1, n3))
-    status, v0, _, lam, _, _, _, _ = _project_pair(p_hat, sigma, idx, geo, k, hints, tol, max_iter, p0, gain, jac)
+    status, v0, _, lam, _, _, _, _ = _project_pair(p_hat, sigma, limits, k, tol, max_iter,
+                                                   PairSolution(p0, np.empty((n3, n3)), np.empty((1, n3))))
     if status != _SOLVED:
         return status, v0
     if not cholesky(sigma, L):
         return _FAILED, v0
     duals[k] = -lam if idx[k, 3] == 1 else lam
-    _linearise(p_hat, L, idx, geo, hints, p0, duals, A, lo, hi, P)
+    _linearise(p_hat, L, limits, p0, duals, qp)
     _stationary_point(A, duals, y0)
     _linear_term(P, y0, q)
     return _SOLVED, v0
@@ -526,12 +573,14 @@ def _qp_start_pair(
 
 @_kernel
 def _qp_finish_pair(
-    p_hat: np.ndarray, sigma: np.ndarray, L: np.ndarray, y: np.ndarray, p0: np.ndarray, idx: np.ndarray,
-    geo: np.ndarray, k: int, hints: np.ndarray, p: np.ndarray, gain: np.ndarray, jac: np.ndarray,
+    p_hat: np.ndarray, sigma: np.ndarray, L: np.ndarray, y: np.ndarray, p0: np.ndarray, limits: StackedLimits, k: int,
+    out: PairSolution,
 ) -> tuple[float, float, bool, float, float, float, float]:
     """OSQP's point p = p̂ + L y of the QP of :func:`_qp_start_pair` (:func:`_advance`)
-    and eqs. 58–60 there for constraint k (:func:`_certify_pair`; p, gain, jac
+    and eqs. 58–60 there for constraint k (:func:`_certify_pair`; ``out``'s p, gain, jac
     written). Returns (step from p0, g_k(p), M > 0, λ, u0, u1, u2)."""
+    idx, geo, hints = limits
+    p, gain, jac = out
     g = np.empty(idx.shape[0])
     step = _advance(p_hat, L, y, p0, idx, geo, p, g)
     ok, lam, u0, u1, u2 = _certify_pair(p_hat, sigma, idx, geo, k, hints, p, gain, jac)

@@ -39,7 +39,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import _FAILED, _INACTIVE, _project_pair, _secular_limits
+from bodyfusion.core.constraints.kernels import (_FAILED, _INACTIVE, PairSolution, StackedLimits, _project_pair,
+                                                 _secular_limits)
 from bodyfusion.core.constraints.linearisation import _finish
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, _check_inputs, _direction,
                                                _hint_array, _layout, _Layout, _max_violation, _remember,
@@ -177,7 +178,7 @@ def _pair_solution(
     mu = np.empty((n3, n3))
     G = np.empty((1, n3))
     status, viol0k, viol1, lam, its, u0, u1, u2 = _project_pair(
-        p_hat, sigma, lay.idx, lay.geo, k, hints, *_secular_limits(tol_m, max_iter), p, mu, G
+        p_hat, sigma, StackedLimits(lay.idx, lay.geo, hints), k, *_secular_limits(tol_m, max_iter), PairSolution(p, mu, G)
     )
     if status == _INACTIVE:
         return _unconstrained_solution(p_hat, lay, "projection", 0.0), {}

@@ -26,7 +26,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import (_INACTIVE, _SOLVED, _qp_finish_pair, _qp_start_pair,
+from bodyfusion.core.constraints.kernels import (_INACTIVE, _SOLVED, PairSolution, PairStart, QpArrays, StackedLimits,
+                                                 _qp_finish_pair, _qp_start_pair,
                                                  _secular_limits)
 from bodyfusion.core.constraints.linearisation import _certify
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, _check_inputs, _hint_array,
@@ -178,8 +179,9 @@ class QpSolver:
         A, lo, hi, P, q, _ = self._work
         L, p0, duals, y0 = self._pair_work
         tol, its = _secular_limits(self.tol_m, self.max_iter)
-        status, viol0 = _qp_start_pair(p_hat, sigma, lay.idx, lay.geo, 0, self._hints, tol, its,
-                                       L, p0, duals, y0, A, lo, hi, P, q)
+        limits = StackedLimits(lay.idx, lay.geo, self._hints)
+        status, viol0 = _qp_start_pair(p_hat, sigma, limits, 0, tol, its, PairStart(L, p0, duals, y0),
+                                       QpArrays(A, lo, hi, P, q))
         if status == _INACTIVE:
             return _unconstrained_solution(p_hat, lay, "qp", viol0)
         if status != _SOLVED:
@@ -190,8 +192,7 @@ class QpSolver:
         p = np.empty(n3)
         mu = np.empty((n3, n3))
         G = np.empty((1, n3))
-        step, g, ok, lam, u0, u1, u2 = _qp_finish_pair(p_hat, sigma, L, y, p0, lay.idx, lay.geo, 0, self._hints,
-                                                        p, mu, G)
+        step, g, ok, lam, u0, u1, u2 = _qp_finish_pair(p_hat, sigma, L, y, p0, limits, 0, PairSolution(p, mu, G))
         viol1 = _max_violation(lay, [g])
         if not (ok and _settled(viol1, step, math.inf, self.tol_m, self.tol_m)
                 and (lay.has_fixed or (g >= -10.0 * self.tol_m and lam > 0.0))):

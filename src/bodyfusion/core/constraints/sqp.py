@@ -30,8 +30,8 @@ from typing import Callable
 import numpy as np
 
 from bodyfusion.base.linalg_kernels import cholesky
-from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, _advance, _linear_term, _linearise,
-                                                 _stationary_point)
+from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, QpArrays, StackedLimits, _advance, _linear_term,
+                                                 _linearise, _stationary_point)
 from bodyfusion.core.constraints.model import _Layout, _max_violation
 
 # one QP: (P, q, A, lo, hi, y warm start, duals warm start) -> (ok, y, duals)
@@ -113,7 +113,7 @@ def _sqp(
         (p, duals), y = start, np.empty(n3)
     prev_step = math.inf
     for it in range(1, max_iter + 1):
-        _linearise(p_hat, L, lay.idx, lay.geo, hints, p, duals, A, lo, hi, P)
+        _linearise(p_hat, L, StackedLimits(lay.idx, lay.geo, hints), p, duals, QpArrays(A, lo, hi, P, q))
         if it == 1 and start is not None:
             _stationary_point(A, duals, y)
         _linear_term(P, y, q)

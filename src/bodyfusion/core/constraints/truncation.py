@@ -27,10 +27,11 @@ estimate's tail says it might not, and the truncation takes that information too
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import _DEGENERATE_M, _kernel, _separation
+from bodyfusion.core.constraints.kernels import _DEGENERATE_M, StackedLimits, _kernel, _separation
 from bodyfusion.core.constraints.model import ConstraintSolution, DistanceConstraint, _layout
 
 TAIL_BETA = 4.0
@@ -52,16 +53,26 @@ def truncated_moments(beta: float) -> tuple[float, float]:
     return -ratio, max(1.0 - beta * ratio - ratio * ratio, 0.0)
 
 
+class SolvedLimits(NamedTuple):
+    """The solve's active limits as the truncation takes them: their Jacobian ``rows`` (A, 3n),
+    the solution ``p_star`` (3n,) m, and which constraints they are ``active`` (A,) int64."""
+
+    rows: np.ndarray
+    p_star: np.ndarray
+    active: np.ndarray
+
+
 @_kernel
-def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, rows: np.ndarray, p_star: np.ndarray,
-              active: np.ndarray, idx: np.ndarray, geo: np.ndarray, tail_beta: float, others: np.ndarray,
-              dx: np.ndarray, tail: np.ndarray) -> int:
+def _truncate(P: np.ndarray, pos: np.ndarray, p_hat: np.ndarray, solved: SolvedLimits, limits: StackedLimits,
+              tail_beta: float, others: np.ndarray, dx: np.ndarray, tail: np.ndarray) -> int:
     """Every limit the truncation takes at one epoch, into δx (n,) and P (n, n) in place
-    (module docstring): the ``active`` constraints' (A,) ``rows`` (A, 3n), bounded at the
-    solution ``p_star`` (3n,), then the inactive inequalities within ``tail_beta`` σ of p̂
-    (flagged in ``tail`` (K,)). Geometry ``idx``, ``geo`` as in
-    :mod:`bodyfusion.core.constraints.kernels`; ``others`` (n,): rows kept out of the
-    correction. Returns the limits that cut (s² > 0, V < s²)."""
+    (module docstring): the ``solved`` active constraints' (A,) ``rows`` (A, 3n), bounded at
+    the solution ``p_star`` (3n,), then the inactive inequalities within ``tail_beta`` σ of p̂
+    (flagged in ``tail`` (K,)). Geometry ``limits`` as in
+    :mod:`bodyfusion.core.constraints.kernels` (its hints unused); ``others`` (n,): rows kept
+    out of the correction. Returns the limits that cut (s² > 0, V < s²)."""
+    rows, p_star, active = solved
+    idx, geo, _ = limits
     n = P.shape[0]
     n3 = pos.shape[0]
     A = rows.shape[0]
@@ -154,7 +165,7 @@ class DensityTruncation:
 
     def __init__(self, constraints: list[DistanceConstraint], n_systems: int, positions_only: bool = False) -> None:
         lay = _layout(n_systems, constraints)
-        self._idx, self._geo = lay.idx, lay.geo
+        self._limits = StackedLimits(lay.idx, lay.geo, np.zeros((lay.idx.shape[0], 3)))
         self.positions_only = positions_only
         self._others: dict[tuple[int, bytes], np.ndarray] = {}  # the rows kept out, per state layout
 
@@ -170,12 +181,13 @@ class DensityTruncation:
         n = P.shape[0]
         P_new = np.array(P, dtype=float, order="C")
         dx = np.zeros(n)
-        tail = np.zeros(self._idx.shape[0], dtype=bool)
+        tail = np.zeros(self._limits.idx.shape[0], dtype=bool)
         key = (n, pos.tobytes())
         others = self._others.get(key)
         if others is None:
             others = self._others[key] = np.full(n, self.positions_only)
             others[pos] = False
-        _truncate(P_new, pos, p_hat, solution.jacobian.reshape(len(solution.active), p_hat.shape[0]), solution.p,
-                  np.array(solution.active, dtype=np.int64), self._idx, self._geo, TAIL_BETA, others, dx, tail)
+        solved = SolvedLimits(solution.jacobian.reshape(len(solution.active), p_hat.shape[0]), solution.p,
+                              np.array(solution.active, dtype=np.int64))
+        _truncate(P_new, pos, p_hat, solved, self._limits, TAIL_BETA, others, dx, tail)
         return dx, P_new, tail

@@ -37,6 +37,7 @@ import numpy as np
 from bodyfusion.nav.error_state import inject, keep_yaw_unobservable
 from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.zupt import unobservable_yaw_column
+from bodyfusion.plugins.foot_ins.records import FilterState, StepScratch
 
 
 @numba.njit(cache=True)
@@ -66,17 +67,19 @@ def velocity_rows_of_inverse_transition(C: np.ndarray, f_n: np.ndarray, dt: floa
 
 
 @numba.njit(cache=True)
-def coloured_zero_velocity_update(x: np.ndarray, P: np.ndarray, v_prev: np.ndarray, C: np.ndarray,
-                                  f_n: np.ndarray, dt: float, q_diag: np.ndarray, alpha: float, sigma_v: float,
-                                  gate: float, dx: np.ndarray, phi: np.ndarray) -> float:
+def coloured_zero_velocity_update(state: FilterState, v_prev: np.ndarray, step: StepScratch, dt: float, alpha: float,
+                                  sigma_v: float, gate: float) -> float:
     """The cKF stance update (module docstring) at a stance sample whose previous sample was
-    also updated. x (16,) prior nominal state and P (15, 15) prior covariance are corrected
-    in place; ``v_prev`` (3,) the posterior velocity at the previous sample (m/s); ``C``, ``f_n``
-    and ``dt`` the step's C_nb, mean navigation-frame specific force (m/s^2) and interval (s);
-    ``q_diag`` (15,) the process noise densities² (Q = diag(q_diag) dt); α the colour factor;
-    σ_v (m/s) the standard deviation of the white driving noise ξ. ``phi`` (15, 15), when not
-    empty, is left-multiplied by (I − K H̄). Writes dx (15,); returns the NIS yᵀ S⁻¹ y. With
-    ``gate`` > 0 and NIS > gate nothing is changed (chi-square gate, 3 degrees of freedom)."""
+    also updated. The ``state``'s x (16,) prior nominal state and P (15, 15) prior covariance
+    are corrected in place; ``v_prev`` (3,) the posterior velocity at the previous sample (m/s);
+    of the ``step``, ``C`` and ``f_n`` its C_nb and mean navigation-frame specific force (m/s^2)
+    and ``q_diag`` (15,) the process noise densities² (Q = diag(q_diag) dt), ``dt`` its interval
+    (s); α the colour factor; σ_v (m/s) the standard deviation of the white driving noise ξ. The
+    state's ``phi`` (15, 15), when not empty, is left-multiplied by (I − K H̄). Writes
+    ``step.dx`` (15,); returns the NIS yᵀ S⁻¹ y. With ``gate`` > 0 and NIS > gate nothing is
+    changed (chi-square gate, 3 degrees of freedom)."""
+    x, P, _, phi = state
+    q_diag, f_n, C, _, dx = step
     T = np.empty((3, 15))
     velocity_rows_of_inverse_transition(C, f_n, dt, T)
     Hb = np.zeros((3, 15))

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from bodyfusion.nav.error_state import FilterParams, inject
+from bodyfusion.plugins.foot_ins.records import FilterHistory, ImuSamples
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.foot_ins.ensemble_kernels import (NOISE_WIDTH, NOMINAL, ensemble_covariance, ensemble_deviations,
                                                       ensemble_mean, place_members, run_ensemble)
@@ -90,15 +91,13 @@ class Ensemble:
         self.mean = np.empty(self.size)
         ensemble_mean(self.ens, self.mean)
 
-    def run(self, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, stance: np.ndarray, i0: int, i1: int,
-            params: FilterParams, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
+    def run(self, samples: ImuSamples, i0: int, i1: int, params: FilterParams, history: FilterHistory) -> None:
         """Process samples i0 ≤ i < i1 (see :func:`run_ensemble`), noise drawn block by block."""
         alpha = -1.0 if self.alpha is None else float(self.alpha)
         for a in range(i0, i1, NOISE_BLOCK):
             b = min(a + NOISE_BLOCK, i1)
             noise = self._rng.standard_normal((b - a, self.members, NOISE_WIDTH))
-            run_ensemble(self.ens, self.memory, t, acc_b, gyro_b, stance, a, b, params, alpha, noise, self.mean,
-                         hist_x, hist_pos_cov, counters)
+            run_ensemble(self.ens, self.memory, samples, a, b, params, alpha, noise, self.mean, history)
 
     def covariance(self) -> np.ndarray:
         """Sample covariance (n, n) of the error-state deviations about the mean."""

@@ -42,9 +42,10 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.error_state import FilterParams
+from bodyfusion.plugins.foot_ins.records import FilterHistory, ImuSamples
 from bodyfusion.nav.kalman import inv3_sym
 from bodyfusion.nav.attitude import quat_from_rotvec, quat_multiply, quat_normalised
-from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus
+from bodyfusion.plugins.foot_ins.smoothing_replay import boxminus
 from bodyfusion.nav.strapdown import mechanise
 
 NOISE_WIDTH = 21
@@ -239,19 +240,21 @@ def ensemble_analysis(ens: np.ndarray, first: int, second: int, z: np.ndarray, r
 
 
 @numba.njit(cache=True)
-def run_ensemble(ens: np.ndarray, memory: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: FilterParams, alpha: float, noise: np.ndarray,
-                 mean: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, counters: np.ndarray) -> None:
+def run_ensemble(ens: np.ndarray, memory: np.ndarray, samples: ImuSamples, i0: int, i1: int, params: FilterParams,
+                 alpha: float, noise: np.ndarray, mean: np.ndarray, history: FilterHistory) -> None:
     """Process samples i0 ≤ i < i1 (i0 ≥ 1) as the module docstring says; ``alpha`` < 0:
     enekf, ``alpha`` ≥ 0: cenekf with colour factor α (``ens`` then has 19 columns).
 
     ``ens`` (M, n_s) and ``memory`` (M, 6) (each member's two-sample mechanisation memory)
     are updated in place; ``noise`` (i1 − i0, M, 21) holds the draws; ``mean`` (n_s,)
-    receives the ensemble mean after the last sample; row i of ``hist_x`` (N, 16) and
-    ``hist_pos_cov`` (N, 4) the mean nominal state and the members' position covariance (variances
-    east, north, up and the east–north covariance, m^2).
-    ``counters`` accumulates [ZUPTs, ZARUs, sum of ZUPT NIS].
+    receives the ensemble mean after the last sample; of the ``history``, row i of ``hist_x``
+    (N, 16) and ``hist_pos_cov`` (N, 4) the mean nominal state and the members' position
+    covariance (variances east, north, up and the east–north covariance, m^2) (the ensemble
+    keeps no NIS: ``hist_nis`` is not written), ``counters`` accumulates [ZUPTs, ZARUs, sum of
+    ZUPT NIS].
     """
+    t, acc_b, gyro_b, stance = samples
+    hist_x, hist_pos_cov, _, counters = history
     M = ens.shape[0]
     g = params.gravity
     w_ie = params.earth_rate.copy()

@@ -31,8 +31,8 @@ from bodyfusion.nav.measurements import GateCounts, position_fix_update
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import COLOURED_KINDS, FootFilterConfig
 from bodyfusion.plugins.foot_ins.ensemble import Ensemble
-from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, NO_RESET, no_record, run_foot_ins,
-                                                 run_foot_ins_coloured, set_state)
+from bodyfusion.plugins.foot_ins.kernels import C_CALL_RECORDS, NO_RESET, run_foot_ins, run_foot_ins_coloured, set_state
+from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, RtsRecord, no_record
 
 
 @dataclass
@@ -63,7 +63,15 @@ class RunData:
     override_P: list[np.ndarray] = field(default_factory=list)
     kept_idx: GrowingArray = field(default_factory=lambda: GrowingArray((), np.int64))
     kept_x: GrowingArray = field(default_factory=lambda: GrowingArray((NOMINAL_SIZE,)))
-    record: tuple[np.ndarray, ...] = field(default_factory=no_record)
+    record: RtsRecord = field(default_factory=no_record)
+
+    def samples(self) -> ImuSamples:
+        """The samples the kernels step through."""
+        return ImuSamples(self.t, self.acc_b, self.gyro_b, self.stance)
+
+    def history(self) -> FilterHistory:
+        """The rows the kernels fill."""
+        return FilterHistory(self.hist_x, self.hist_pos_cov, self.hist_nis, self.counters)
 
 
 class Estimator:
@@ -82,8 +90,8 @@ class Estimator:
 
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         """Process samples i0 ≤ i < i1; ``phi`` accumulates the transition ((0, 0): off)."""
-        run_foot_ins(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                     self.mech_memory, phi, data.hist_x, data.hist_pos_cov, data.hist_nis, data.counters, *data.record)
+        run_foot_ins(FilterState(self.x, self.P, self.mech_memory, phi), data.samples(), i0, i1, data.params,
+                     data.history(), data.record)
 
     def reset_and_record(self, dx: np.ndarray, P: np.ndarray, data: RunData, i: int, packed: np.ndarray) -> bool:
         """Closed-loop reset: inject dx (n,) into the nominal state, take ½ (P + Pᵀ) (n, n); then
@@ -111,9 +119,8 @@ class ColouredEkf(Estimator):
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
         bound = int(np.count_nonzero(data.stance[i0:i1]))
         post_idx, post_P = np.empty(bound, dtype=np.int64), np.empty((bound, 15, 15))
-        run_foot_ins_coloured(self.x, self.P, data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params,
-                              self.cfg.colour_factor, self.mech_memory, phi, data.hist_x, data.hist_pos_cov,
-                              data.hist_nis, data.counters, post_idx, post_P)
+        run_foot_ins_coloured(FilterState(self.x, self.P, self.mech_memory, phi), data.samples(), i0, i1, data.params,
+                              self.cfg.colour_factor, data.history(), post_idx, post_P)
         k = int(data.counters[C_CALL_RECORDS])
         if k:  # the smoother rebuilds ZUPTs with σ_ξ: it takes the ckf's covariances here
             data.override_idx.append(post_idx[:k])
@@ -139,8 +146,7 @@ class EnsembleEkf(Estimator):
         self.P = self.ensemble.covariance()
 
     def run(self, data: RunData, i0: int, i1: int, phi: np.ndarray) -> None:
-        self.ensemble.run(data.t, data.acc_b, data.gyro_b, data.stance, i0, i1, data.params, data.hist_x,
-                          data.hist_pos_cov, data.counters)
+        self.ensemble.run(data.samples(), i0, i1, data.params, data.history())
         self._sync()
 
     def reset_and_record(self, dx: np.ndarray, P: np.ndarray, data: RunData, i: int, packed: np.ndarray) -> bool:

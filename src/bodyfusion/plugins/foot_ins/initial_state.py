@@ -24,7 +24,8 @@ from bodyfusion.nav.error_state import DPOS, rotate_about_up
 from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attitude_from_specific_force,
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
-from bodyfusion.plugins.foot_ins.kernels import C_GATED, C_ZUPTS, COUNTERS_SIZE, no_record, run_foot_ins
+from bodyfusion.plugins.foot_ins.kernels import C_GATED, C_ZUPTS, COUNTERS_SIZE, run_foot_ins
+from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, no_record
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
@@ -112,8 +113,9 @@ class InitialState:
         stance_r = np.ascontiguousarray(self.stance[s - r])
         hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
-        run_foot_ins(xb, Pb, t_r, acc_r, gyro_r, stance_r, 1, s + 1, params, np.zeros(6), np.empty((0, 0)),
-                     hist_x, hist_cov, np.empty(s + 1), self.backward_counters, *no_record())
+        run_foot_ins(FilterState(xb, Pb, np.zeros(6), np.empty((0, 0))), ImuSamples(t_r, acc_r, gyro_r, stance_r), 1,
+                     s + 1, params, FilterHistory(hist_x, hist_cov, np.empty(s + 1), self.backward_counters),
+                     no_record())
         xb[3:6] *= -1.0
         xb[13:16] *= -1.0
         Pb = 2.0 * (Pb * flip)

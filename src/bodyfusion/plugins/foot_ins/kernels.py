@@ -9,13 +9,13 @@ v_k = α v_{k−1} + ξ_k, R = σ_ξ² / (1 − α²) (:func:`stationary_zupt_pa
 
 One sample of the ekf is :func:`ekf_step`, the only place its per-sample recursion is written:
 the filter (:func:`run_foot_ins`) and the smoothers' passes
-(:mod:`bodyfusion.plugins.foot_ins.smoothing_kernels`: the covariance rebuild, the backward
+(:mod:`bodyfusion.plugins.foot_ins.smoothing_replay`: the covariance rebuild, the backward
 navigation) all call it, so a change to the propagation or to the zero-velocity update
 changes them all.
 
 For the whole-run RTS the ekf can record, as it runs, what the backward sweep of
 :mod:`bodyfusion.plugins.foot_ins.smoothing_mbf` needs (:func:`record_posterior`,
-:func:`record_stance`; the arrays of :func:`no_record` when it records nothing): the sweep then
+:func:`record_stance`; the arrays of :func:`~bodyfusion.plugins.foot_ins.records.no_record` when it records nothing): the sweep then
 needs no replay of the filter.
 
 Every stance update is chi-square gated with bounded influence (``params.zupt_gate``,
@@ -33,14 +33,13 @@ from bodyfusion.nav.error_state import (FilterParams, bias_decay, closed_loop_re
 from bodyfusion.nav.strapdown import mechanise
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, stance_update, stance_velocity_sigma, zero_angular_rate_update
 from bodyfusion.plugins.foot_ins.coloured import coloured_zero_velocity_update
+from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, RtsRecord, StepScratch
 
 # Layout of the ``counters`` vector: updates, NIS sum (before gating), the
 # gated (de-weighted) stance samples, the coloured updates, the ckf's stance updates
 # recorded by this call, and the stance samples recorded for the whole-run RTS.
 C_ZUPTS, C_ZARUS, C_NIS_SUM, C_COLOURED, C_GATED, C_CALL_RECORDS, C_STANCE_RECORDS = range(7)
 COUNTERS_SIZE = 7
-PACKED_SIZE = 120
-"""Elements of a symmetric 15×15 matrix stored packed: its upper triangle by rows."""
 
 
 @numba.njit(cache=True)
@@ -54,11 +53,12 @@ def stationary_zupt_params(params: FilterParams, alpha: float) -> FilterParams:
 
 
 @numba.njit(inline="always")
-def _propagate_sample(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                      i: int, params: FilterParams, q_diag: np.ndarray, f_n: np.ndarray, mech_memory: np.ndarray,
-                      phi: np.ndarray, C: np.ndarray) -> None:
+def _propagate_sample(state: FilterState, imu: ImuSamples, i: int, params: FilterParams, scratch: StepScratch) -> None:
     """Mechanise sample i (from t[i-1] to t[i]), decay the bias estimates and propagate P
-    (and Φ when tracked); C_nb (3, 3) of the step is left in ``C``, f_n (3,) in ``f_n``."""
+    (and Φ when tracked); C_nb (3, 3) of the step is left in ``scratch.C``, f_n (3,) in ``scratch.f_n``."""
+    x, P, mech_memory, phi = state
+    t, acc_b, gyro_b, _ = imu
+    q_diag, f_n, C, _, _ = scratch
     dt = t[i] - t[i - 1]
     mechanise(x, acc_b[i], gyro_b[i], dt, params.gravity, params.earth_rate, f_n, mech_memory, C)
     decay_biases(x, q_diag, dt)
@@ -86,21 +86,21 @@ NO_STANCE = -1.0
 
 
 @numba.njit(inline="always")
-def ekf_step(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-             stance: np.ndarray, i: int, params: FilterParams, q_diag: np.ndarray, f_n: np.ndarray,
-             mech_memory: np.ndarray, phi: np.ndarray, work: np.ndarray, dx: np.ndarray, C: np.ndarray,
+def ekf_step(state: FilterState, imu: ImuSamples, i: int, params: FilterParams, scratch: StepScratch,
              x_prior: np.ndarray | None, P_prior: np.ndarray | None, Phi: np.ndarray | None) -> float:
     """One sample i of the ekf: mechanise from t[i-1] to t[i], propagate P, and at a stance
     sample the gated ZUPT (and ZARU) of :func:`bodyfusion.nav.zupt.stance_update`.
 
-    x (16,), P (15, 15), ``mech_memory`` (6,) and ``phi`` (the transition accumulated for the
-    fuser, (0, 0): off) are updated in place; ``dx`` (15,) is scratch; ``f_n`` (3,) receives the
-    step's mean specific force in the navigation frame (m/s²) and ``C`` (3, 3) its C_nb. For the smoothers, the step also
+    The ``state`` is updated in place; of the ``scratch``, ``f_n`` (3,) receives the step's mean
+    specific force in the navigation frame (m/s²) and ``C`` (3, 3) its C_nb. For the smoothers, the step also
     writes its prior nominal state ``x_prior`` (16,) and covariance ``P_prior`` (15, 15) when
     ``P_prior`` is not empty, and its transition ``Phi`` (15, 15, :func:`transition`) when
     ``Phi`` is not empty; an empty (0, 0) array skips them, None (the filter) leaves them out of
     the compiled step. Returns the ZUPT's NIS before gating, or :data:`NO_STANCE`."""
-    _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, C)
+    x, P, _, phi = state
+    t, _, gyro_b, stance = imu
+    q_diag, f_n, C, work, dx = scratch
+    _propagate_sample(state, imu, i, params, scratch)
     if P_prior is not None:  # pruned at compile time when None
         if P_prior.shape[0] > 0:
             for r in range(15):
@@ -145,7 +145,7 @@ def _record_row(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_p
 
 @numba.njit(inline="always")
 def record_posterior(P: np.ndarray, f_n: np.ndarray, j: int, Pu: np.ndarray, f_ns: np.ndarray) -> None:
-    """Row j of the whole-run RTS record: ``Pu[j]`` (:data:`PACKED_SIZE`,) the posterior
+    """Row j of the whole-run RTS record: ``Pu[j]`` (:data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`,) the posterior
     covariance P (15, 15) packed (upper triangle by rows), ``f_ns[j]`` (3,) the step's mean
     specific force f_n (navigation frame, m/s²; with the state before the step it gives the
     step's transition again, exactly)."""
@@ -156,7 +156,7 @@ def record_posterior(P: np.ndarray, f_n: np.ndarray, j: int, Pu: np.ndarray, f_n
 
 @numba.njit(inline="always")
 def _pack(P: np.ndarray, out: np.ndarray) -> None:
-    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows."""
+    """``out`` (:data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows."""
     q = 0
     for r in range(15):
         for c in range(r, 15):
@@ -178,7 +178,7 @@ def _pack_symmetric(P: np.ndarray, out: np.ndarray) -> bool:
 
 @numba.njit(cache=True)
 def pack_covariance(P: np.ndarray, out: np.ndarray) -> bool:
-    """``out`` (:data:`PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
+    """``out`` (:data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`,) ← the upper triangle of P (15, 15) by rows; whether P is
     exactly symmetric (then ``out`` holds all of it; a NaN makes it not)."""
     return _pack_symmetric(P, out)
 
@@ -196,7 +196,7 @@ def set_state(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray, i
     dx (15,) and P_new (n, n) (:func:`bodyfusion.nav.error_state.closed_loop_reset`; both empty,
     :data:`NO_RESET`: none, x (16,) and P (n, n) already set); row i of ``hist_x`` (N, 16) ← x and
     of ``hist_pos_cov`` (N, 4) ← P's position variances east, north, up and east–north covariance
-    (m²); unless ``packed`` is empty (:data:`NOT_PACKED`), ``packed`` (:data:`PACKED_SIZE`,) ← the
+    (m²); unless ``packed`` is empty (:data:`NOT_PACKED`), ``packed`` (:data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`,) ← the
     upper triangle of P (15, 15) by rows. Returns whether P is exactly symmetric (then ``packed``
     holds all of it; a NaN makes it not); True when nothing is packed."""
     if dx.shape[0] > 0:
@@ -225,45 +225,37 @@ def record_stance(x: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray, sigma
             st_P[n, r, m] = P_prior[r, ZUPT_COLUMNS[m]]
 
 
-def no_record() -> tuple[np.ndarray, ...]:
-    """The record arguments of :func:`run_foot_ins` of a run that records nothing."""
-    return (np.empty((0, PACKED_SIZE)), np.empty((0, 3)), np.empty((0, 6)), np.empty((0, 15, 4)), np.empty(16),
-            np.empty((0, 0)))
-
-
 @numba.njit(cache=True)
-def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                 stance: np.ndarray, i0: int, i1: int, params: FilterParams, mech_memory: np.ndarray,
-                 phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray, hist_nis: np.ndarray,
-                 counters: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-                 x_prior: np.ndarray, P_prior: np.ndarray) -> None:
+def run_foot_ins(state: FilterState, imu: ImuSamples, i0: int, i1: int, params: FilterParams,
+                 history: FilterHistory, record: RtsRecord) -> None:
     """The ``ekf``: process samples i0 ≤ i < i1 (i0 ≥ 1): mechanise from t[i-1] to t[i],
     propagate P, and at stance samples apply the gated ZUPT (and the ZARU when its σ > 0).
 
-    x (16,) nominal state, P (15, 15) and ``mech_memory`` (6,) (the previous step's
-    increments, see :func:`bodyfusion.nav.strapdown.mechanise`) are updated in place; row i of ``hist_x`` and
+    The ``state`` (:class:`~bodyfusion.plugins.foot_ins.records.FilterState`: x, P, the
+    mechanisation memory of :func:`bodyfusion.nav.strapdown.mechanise`, the transition Φ
+    accumulated for the fuser) is updated in place; of the ``history``, row i of ``hist_x`` and
     ``hist_pos_cov`` (N, 4) receives the state and the position covariance after sample i
     (variances east, north, up and the east–north covariance, m^2), and ``hist_nis`` (N,) its
-    stance update's NIS before gating (:data:`NO_STANCE` at a swing sample). ``counters`` accumulates (layout ``C_*``). ``phi`` (15, 15) accumulates the error-state
-    transition for the fuser's cross-covariances (empty (0, 0): off).
+    stance update's NIS before gating (:data:`NO_STANCE` at a swing sample); ``counters``
+    accumulates (layout ``C_*``).
 
-    Unless ``Pu`` is empty (:func:`no_record`), the run records for the whole-run RTS: row i of
-    ``Pu`` (N, :data:`PACKED_SIZE`) and ``f_ns`` (N, 3) (:func:`record_posterior`) and, at the
+    Unless ``record.Pu`` is empty (:func:`~bodyfusion.plugins.foot_ins.records.no_record`), the run records for the whole-run RTS: row i of
+    ``Pu`` (N, :data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`) and ``f_ns`` (N, 3) (:func:`record_posterior`) and, at the
     n-th stance sample of the run (n = ``counters[C_STANCE_RECORDS]``), entry n of ``st_v``
     (S, 6) and ``st_P`` (S, 15, 4) (:func:`record_stance`); ``x_prior`` (16,) and ``P_prior``
     (15, 15) are left with the nominal state and covariance before the step to i1 − 1 (the
     sample a correction from outside the loop would be made at)."""
-    q_diag = process_noise_diag(params)
-    work = np.empty((15, 15))
-    f_n = np.empty(3)
-    C = np.empty((3, 3))
-    dx = np.empty(15)
+    x, P, _, _ = state
+    _, _, gyro_b, stance = imu
+    hist_x, hist_pos_cov, hist_nis, counters = history
+    Pu, f_ns, st_v, st_P, x_prior, P_prior = record
+    scratch = StepScratch(process_noise_diag(params), np.empty(3), np.empty((3, 3)), np.empty((15, 15)), np.empty(15))
+    f_n = scratch.f_n
     no_prior = np.empty((0, 0))
     recording = Pu.shape[0] > 0
     for i in range(i0, i1):
         keep = recording and (stance[i] or i == i1 - 1)
-        nis = ekf_step(x, P, t, acc_b, gyro_b, stance, i, params, q_diag, f_n, mech_memory, phi, work, dx, C,
-                       x_prior, P_prior if keep else no_prior, None)
+        nis = ekf_step(state, imu, i, params, scratch, x_prior, P_prior if keep else no_prior, None)
         if nis != NO_STANCE:
             _count(params, nis, counters)
         if recording:
@@ -276,10 +268,8 @@ def run_foot_ins(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray,
 
 
 @numba.njit(cache=True)
-def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray,
-                          stance: np.ndarray, i0: int, i1: int, params: FilterParams, alpha: float,
-                          mech_memory: np.ndarray, phi: np.ndarray, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
-                          hist_nis: np.ndarray, counters: np.ndarray, post_idx: np.ndarray, post_P: np.ndarray) -> None:
+def run_foot_ins_coloured(state: FilterState, imu: ImuSamples, i0: int, i1: int, params: FilterParams, alpha: float,
+                          history: FilterHistory, post_idx: np.ndarray, post_P: np.ndarray) -> None:
     """The ``ckf`` with colour factor α: as :func:`run_foot_ins`, with the coloured-noise
     update at every stance sample i ≥ 2 whose previous sample was stance too (a separate
     entry point, so that the ekf does not compile it). The other stance samples, and a
@@ -288,25 +278,25 @@ def run_foot_ins_coloured(x: np.ndarray, P: np.ndarray, t: np.ndarray, acc_b: np
     (the ZUPT with σ_ξ), so the index and posterior covariance of every stance update are
     written, in order, to ``post_idx`` (K,) and ``post_P`` (K, 15, 15), K the stance samples
     of the chunk; ``counters[C_CALL_RECORDS]`` says how many were written."""
-    q_diag = process_noise_diag(params)
+    x, P, _, phi = state
+    t, _, gyro_b, stance = imu
+    hist_x, hist_pos_cov, hist_nis, counters = history
+    scratch = StepScratch(process_noise_diag(params), np.empty(3), np.empty((3, 3)), np.empty((15, 15)), np.empty(15))
+    q_diag, f_n, C, work, dx = scratch
     ordinary = stationary_zupt_params(params, alpha)
-    work = np.empty((15, 15))
-    f_n = np.empty(3)
-    C = np.empty((3, 3))
-    dx = np.empty(15)
     v_prev = np.empty(3)
     gate = params.zupt_gate
     counters[C_CALL_RECORDS] = 0
     for i in range(i0, i1):
         for k in range(3):
             v_prev[k] = x[3 + k]
-        _propagate_sample(x, P, t, acc_b, gyro_b, i, params, q_diag, f_n, mech_memory, phi, C)
+        _propagate_sample(state, imu, i, params, scratch)
         nis = NO_STANCE
         if stance[i]:
             coloured = False
             if stance[i - 1] and i >= 2:
-                nis = coloured_zero_velocity_update(x, P, v_prev, C, f_n, t[i] - t[i - 1], q_diag, alpha,
-                                                    stance_velocity_sigma(params, gyro_b[i], x), gate, dx, phi)
+                nis = coloured_zero_velocity_update(state, v_prev, scratch, t[i] - t[i - 1], alpha,
+                                                    stance_velocity_sigma(params, gyro_b[i], x), gate)
                 coloured = gate <= 0.0 or nis <= gate
                 if coloured and params.zaru_sigma > 0:
                     zero_angular_rate_update(x, P, gyro_b[i], params.zaru_sigma, dx, phi, work)

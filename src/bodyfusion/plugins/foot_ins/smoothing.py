@@ -5,7 +5,7 @@ the core calls :meth:`bodyfusion.plugins.foot_ins.system.FootIns.smooth`, which 
 :meth:`~bodyfusion.plugins.foot_ins.system.FootIns.smoothing_record` to :func:`smooth_record`.
 
 The forward pass is the filter itself. The filter keeps no N×15×15 history: its run is
-replayed block by block (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass`)
+replayed block by block (:func:`~bodyfusion.plugins.foot_ins.smoothing_replay.filter_pass`)
 from its recorded state and mechanisation memory at the block start, with the filter's own
 compiled step (:func:`bodyfusion.plugins.foot_ins.kernels.ekf_step`), the gap policy's
 inflations and the covariances set outside the compiled loop (fuser corrections, position
@@ -45,11 +45,11 @@ Kinds:
   velocity and gyro bias negated, the same specific force) with its own error filter and
   ZUPTs, fused by covariance. The passes are independent. The backward pass starts at b
   from the forward nominal state — a linearisation point, not information: its prior
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.backward_prior`) is diffuse on every
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_fb.backward_prior`) is diffuse on every
   state but the yaw, which it shares with the forward pass (a foot INS cannot observe it; a
   diffuse yaw would only gather the EKF's spurious yaw information), and the fusion removes
   that shared yaw error
-  (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fuse_block`). At each sample the
+  (:func:`~bodyfusion.plugins.foot_ins.smoothing_fb.fuse_block`). At each sample the
   forward posterior is fused with the backward prior (before its update at that sample), so
   no sample is counted twice: the two-filter form of the smoother given the data up to b. At
   b the fused state is the forward one, and the next segment continues from the filter's
@@ -61,7 +61,7 @@ Kinds:
 
 Position (``fb``, ``fb-rts``). The backward pass cannot observe position; the fused position
 is recomputed from the fused velocity by the mechanisation's trapezoid (the paper's
-re-forward navigation, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.integrate_position`),
+re-forward navigation, :func:`~bodyfusion.plugins.foot_ins.smoothing_fb.integrate_position`),
 from the fused position at the segment start, plus the position the filter's corrections
 outside its loop moved (fuser constraints, position fixes: the backward pass cannot replay
 them, so FB keeps them as the filter made them; FB-RTS spreads the foot's own ones through the
@@ -113,8 +113,12 @@ import numpy as np
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
 from bodyfusion.nav.error_state import FilterParams
-from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, PACKED_SIZE, no_record, pack_covariance
-from bodyfusion.plugins.foot_ins.smoothing_kernels import boxminus, fb_segment, filter_pass
+from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, pack_covariance
+from bodyfusion.plugins.foot_ins.records import (PACKED_SIZE, FilterReplay, FilterRun, FilterState, ImuSamples,
+                                                 PassBuffers, RtsRecord, SmoothedOutput, SmoothedPass, SweepRecord,
+                                                 no_record)
+from bodyfusion.plugins.foot_ins.smoothing_fb import fb_segment
+from bodyfusion.plugins.foot_ins.smoothing_replay import boxminus, filter_pass
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep, record_pass
 
 log = logging.getLogger(__name__)
@@ -187,9 +191,13 @@ def record_bytes(samples: int, stance: int, general: int = 0) -> int:
     return 8 * (123 * samples + 65 * stance + 242 * general)
 
 
+NO_PHI = np.empty((0, 0))
+"""The transition a replay does not accumulate."""
+
+
 class _Pass:
     """Block buffers of ``passes`` passes, each array's first index the pass (see
-    :mod:`~bodyfusion.plugins.foot_ins.smoothing_kernels`); FB holds the forward pass at 0 and
+    :mod:`~bodyfusion.plugins.foot_ins.smoothing_replay`); FB holds the forward pass at 0 and
     the backward one at 1."""
 
     def __init__(self, size: int, passes: int = 1) -> None:
@@ -204,6 +212,15 @@ class _Pass:
         self.dxs = np.zeros((passes, size, 15))
         self.Ps = np.zeros((passes, size, 15, 15))
         self.smoothed = np.zeros((passes, size, 16))
+
+    def buffers(self, p: int | None = None) -> PassBuffers:
+        """The replay buffers of pass p, or of every pass (a leading pass axis)."""
+        arrays = (self.xs, self.xp, self.Ppost, self.Pprior, self.Phi, self.dx, self.jump, self.yaw_reset)
+        return PassBuffers(*(a if p is None else a[p] for a in arrays))
+
+    def smoothing(self, fused_P: np.ndarray) -> SmoothedPass:
+        """The RTS and fusion buffers of every pass, and the fused position block ``fused_P``."""
+        return SmoothedPass(self.dxs, self.Ps, self.smoothed, fused_P)
 
 
 class _Record:
@@ -226,6 +243,10 @@ class _Record:
         self.gap_idx = np.ascontiguousarray(rec.get("gap_idx", np.empty(0)), dtype=np.int64)
         self.gap_dP = np.ascontiguousarray(rec.get("gap_dP", np.empty((0, 15, 15))), dtype=f64)
         self.rate_hz = float(rec["rate_hz"])
+        self.run = FilterRun(ImuSamples(self.t, self.acc, self.gyro, self.stance), self.params,
+                             FilterReplay(self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x, self.gap_idx,
+                                          self.gap_dP), self.P0)
+        """The run as the compiled smoothers take it."""
         self.forward_record: ForwardRecord = rec.get("forward_record") or ForwardRecord()
         self.n = self.hist_x.shape[0]
         self.state_error = 0.0
@@ -238,6 +259,11 @@ class _Record:
         out = self.stance.copy() if self.params.zaru_sigma > 0 else np.zeros(self.n, dtype=np.bool_)
         out[self.ov_idx] = True
         return out
+
+    def start(self, a: int, P_a: np.ndarray) -> FilterState:
+        """The filter at sample a as a replay starts from it: its recorded state, the covariance
+        P_a and its mechanisation memory there."""
+        return FilterState(self.hist_x[a], P_a, self.memory([a])[0], NO_PHI)
 
     def memory(self, a: np.ndarray) -> np.ndarray:
         """(K, 6): the filter's mechanisation memory before the step to each a + 1 (sample
@@ -256,10 +282,8 @@ class _Record:
         """The filter over a < i ≤ b from its recorded state at a and the covariance P_a, with
         ``store`` into the first pass of ``buf`` (and :attr:`state_error` updated); returns the
         covariance at b."""
-        P_b = filter_pass(self.hist_x[a], P_a, self.memory([a])[0], self.t, self.acc, self.gyro, self.stance,
-                          self.params, a, b, self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x,
-                          self.gap_idx, self.gap_dP, store, buf.xs[0], buf.xp[0], buf.Ppost[0], buf.Pprior[0],
-                          buf.Phi[0], buf.dx[0], buf.jump[0], buf.yaw_reset[0])
+        P_b = filter_pass(self.start(a, P_a), self.run.samples, self.params, a, b, self.run.replay, store,
+                          buf.buffers(0))
         if store:
             self.state_error = max(self.state_error,
                                    float(np.max(np.abs(buf.xs[0, :b - a + 1] - self.hist_x[a:b + 1]))))
@@ -316,9 +340,9 @@ class ForwardRecord:
             self.ckpt_P = np.empty((self.ckpt_idx.size, PACKED_SIZE))
         return True
 
-    def restart(self, P0: np.ndarray, counters: np.ndarray) -> tuple[np.ndarray, ...]:
+    def restart(self, P0: np.ndarray, counters: np.ndarray) -> RtsRecord:
         """A new run from the covariance P0 at sample 0, the kernel counting into ``counters``;
-        returns the record arguments of :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`."""
+        returns the record :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins` fills."""
         self.captured = {}
         self.kept = 0
         if not self.active:
@@ -326,7 +350,7 @@ class ForwardRecord:
         self.Pu[0] = P0[_UPPER]
         self.f_ns[0] = 0.0
         self.counters = counters
-        return self.Pu, self.f_ns, self.st_v, self.st_P, self.x_prior, self.P_prior
+        return RtsRecord(self.Pu, self.f_ns, self.st_v, self.st_P, self.x_prior, self.P_prior)
 
     def capture(self, i: int, P: np.ndarray) -> None:
         """After the kernel's last step, to sample i, whose posterior covariance is P (15, 15):
@@ -359,7 +383,7 @@ class ForwardRecord:
         P[1:][corrected] = r.ov_P[last[corrected]]
         return np.concatenate([[0], idx]), P
 
-    def sweep_arrays(self, r: _Record, general: np.ndarray) -> tuple[np.ndarray, ...] | None:
+    def sweep_arrays(self, r: _Record, general: np.ndarray) -> SweepRecord | None:
         """The record of the whole run as :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`
         takes it (``Pu`` … ``kept_P``; ``Pu`` at each corrected sample set to the covariance
         the corrections left), or None when it cannot serve (a stance sample not recorded, a
@@ -386,8 +410,8 @@ class ForwardRecord:
             if kept[i]:
                 kept_P[k] = P_post
             self.Pu[i] = r.ov_P[last[g]][_UPPER]
-        return (self.Pu[:n], self.f_ns[:n], self.st_v[:stance], self.st_P[:stance], gen_P, gen_dx, gen_a,
-                kept[gen], kept_P)
+        return SweepRecord(self.Pu[:n], self.f_ns[:n], self.st_v[:stance], self.st_P[:stance], gen_P, gen_dx, gen_a,
+                           kept[gen], kept_P)
 
 
 def _latency(ms: list[float]) -> dict:
@@ -424,19 +448,19 @@ def _blocks(r: _Record, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.nda
     return idx[order], np.concatenate(new_P)[order]
 
 
-def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> tuple[np.ndarray, ...]:
+def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> SweepRecord:
     """The record :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes
     (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[k + 1]``: its
     samples, stance samples, general updates (``general`` (n,)) and kept corrections."""
     L = int(np.max(np.diff(bounds)))
     ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][bounds]))) for f in (r.stance, general))
     nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, bounds, side="right"))))
-    return (np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 6)), np.empty((ns, 15, 4)),
-            np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
-            np.empty((nk, 15, 15)))
+    return SweepRecord(np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 6)), np.empty((ns, 15, 4)),
+                       np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
+                       np.empty((nk, 15, 15)))
 
 
-def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward: tuple[np.ndarray, ...] | None,
+def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward: SweepRecord | None,
                    out_x: np.ndarray, out_var: np.ndarray, diag: dict) -> tuple[float, list[float]]:
     """The RTS of each segment on its own (``span: segment``): the segment's part of the filter's
     own record (``forward``, :meth:`ForwardRecord.sweep_arrays`), or, without one, the segment
@@ -456,16 +480,15 @@ def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward:
         t0 = time.perf_counter_ns()
         if forward is not None:
             (s0, g0, k0), (s1, g1, k1) = counts[k], counts[k + 1]
-            record = (Pu[a:b + 1], f_ns[a:b + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
-                      gen_a[g0:g1], gen_kept[g0:g1], kept_P[k0:k1])
+            record = SweepRecord(Pu[a:b + 1], f_ns[a:b + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
+                                 gen_a[g0:g1], gen_kept[g0:g1], kept_P[k0:k1])
         else:
-            P, error, ns, ng, nk = record_pass(r.hist_x[a], P, r.memory([a])[0], r.t, r.acc, r.gyro, r.stance, general,
-                                               r.params, a, b, r.hist_x, r.ov_idx, r.ov_P, r.kept_idx, r.kept_x,
-                                               r.gap_idx, r.gap_dP, *store)
+            P, error, ns, ng, nk = record_pass(r.start(a, P), r.run, general, a, b, store)
             r.state_error = max(r.state_error, error)
-            record = (Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk])
-        failed += mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, a, b - a, *record, np.zeros(15),
-                            np.zeros((15, 15)), out_x, out_var)
+            record = SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng],
+                                 kept_P[:nk])
+        failed += mbf_sweep(r.run, general, a, b - a, record, np.zeros(15), np.zeros((15, 15)),
+                            SmoothedOutput(out_x, out_var))
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
     diag["rts_gain_failures"] = failed
     return (0.0 if forward is not None else _rebuild_error(P, r.P_end)), latencies
@@ -483,14 +506,14 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     if not whole:  # each segment swept back from zero adjoints at its end
         return _segmented_rts(r, bounds, general, forward, out_x, out_var, diag)
     if forward is not None:  # the filter's own record: nothing to replay
-        diag["rts_gain_failures"] = mbf_sweep(r.hist_x, r.t, r.stance, general, r.params, 0, r.n - 1, *forward,
-                                              np.zeros(15), np.zeros((15, 15)), out_x, out_var)
+        diag["rts_gain_failures"] = mbf_sweep(r.run, general, 0, r.n - 1, forward, np.zeros(15), np.zeros((15, 15)),
+                                              SmoothedOutput(out_x, out_var))
         return 0.0, []
     starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
     P_replayed = np.empty_like(P_start)
-    failed, error = block_sweep(r.hist_x, r.t, r.acc, r.gyro, r.stance, general, r.params, r.ov_idx, r.ov_P,
-                                r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, starts, P_start, r.memory(starts),
-                                *_sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed, out_x, out_var)
+    failed, error = block_sweep(r.run, general, starts, P_start, r.memory(starts),
+                                _sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed,
+                                SmoothedOutput(out_x, out_var))
     r.state_error = max(r.state_error, error)
     diag["rts_gain_failures"] = failed
     return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), []
@@ -499,7 +522,7 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
 def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
         diag: dict) -> tuple[float, list[float]]:
     """FB or FB-RTS segment by segment in time order (see the module docstring), one compiled
-    call per segment (:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.fb_segment`). Returns
+    call per segment (:func:`~bodyfusion.plugins.foot_ins.smoothing_fb.fb_segment`). Returns
     the covariance rebuild's relative error at the run's end (:func:`_rebuild_error`) and the
     per-segment latencies."""
     size = int(np.max(np.diff(bounds))) + 1
@@ -512,11 +535,8 @@ def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_v
     for k in range(bounds.size - 1):
         a, b = int(bounds[k]), int(bounds[k + 1])
         t0 = time.perf_counter_ns()
-        P, error, gains, fusions = fb_segment(r.hist_x, r.t, r.acc, r.gyro, r.stance, r.params, params_bw, r.P0,
-                                              r.ov_idx, r.ov_P, r.kept_idx, r.kept_x, r.gap_idx, r.gap_dP, a, b, P,
-                                              r.memory([a])[0], with_rts, buf.xs, buf.xp, buf.Ppost, buf.Pprior,
-                                              buf.Phi, buf.dx, buf.jump, buf.yaw_reset, buf.dxs, buf.Ps, buf.smoothed,
-                                              fused_P, out_x, out_var)
+        P, error, gains, fusions = fb_segment(r.run, params_bw, a, b, P, r.memory([a])[0], with_rts, buf.buffers(),
+                                              buf.smoothing(fused_P), SmoothedOutput(out_x, out_var))
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
         r.state_error = max(r.state_error, error)
         gain_failures += gains

@@ -10,7 +10,7 @@ sweeps it back carrying the adjoint (lam, Lam) (G. J. Bierman, Factorization Met
 Discrete Sequential Estimation, 1977): no covariance inverse but at those few samples, no
 process noise, and the transition rebuilt from the recorded state and the stored specific
 force. In exact arithmetic it is the textbook RTS sweep of
-:func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`; in floating point it agrees
+:func:`~bodyfusion.plugins.foot_ins.smoothing_rts.rts_block`; in floating point it agrees
 to rounding. :func:`block_sweep` runs the two block by block from the run's end, from the
 filter's covariance at each block start, so that the record holds one block. Scalar loops
 only (array expressions cost numba compile time).
@@ -27,7 +27,9 @@ from bodyfusion.nav.error_state import (FilterParams, Q_DECAY, congruence_by_yaw
 from bodyfusion.nav.kalman import inv3_sym_into
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance, stance_velocity_sigma
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
-from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve, replay_corrections
+from bodyfusion.plugins.foot_ins.records import FilterRun, FilterState, SmoothedOutput, StepScratch, SweepRecord
+from bodyfusion.plugins.foot_ins.smoothing_replay import replay_corrections
+from bodyfusion.plugins.foot_ins.smoothing_rts import chol_solve
 
 
 @numba.njit(cache=True)
@@ -161,7 +163,7 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
     (a correction outside the filter's loop, a ZARU): the smoothed error dxs = −P⁺ lam and
     covariance Ps = P⁺ − P⁺ Lam P⁺ there, taken to the prior by the heading reset's G⁻¹ and
     the injected correction dx (as
-    :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.rts_block`), give lam = −(P⁻)⁻¹ e
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_rts.rts_block`), give lam = −(P⁻)⁻¹ e
     and Lam = (P⁻)⁻¹ (P⁻ − G⁻¹ Ps G⁻ᵀ) (P⁻)⁻¹. False when P⁻ cannot be factorised."""
     PL = np.empty((15, 15))
     D = np.empty((15, 15))
@@ -247,16 +249,13 @@ def _smoothed_error_columns(P: np.ndarray, lam: np.ndarray, Lam: np.ndarray, r0:
 
 
 @numba.njit(cache=True, nogil=True)
-def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarray, acc: np.ndarray,
-                gyro: np.ndarray, stance: np.ndarray, general: np.ndarray, params: FilterParams, i0: int, i1: int,
-                recorded_x: np.ndarray, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
-                kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray,
-                kept_P: np.ndarray) -> tuple[np.ndarray, float, int, int, int]:
-    """The ekf over i0 < i ≤ i1 as
-    :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.filter_pass` (from the filter's
-    state, covariance and mechanisation memory at i0, its corrections outside the loop and its
-    gaps replayed), storing compactly what :func:`mbf_sweep` needs, j = i − i0:
+def record_pass(start: FilterState, run: FilterRun, general: np.ndarray, i0: int, i1: int,
+                store: SweepRecord) -> tuple[np.ndarray, float, int, int, int]:
+    """The ekf over i0 < i ≤ i1 of the filter's ``run`` as
+    :func:`~bodyfusion.plugins.foot_ins.smoothing_replay.filter_pass` (from the filter's
+    state, covariance and mechanisation memory at i0, the ``start``, its corrections outside the
+    loop and its gaps replayed), storing compactly into ``store`` what :func:`mbf_sweep` needs,
+    j = i − i0:
 
     * ``Pu`` (L+1, 120), ``f_ns`` (L+1, 3): the posterior covariance packed and the step's
       mean specific force (:func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior`);
@@ -266,13 +265,18 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
       the ekf records as it runs, :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`);
     * per sample with a ``general`` update (in order): ``gen_P`` (·, 15, 15) the prior
       covariance, ``gen_dx`` (·, 15) the correction injected (posterior ⊖ prior nominal; up to
-      the state before a kept correction, :func:`~bodyfusion.plugins.foot_ins.smoothing_kernels.replay_corrections`),
+      the state before a kept correction, :func:`~bodyfusion.plugins.foot_ins.smoothing_replay.replay_corrections`),
       ``gen_a`` (·, 2) the heading reset's a, ``gen_kept`` (·,) whether a kept correction was made
       there;
     * per kept correction (in order): ``kept_P`` (·, 15, 15) the covariance before it.
 
     Returns the covariance at i1, the largest |replayed − recorded| nominal state element and
     the entries written per stance sample, per general update and per kept correction."""
+    x0, P0, memory0, _ = start
+    samples, params, replay, _ = run
+    _, _, gyro, stance = samples
+    recorded_x, ov_idx, _, kept_idx, _, gap_idx, gap_dP = replay
+    Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store
     q_diag = process_noise_diag(params)
     work = np.empty((15, 15))
     f_n = np.empty(3)
@@ -284,6 +288,8 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
     x_prior = np.empty(16)
     P_prior = np.empty((15, 15))
     no_phi = np.empty((0, 0))
+    state = FilterState(x, P, memory, no_phi)
+    step = StepScratch(q_diag, f_n, C_nb, work, scratch)
     ptr = np.searchsorted(ov_idx, i0 + 1)
     kptr = np.searchsorted(kept_idx, i0 + 1)
     gptr = np.searchsorted(gap_idx, i0 + 1)
@@ -300,8 +306,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                     P[r, c] += gap_dP[gptr, r, c]
             gptr += 1
         # the prior only where it is stored (stance, general update)
-        nis = ekf_step(x, P, t, acc, gyro, stance, i, params, q_diag, f_n, memory, no_phi, work, scratch, C_nb,
-                       x_prior, P_prior if stance[i] or general[i] else no_phi, None)
+        nis = ekf_step(state, samples, i, params, step, x_prior, P_prior if stance[i] or general[i] else no_phi, None)
         j = i - i0
         stanced = nis != NO_STANCE
         if stanced:
@@ -313,8 +318,7 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
                 for c in range(15):
                     kept_P[nk, r, c] = P[r, c]
             nk += 1
-        ptr, kptr = replay_corrections(i, x, P, x_prior, recorded_x, ov_idx, ov_P, kept_idx, kept_x, ptr, kptr,
-                                       general[i], scratch, moved)
+        ptr, kptr = replay_corrections(i, x, P, x_prior, replay, ptr, kptr, general[i], scratch, moved)
         for k in range(16):
             error = max(error, abs(x[k] - recorded_x[i, k]))
         record_posterior(P, f_n, j, Pu, f_ns)
@@ -332,13 +336,10 @@ def record_pass(x0: np.ndarray, P0: np.ndarray, memory0: np.ndarray, t: np.ndarr
 
 
 @numba.njit(cache=True, nogil=True)
-def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np.ndarray, params: FilterParams,
-              i0: int, L: int, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-              gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
-              lam: np.ndarray, Lam: np.ndarray,
-              out_x: np.ndarray, out_var: np.ndarray) -> int:
-    """The fixed-interval (RTS) smoother over samples i0 … i0 + L of a run, from what
-    :func:`record_pass` stored, in the modified Bryson–Frazier form (G. J. Bierman,
+def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: SweepRecord, lam: np.ndarray,
+              Lam: np.ndarray, out: SmoothedOutput) -> int:
+    """The fixed-interval (RTS) smoother over samples i0 … i0 + L of the filter's ``run``, from
+    what :func:`record_pass` stored (the ``record``), in the modified Bryson–Frazier form (G. J. Bierman,
     Factorization Methods for Discrete Sequential Estimation, 1977): the backward sweep
     carries the adjoint lam (15,) and Lam (15, 15) instead of a smoothed state and covariance,
     so that at each sample
@@ -357,6 +358,10 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
     up, covariance east–north of Ps_i, m²). Returns the samples whose update could not be
     undone (general updates with a non-positive-definite prior; the sweep restarts from zero
     adjoints there, as ``rts_block`` from the filter)."""
+    (t, _, _, stance), params, replay, _ = run
+    hist_x = replay.recorded_x
+    Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = record
+    out_x, out_var = out
     q_diag = process_noise_diag(params)
     P = np.empty((15, 15))
     d = np.empty(15)
@@ -424,21 +429,20 @@ def mbf_sweep(hist_x: np.ndarray, t: np.ndarray, stance: np.ndarray, general: np
 
 
 @numba.njit(cache=True, nogil=True)
-def block_sweep(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray,
-                general: np.ndarray, params: FilterParams, ov_idx: np.ndarray, ov_P: np.ndarray, kept_idx: np.ndarray,
-                kept_x: np.ndarray, gap_idx: np.ndarray, gap_dP: np.ndarray, starts: np.ndarray, P_start: np.ndarray,
-                memory: np.ndarray, Pu: np.ndarray, f_ns: np.ndarray, st_v: np.ndarray, st_P: np.ndarray,
-                gen_P: np.ndarray, gen_dx: np.ndarray, gen_a: np.ndarray, gen_kept: np.ndarray, kept_P: np.ndarray,
-                P_replayed: np.ndarray, out_x: np.ndarray, out_var: np.ndarray) -> tuple[int, float]:
+def block_sweep(run: FilterRun, general: np.ndarray, starts: np.ndarray, P_start: np.ndarray, memory: np.ndarray,
+                store: SweepRecord, P_replayed: np.ndarray, out: SmoothedOutput) -> tuple[int, float]:
     """The whole-run RTS block by block from the last: block k covers samples
     ``starts[k]`` … ``starts[k + 1]`` (the last block to the run's last sample), replayed once
     by :func:`record_pass` from the filter's covariance ``P_start[k]`` (15, 15) and mechanisation
-    memory ``memory[k]`` (6,) at its start into the store ``Pu`` … ``kept_P`` (sized for the
+    memory ``memory[k]`` (6,) at its start into the ``store`` (sized for the
     largest block), then swept back by :func:`mbf_sweep`, the adjoint carried into the block
     before it: the sweep of the whole run, whose store holds one block. ``P_replayed[k]``
     (15, 15) receives the replayed covariance at the end of block k (the filter's
     ``P_start[k + 1]`` when the replay reproduces it). Returns the samples whose update could
     not be undone and the largest |replayed − recorded| nominal state element."""
+    hist_x = run.replay.recorded_x
+    Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store
+    no_phi = np.empty((0, 0))
     lam = np.zeros(15)
     Lam = np.zeros((15, 15))
     blocks = starts.shape[0]
@@ -447,14 +451,12 @@ def block_sweep(hist_x: np.ndarray, t: np.ndarray, acc: np.ndarray, gyro: np.nda
     for k in range(blocks - 1, -1, -1):
         a = starts[k]
         b = starts[k + 1] if k + 1 < blocks else hist_x.shape[0] - 1
-        P_b, block_error, ns, ng, nk = record_pass(hist_x[a], P_start[k], memory[k], t, acc, gyro, stance, general,
-                                                   params, a, b, hist_x, ov_idx, ov_P, kept_idx, kept_x, gap_idx,
-                                                   gap_dP, Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept,
-                                                   kept_P)
+        P_b, block_error, ns, ng, nk = record_pass(FilterState(hist_x[a], P_start[k], memory[k], no_phi), run, general,
+                                                   a, b, store)
         error = max(error, block_error)
         for r in range(15):
             for c in range(15):
                 P_replayed[k, r, c] = P_b[r, c]
-        failed += mbf_sweep(hist_x, t, stance, general, params, a, b - a, Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng],
-                            gen_dx[:ng], gen_a[:ng], gen_kept[:ng], kept_P[:nk], lam, Lam, out_x, out_var)
+        failed += mbf_sweep(run, general, a, b - a, SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng],
+                                                               gen_a[:ng], gen_kept[:ng], kept_P[:nk]), lam, Lam, out)
     return failed, error

@@ -1,4 +1,4 @@
-"""Compiled pieces of the foot INS smoothers (bodyfusion.plugins.foot_ins.smoothing_kernels)."""
+"""Compiled pieces of the foot INS smoothers: the solve of the RTS gain (bodyfusion.plugins.foot_ins.smoothing_rts)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bodyfusion.plugins.foot_ins.smoothing_kernels import chol_solve
+from bodyfusion.plugins.foot_ins.smoothing_rts import chol_solve
 
 
 def _textbook_chol_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray | None:
