@@ -9,7 +9,8 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.strapdown import integrate
-from bodyfusion.plugins.foot_ins.smoothing import _Pass, _Record, segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing import segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing_record import BlockBuffers, RunRecord
 from bodyfusion.plugins.foot_ins.records import (FilterReplay, FilterState, ImuSamples, PassBuffers,
                                                  SmoothedOutput)
 from bodyfusion.plugins.foot_ins.smoothing_fb import backward_prior, fb_segment, fuse_block, integrate_position
@@ -143,7 +144,7 @@ def test_rts_kernel_equals_textbook_rts_on_a_linear_gaussian_toy():
         np.testing.assert_allclose(Pss[j], Ps[j], atol=1e-9)
 
 
-def _rts(buf: _Pass, L: int, position: bool = True) -> int:
+def _rts(buf: BlockBuffers, L: int, position: bool = True) -> int:
     """The textbook RTS of the first pass's block a … a + L from its end (rts_block; without
     ``position``, the states after it: rts_block_after_position), the states into ``smoothed``."""
     sweep = rts_block if position else rts_block_after_position
@@ -155,9 +156,9 @@ def _rts(buf: _Pass, L: int, position: bool = True) -> int:
 # --------------------------------------------------------------------------- one step: filter = replay
 
 
-def _replay(rec: dict) -> tuple[_Pass, np.ndarray]:
-    r = _Record(rec)
-    buf = _Pass(r.n)
+def _replay(rec: dict) -> tuple[BlockBuffers, np.ndarray]:
+    r = RunRecord(rec)
+    buf = BlockBuffers(r.n)
     return buf, r.forward(0, r.n - 1, r.P0, True, buf)
 
 
@@ -228,9 +229,9 @@ def test_segmented_rts_is_the_textbook_sweep_of_each_segment(walk, vicon_cut):
     for rec in [walk[1]] + [vicon_cut.systems[foot].smoothing_record() for foot in ("left_foot", "right_foot")]:
         res = smooth_record(rec, cfg)
         assert res.diagnostics["rts_gain_failures"] == 0 and res.diagnostics["state_rebuild_max_abs_error"] == 0.0
-        r = _Record(rec)
+        r = RunRecord(rec)
         bounds = segment_bounds(r.stance, r.rate_hz, cfg.min_stance_s, cfg.max_segment_s)
-        buf = _Pass(int(np.max(np.diff(bounds))) + 1)
+        buf = BlockBuffers(int(np.max(np.diff(bounds))) + 1)
         P = r.P0.copy()
         for k in range(bounds.size - 1):
             a, b = int(bounds[k]), int(bounds[k + 1])
@@ -266,7 +267,7 @@ def test_only_the_rts_of_the_ekf_without_zaru_records_as_it_runs(walk):
 # --------------------------------------------------------------------------- backward navigation
 
 
-def _segment(r: _Record, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: _Pass, fused_P: np.ndarray,
+def _segment(r: RunRecord, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: BlockBuffers, fused_P: np.ndarray,
              out_x: np.ndarray, out_var: np.ndarray) -> tuple:
     """FB (FB-RTS) of the segment a … b, the passes into ``buf`` (forward [0], backward [1])."""
     params_bw = r.params.backward()
@@ -277,11 +278,11 @@ def _segment(r: _Record, a: int, b: int, P_a: np.ndarray, with_rts: bool, buf: _
 def test_backward_navigation_retraces_a_forward_trajectory(walk):
     _, rec, _ = walk
     a, b = 150, 650  # through a swing
-    r = _Record(dict(rec, stance=np.zeros_like(rec["stance"]), hist_x=rec["hist_x"].copy()))  # no update
+    r = RunRecord(dict(rec, stance=np.zeros_like(rec["stance"]), hist_x=rec["hist_x"].copy()))  # no update
     params = r.params
     fwd = integrate(r.hist_x[a].copy(), r.t[a:b + 1], r.acc[a:b + 1], r.gyro[a:b + 1], params.gravity, params.earth_rate.copy())
     r.hist_x[b] = fwd[-1]  # the backward pass starts from the forward nominal state at b
-    buf = _Pass(b - a + 1, 2)
+    buf = BlockBuffers(b - a + 1, 2)
     _segment(r, a, b, r.P0, False, buf, np.zeros((b - a + 1, 3, 3)), r.hist_x.copy(), np.zeros((r.n, 4)))
     back = buf.xs[1, ::-1]
     back[:, 3:6] *= -1.0  # backward form: velocity negated
@@ -324,10 +325,10 @@ def test_fb_passes_are_independent_nothing_shrinks_at_segment_boundaries(walk):
     segment end is the filter's, and every segment starts from the filter's own covariance
     (so the replayed filter ends on its last covariance, bit for bit)."""
     _, rec, _ = walk
-    r = _Record(rec)
+    r = RunRecord(rec)
     bounds = segment_bounds(r.stance, r.rate_hz, 0.04, 10.0)
     size = int(np.max(np.diff(bounds))) + 1
-    buf = _Pass(size, 2)
+    buf = BlockBuffers(size, 2)
     fused_x, fused_P, fused_var = r.hist_x.copy(), np.zeros((size, 15, 15)), np.zeros((r.n, 4))
     P = r.P0.copy()
     for k in range(bounds.size - 1):
@@ -351,9 +352,9 @@ def test_the_sweep_after_position_is_the_whole_sweeps_on_those_states(walk):
     """No state, ZUPT or heading reset depends on position: where nothing measures it (the
     simulated walk's filter, like every backward pass) the RTS of the other twelve states is the
     whole sweep's on them, to rounding, and leaves position unsmoothed."""
-    r = _Record(walk[1])
+    r = RunRecord(walk[1])
     bounds = segment_bounds(r.stance, r.rate_hz, KINDS["fb-rts"].min_stance_s, KINDS["fb-rts"].max_segment_s)
-    whole, reduced = _Pass(int(np.max(np.diff(bounds))) + 1), _Pass(int(np.max(np.diff(bounds))) + 1)
+    whole, reduced = BlockBuffers(int(np.max(np.diff(bounds))) + 1), BlockBuffers(int(np.max(np.diff(bounds))) + 1)
     P = r.P0.copy()
     for k in range(min(bounds.size - 1, 12)):
         a, b = int(bounds[k]), int(bounds[k + 1])
@@ -376,10 +377,10 @@ def _fb_composed(rec: dict, with_rts: bool) -> tuple[np.ndarray, np.ndarray]:
     inputs reversed by numpy, both passes smoothed (the backward one's states after position),
     the whole fused covariance formed."""
     cfg = KINDS["fb-rts" if with_rts else "fb"]
-    r = _Record(rec)
+    r = RunRecord(rec)
     bounds = segment_bounds(r.stance, r.rate_hz, cfg.min_stance_s, cfg.max_segment_s)
     size = int(np.max(np.diff(bounds))) + 1
-    fw, bw, fused_P = _Pass(size), _Pass(size), np.zeros((size, 15, 15))
+    fw, bw, fused_P = BlockBuffers(size), BlockBuffers(size), np.zeros((size, 15, 15))
     out_x, out_var = r.hist_x.copy(), np.zeros((r.n, 4))
     params_bw = r.params.backward()
     sign = np.r_[np.ones(3), -np.ones(3), np.ones(6), -np.ones(3)]

@@ -9,8 +9,9 @@ import pytest
 
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.runner import run_layout
-from bodyfusion.plugins.foot_ins import smoothing
-from bodyfusion.plugins.foot_ins.smoothing import CHECKPOINT_SAMPLES, MAX_BLOCK_SAMPLES, _Record, smooth_record
+from bodyfusion.plugins.foot_ins import smoothing, smoothing_record
+from bodyfusion.plugins.foot_ins.smoothing import MAX_BLOCK_SAMPLES, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing_record import CHECKPOINT_SAMPLES, BlockBuffers, RunRecord
 from tests.paths import ROOT
 
 VICON_CFG = ROOT / "configs" / "dual_foot_vicon.yaml"
@@ -33,7 +34,7 @@ def vicon_runs():
                 "constraints.0.distance_m=0.45"]
     whole = run_layout(load_layout(VICON_CFG, settings))
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(smoothing, "STORE_BYTES", 1024)
+        mp.setattr(smoothing_record, "STORE_BYTES", 1024)
         checkpointed = run_layout(load_layout(VICON_CFG, settings))
     return whole, checkpointed
 
@@ -57,11 +58,11 @@ def test_checkpoints_are_spaced_and_hold_the_filters_covariance(vicon_runs):
     _, checkpointed = vicon_runs
     for foot in FEET:
         rec = checkpointed.systems[foot].smoothing_record()
-        r = _Record(rec)
+        r = RunRecord(rec)
         starts, P = rec["forward_record"].checkpoints(r)
         assert starts[0] == 0 and np.all(np.diff(starts) >= CHECKPOINT_SAMPLES), foot
         assert np.isin(starts[1:], r.ov_idx).any() and not np.isin(starts[1:], r.ov_idx).all(), foot
-        buf = smoothing._Pass(1)
+        buf = BlockBuffers(1)
         for k in range(1, starts.size):
             replayed = r.forward(int(starts[k - 1]), int(starts[k]), P[k - 1], False, buf)
             assert np.array_equal(replayed, P[k]), (foot, k)
@@ -73,8 +74,8 @@ def test_each_block_is_replayed_once(vicon_runs, monkeypatch):
     result is the same."""
     _, checkpointed = vicon_runs
     calls = []
-    forward = _Record.forward
-    monkeypatch.setattr(_Record, "forward",
+    forward = RunRecord.forward
+    monkeypatch.setattr(RunRecord, "forward",
                         lambda self, a, b, *args: calls.append((a, b)) or forward(self, a, b, *args))
     for foot in FEET:
         rec = checkpointed.systems[foot].smoothing_record()

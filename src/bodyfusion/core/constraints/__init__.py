@@ -34,8 +34,8 @@ the projection solution with ``fallback=True``.
 
 Modules, each importing only those above it:
 
-* :mod:`.kernels` — the numba kernels (one constraint's projection and
-  certification, whitening, the SQP's linearisation), cached on disk;
+* :mod:`.kernels` — the numba kernels of one constraint's projection and certification,
+  cached on disk; :mod:`.qp_kernels` — those of the SQP's QPs (linearisation, OSQP's start);
 * :mod:`.model` — :class:`DistanceConstraint`, :class:`ConstraintSolution`, the
   stacked layout, input checks, hint directions, :func:`violations`, :func:`linearised`,
   :func:`constrained_covariance`;

@@ -26,9 +26,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from bodyfusion.core.constraints.kernels import (_INACTIVE, _SOLVED, PairSolution, PairStart, QpArrays, StackedLimits,
-                                                 _qp_finish_pair, _qp_start_pair,
-                                                 _secular_limits)
+from bodyfusion.core.constraints.kernels import _INACTIVE, _SOLVED, PairSolution, StackedLimits, _secular_limits
+from bodyfusion.core.constraints.qp_kernels import PairStart, QpArrays, _qp_finish_pair, _qp_start_pair
 from bodyfusion.core.constraints.linearisation import _certify
 from bodyfusion.core.constraints.model import (ConstraintSolution, DistanceConstraint, _check_inputs, _hint_array,
                                                _Layout, _max_violation, _remember, _unconstrained_solution)

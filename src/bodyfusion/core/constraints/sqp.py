@@ -30,8 +30,8 @@ from typing import Callable
 import numpy as np
 
 from bodyfusion.base.linalg_kernels import cholesky
-from bodyfusion.core.constraints.kernels import (_DEGENERATE_M, QpArrays, StackedLimits, _advance, _linear_term,
-                                                 _linearise, _stationary_point)
+from bodyfusion.core.constraints.kernels import _DEGENERATE_M, StackedLimits
+from bodyfusion.core.constraints.qp_kernels import QpArrays, _advance, _linear_term, _linearise, _stationary_point
 from bodyfusion.core.constraints.model import _Layout, _max_violation
 
 # one QP: (P, q, A, lo, hi, y warm start, duals warm start) -> (ok, y, duals)

@@ -17,12 +17,12 @@ block by block from the last, each block into a compact record
 (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, about 1.3 kB per sample) that
 holds that block alone, then swept back into the block before it
 (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.block_sweep`). The blocks start at the
-covariance checkpoints the filter keeps as it runs (:class:`ForwardRecord`: 120 floats every
+covariance checkpoints the filter keeps as it runs (:class:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord`: 120 floats every
 :data:`CHECKPOINT_SAMPLES` samples or more, about 1.4 MB for an hour at 100 Hz); a stretch
 without any is cut by a replay without a record (:func:`_blocks`). When the system knows
 before its run that it will be smoothed so
 (:meth:`~bodyfusion.plugins.foot_ins.system.FootIns.plan_smoothing`) and the record of the
-whole run fits :data:`STORE_BYTES`, the ekf writes that record itself as it runs, and the RTS
+whole run fits :data:`~bodyfusion.plugins.foot_ins.smoothing_record.STORE_BYTES`, the ekf writes that record itself as it runs, and the RTS
 (either span) replays nothing: its record is the filter's, not a replay of it.
 
 Segments. The run is split at the midpoints of stance runs (runs shorter than
@@ -112,41 +112,20 @@ import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
-from bodyfusion.nav.error_state import FilterParams
-from bodyfusion.plugins.foot_ins.kernels import C_STANCE_RECORDS, pack_covariance
-from bodyfusion.plugins.foot_ins.records import (PACKED_SIZE, FilterReplay, FilterRun, FilterState, ImuSamples,
-                                                 PassBuffers, RtsRecord, SmoothedOutput, SmoothedPass, SweepRecord,
-                                                 no_record)
+from bodyfusion.plugins.foot_ins.records import PACKED_SIZE, SmoothedOutput, SweepRecord
 from bodyfusion.plugins.foot_ins.smoothing_fb import fb_segment
-from bodyfusion.plugins.foot_ins.smoothing_replay import boxminus, filter_pass
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep, record_pass
+from bodyfusion.plugins.foot_ins.smoothing_record import CHECKPOINT_SAMPLES, BlockBuffers, RunRecord
 
 log = logging.getLogger(__name__)
 
 MIN_SAMPLES = 10
 """Runs with fewer samples are not smoothed (warning)."""
 
-STORE_BYTES = 64 * 2**20
-"""The largest record of the whole run the filter writes as it runs for the whole-run RTS
-(bytes): about 1 kB per sample and 0.5 kB more per stance sample
-(:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`): a run of up to some
-50 000 samples (8 min at 100 Hz) is recorded so (:class:`ForwardRecord`); a longer one keeps
-covariance checkpoints instead (:data:`CHECKPOINT_SAMPLES`)."""
-
-CHECKPOINT_SAMPLES = 256
-"""Fewest samples between two covariance checkpoints the filter keeps as it runs when its
-whole-run RTS record does not fit :data:`STORE_BYTES` (:class:`ForwardRecord`; 120 floats
-each): the sweep replays each stretch between two once, a block whose record (about 1.3 kB
-a sample, a few hundred kB) stays in the processor's cache."""
-
 MAX_BLOCK_SAMPLES = 4 * CHECKPOINT_SAMPLES
 """Longer stretches without a checkpoint (a run not advanced by the fuser, a record without
 checkpoints) are cut into blocks of :data:`CHECKPOINT_SAMPLES`, their start covariances
 given by a replay of the filter without a record."""
-
-_UPPER = np.triu_indices(15)
-"""The packed order of a symmetric 15×15 matrix (upper triangle by rows, as
-:func:`~bodyfusion.plugins.foot_ins.kernels.record_posterior` writes it)."""
 
 @dataclass
 class SmoothingResult:
@@ -183,237 +162,6 @@ def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_
     return np.asarray(out, dtype=np.int64)
 
 
-def record_bytes(samples: int, stance: int, general: int = 0) -> int:
-    """Bytes the whole-run RTS's record of ``samples`` samples, ``stance`` of them stance
-    samples and ``general`` with a general update, takes
-    (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`): 8 × (123 per sample, 65
-    per stance sample, 242 per general update)."""
-    return 8 * (123 * samples + 65 * stance + 242 * general)
-
-
-NO_PHI = np.empty((0, 0))
-"""The transition a replay does not accumulate."""
-
-
-class _Pass:
-    """Block buffers of ``passes`` passes, each array's first index the pass (see
-    :mod:`~bodyfusion.plugins.foot_ins.smoothing_replay`); FB holds the forward pass at 0 and
-    the backward one at 1."""
-
-    def __init__(self, size: int, passes: int = 1) -> None:
-        self.xs = np.zeros((passes, size, 16))
-        self.xp = np.zeros((passes, size, 16))
-        self.Ppost = np.zeros((passes, size, 15, 15))
-        self.Pprior = np.zeros((passes, size, 15, 15))
-        self.Phi = np.zeros((passes, size, 15, 15))
-        self.dx = np.zeros((passes, size, 15))
-        self.jump = np.zeros((passes, size, 3))
-        self.yaw_reset = np.zeros((passes, size, 2))
-        self.dxs = np.zeros((passes, size, 15))
-        self.Ps = np.zeros((passes, size, 15, 15))
-        self.smoothed = np.zeros((passes, size, 16))
-
-    def buffers(self, p: int | None = None) -> PassBuffers:
-        """The replay buffers of pass p, or of every pass (a leading pass axis)."""
-        arrays = (self.xs, self.xp, self.Ppost, self.Pprior, self.Phi, self.dx, self.jump, self.yaw_reset)
-        return PassBuffers(*(a if p is None else a[p] for a in arrays))
-
-    def smoothing(self, fused_P: np.ndarray) -> SmoothedPass:
-        """The RTS and fusion buffers of every pass, and the fused position block ``fused_P``."""
-        return SmoothedPass(self.dxs, self.Ps, self.smoothed, fused_P)
-
-
-class _Record:
-    """The filter's record as the compiled passes take it."""
-
-    def __init__(self, rec: dict) -> None:
-        f64 = np.float64
-        self.hist_x = np.ascontiguousarray(rec["hist_x"], dtype=f64)
-        self.t = np.ascontiguousarray(rec["t"], dtype=f64)
-        self.acc = np.ascontiguousarray(rec["acc"], dtype=f64)
-        self.gyro = np.ascontiguousarray(rec["gyro"], dtype=f64)
-        self.stance = np.ascontiguousarray(rec["stance"], dtype=np.bool_)
-        self.params = rec["params"]
-        self.P0 = np.ascontiguousarray(rec["P0"], dtype=f64)
-        self.P_end = np.asarray(rec["P_end"], dtype=f64)
-        self.ov_idx = np.ascontiguousarray(rec["override_idx"], dtype=np.int64)
-        self.ov_P = np.ascontiguousarray(rec["override_P"], dtype=f64)
-        self.kept_idx = np.ascontiguousarray(rec.get("kept_idx", np.empty(0)), dtype=np.int64)
-        self.kept_x = np.ascontiguousarray(rec.get("kept_x", np.empty((0, 16))), dtype=f64)
-        self.gap_idx = np.ascontiguousarray(rec.get("gap_idx", np.empty(0)), dtype=np.int64)
-        self.gap_dP = np.ascontiguousarray(rec.get("gap_dP", np.empty((0, 15, 15))), dtype=f64)
-        self.rate_hz = float(rec["rate_hz"])
-        self.run = FilterRun(ImuSamples(self.t, self.acc, self.gyro, self.stance), self.params,
-                             FilterReplay(self.hist_x, self.ov_idx, self.ov_P, self.kept_idx, self.kept_x, self.gap_idx,
-                                          self.gap_dP), self.P0)
-        """The run as the compiled smoothers take it."""
-        self.forward_record: ForwardRecord = rec.get("forward_record") or ForwardRecord()
-        self.n = self.hist_x.shape[0]
-        self.state_error = 0.0
-        """Largest |replayed − recorded| nominal state element over the stored forward passes."""
-
-    def general_updates(self) -> np.ndarray:
-        """(n,) bool: the samples whose update is more than the ekf's ZUPT (a correction outside
-        the filter's loop, or the ZARU after the ZUPT), which the whole-run smoother steps back
-        through in general form (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`)."""
-        out = self.stance.copy() if self.params.zaru_sigma > 0 else np.zeros(self.n, dtype=np.bool_)
-        out[self.ov_idx] = True
-        return out
-
-    def start(self, a: int, P_a: np.ndarray) -> FilterState:
-        """The filter at sample a as a replay starts from it: its recorded state, the covariance
-        P_a and its mechanisation memory there."""
-        return FilterState(self.hist_x[a], P_a, self.memory([a])[0], NO_PHI)
-
-    def memory(self, a: np.ndarray) -> np.ndarray:
-        """(K, 6): the filter's mechanisation memory before the step to each a + 1 (sample
-        indices a (K,)): the bias-corrected increments of sample a with the biases the filter
-        held then (after sample a − 1)."""
-        a = np.asarray(a, dtype=np.int64)
-        m = np.zeros((a.size, 6))
-        later = a >= 1
-        b = a[later]
-        dt = (self.t[b] - self.t[b - 1])[:, None]
-        m[later, 0:3] = (self.gyro[b] - self.hist_x[b - 1, 13:16]) * dt
-        m[later, 3:6] = (self.acc[b] - self.hist_x[b - 1, 10:13]) * dt
-        return m
-
-    def forward(self, a: int, b: int, P_a: np.ndarray, store: bool, buf: _Pass) -> np.ndarray:
-        """The filter over a < i ≤ b from its recorded state at a and the covariance P_a, with
-        ``store`` into the first pass of ``buf`` (and :attr:`state_error` updated); returns the
-        covariance at b."""
-        P_b = filter_pass(self.start(a, P_a), self.run.samples, self.params, a, b, self.run.replay, store,
-                          buf.buffers(0))
-        if store:
-            self.state_error = max(self.state_error,
-                                   float(np.max(np.abs(buf.xs[0, :b - a + 1] - self.hist_x[a:b + 1]))))
-        return P_b
-
-
-class ForwardRecord:
-    """The whole-run RTS's record written by the ekf as it runs
-    (:func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins`): per sample the packed posterior
-    covariance ``Pu`` and the specific force ``f_ns``, per stance sample ``st_v`` and ``st_P``,
-    and the nominal state ``x_prior`` and covariance ``P_prior`` before the kernel's last step.
-    A system holds one and reuses its arrays across restarts; inactive (no arrays) unless
-    :meth:`plan` asks for it.
-
-    A correction made outside the compiled loop (fuser, position fix) comes after the kernel's
-    last step: :meth:`capture` keeps what that step left (prior state and covariance,
-    posterior covariance). :meth:`sweep_arrays` then completes the record as
-    :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes it from the replay:
-    the same numbers, as the replay reproduces the filter.
-
-    A whole-run RTS whose record does not fit keeps checkpoints instead (``checkpointing``):
-    :meth:`capture` packs the covariance the kernel left, at least :data:`CHECKPOINT_SAMPLES`
-    after the last one kept, and the sweep replays each stretch between two once
-    (:meth:`checkpoints`)."""
-
-    def __init__(self) -> None:
-        self.active = False
-        self.checkpointing = False
-        self.captured: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.kept = 0
-
-    def plan(self, cfg: SmootherConfig, filter_kind: str, params: FilterParams, stance: np.ndarray) -> bool:
-        """Active for the RTS (``kind: rts``, either span) of an ``ekf`` without the ZARU (whose
-        every stance update the sweep takes in general form) whose record of the run with these
-        ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other whole-run RTS.
-        True when either changed."""
-        samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
-        whole = cfg.kind == "rts" and not cfg.segmented
-        active = (cfg.kind == "rts" and filter_kind == "ekf" and params.zaru_sigma == 0.0
-                  and record_bytes(samples, n_stance) <= STORE_BYTES)
-        checkpointing = whole and not active
-        if (active, checkpointing) == (self.active, self.checkpointing):
-            return False
-        self.active, self.checkpointing = active, checkpointing
-        if active:
-            self.Pu = np.empty((samples, PACKED_SIZE))
-            self.f_ns = np.empty((samples, 3))
-            self.st_v = np.empty((n_stance, 6))
-            self.st_P = np.empty((n_stance, 15, 4))
-            self.x_prior = np.empty(16)
-            self.P_prior = np.empty((15, 15))
-        if checkpointing:
-            self.ckpt_idx = np.empty(samples // CHECKPOINT_SAMPLES + 1, dtype=np.int64)
-            self.ckpt_P = np.empty((self.ckpt_idx.size, PACKED_SIZE))
-        return True
-
-    def restart(self, P0: np.ndarray, counters: np.ndarray) -> RtsRecord:
-        """A new run from the covariance P0 at sample 0, the kernel counting into ``counters``;
-        returns the record :func:`~bodyfusion.plugins.foot_ins.kernels.run_foot_ins` fills."""
-        self.captured = {}
-        self.kept = 0
-        if not self.active:
-            return no_record()
-        self.Pu[0] = P0[_UPPER]
-        self.f_ns[0] = 0.0
-        self.counters = counters
-        return RtsRecord(self.Pu, self.f_ns, self.st_v, self.st_P, self.x_prior, self.P_prior)
-
-    def capture(self, i: int, P: np.ndarray) -> None:
-        """After the kernel's last step, to sample i, whose posterior covariance is P (15, 15):
-        keep the step's prior and P, for a correction outside the loop made there; or,
-        checkpointing, P packed when it is exactly symmetric and i at least
-        :data:`CHECKPOINT_SAMPLES` after the last checkpoint (sample 0 the first)."""
-        if self.active:
-            self.captured[i] = (self.x_prior.copy(), self.P_prior.copy(), P[:15, :15].copy())
-        elif self.checkpointing and i - (self.ckpt_idx[self.kept - 1] if self.kept else 0) >= CHECKPOINT_SAMPLES:
-            self.ckpt_idx[self.kept] = i
-            if pack_covariance(P, self.ckpt_P[self.kept]):
-                self.kept += 1
-
-    def checkpoints(self, r: _Record) -> tuple[np.ndarray, np.ndarray]:
-        """The block starts of the record ``r``'s whole-run RTS: sample 0 and the checkpoints
-        before its last sample (K,), and the filter's covariance (K, 15, 15) at each: the
-        initial one, a checkpoint's, or the one the last correction made there left."""
-        if not self.checkpointing:
-            return np.zeros(1, dtype=np.int64), r.P0[None].copy()
-        idx = self.ckpt_idx[:self.kept]
-        idx = idx[idx < r.n - 1]
-        P = np.empty((idx.size + 1, 15, 15))
-        P[0] = r.P0
-        packed = self.ckpt_P[:idx.size]
-        P[1:, _UPPER[0], _UPPER[1]] = packed
-        P[1:, _UPPER[1], _UPPER[0]] = packed
-        last = np.searchsorted(r.ov_idx, idx, side="right") - 1
-        corrected = last >= 0
-        corrected[corrected] = r.ov_idx[last[corrected]] == idx[corrected]
-        P[1:][corrected] = r.ov_P[last[corrected]]
-        return np.concatenate([[0], idx]), P
-
-    def sweep_arrays(self, r: _Record, general: np.ndarray) -> SweepRecord | None:
-        """The record of the whole run as :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.mbf_sweep`
-        takes it (``Pu`` … ``kept_P``; ``Pu`` at each corrected sample set to the covariance
-        the corrections left), or None when it cannot serve (a stance sample not recorded, a
-        correction at sample 0 or one without its capture): the replay does then."""
-        n = r.n
-        stance = int(np.count_nonzero(r.stance[1:]))
-        gen = np.flatnonzero(general)
-        if (not self.active or self.Pu.shape[0] < n or int(self.counters[C_STANCE_RECORDS]) != stance
-                or (gen.size and gen[0] == 0) or any(int(i) not in self.captured for i in gen)):
-            return None
-        ordinal = np.cumsum(r.stance) - 1 - r.stance[0]  # the stance entry of each stance sample
-        kept = np.zeros(n, dtype=np.bool_)
-        kept[r.kept_idx] = True
-        gen_P, gen_dx = np.empty((gen.size, 15, 15)), np.empty((gen.size, 15))
-        gen_a, kept_P = np.zeros((gen.size, 2)), np.empty((r.kept_idx.size, 15, 15))
-        last = np.searchsorted(r.ov_idx, gen, side="right") - 1
-        for g, i in enumerate(gen):
-            x_prior, P_prior, P_post = self.captured[int(i)]
-            gen_P[g] = P_prior
-            if r.stance[i]:
-                gen_a[g] = self.st_v[ordinal[i], 3:5]
-            k = int(np.searchsorted(r.kept_idx, i))
-            boxminus(r.kept_x[k] if kept[i] else r.hist_x[i], x_prior, gen_dx[g])
-            if kept[i]:
-                kept_P[k] = P_post
-            self.Pu[i] = r.ov_P[last[g]][_UPPER]
-        return SweepRecord(self.Pu[:n], self.f_ns[:n], self.st_v[:stance], self.st_P[:stance], gen_P, gen_dx, gen_a,
-                           kept[gen], kept_P)
-
-
 def _latency(ms: list[float]) -> dict:
     if not ms:
         return {}
@@ -428,13 +176,13 @@ def _rebuild_error(replayed: np.ndarray, recorded: np.ndarray) -> float:
     return float(np.max(np.max(np.abs(replayed - recorded), axis=(-2, -1)) / scale))
 
 
-def _blocks(r: _Record, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _blocks(r: RunRecord, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The block starts (K,) and the filter's covariances there (K, 15, 15) with every stretch
     longer than :data:`MAX_BLOCK_SAMPLES` cut into blocks of at most :data:`CHECKPOINT_SAMPLES`,
     the covariances at the new starts replayed (without a record) from the stretch's start."""
     ends = np.append(starts[1:], r.n - 1)
     new_idx, new_P = [starts], [P_start]
-    buf = _Pass(1)
+    buf = BlockBuffers(1)
     for k in np.flatnonzero(ends - starts > MAX_BLOCK_SAMPLES):
         a, b = int(starts[k]), int(ends[k])
         cuts = np.arange(a + CHECKPOINT_SAMPLES, b, CHECKPOINT_SAMPLES)
@@ -448,7 +196,7 @@ def _blocks(r: _Record, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.nda
     return idx[order], np.concatenate(new_P)[order]
 
 
-def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> SweepRecord:
+def _sweep_store(r: RunRecord, bounds: np.ndarray, general: np.ndarray) -> SweepRecord:
     """The record :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes
     (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[k + 1]``: its
     samples, stance samples, general updates (``general`` (n,)) and kept corrections."""
@@ -460,10 +208,10 @@ def _sweep_store(r: _Record, bounds: np.ndarray, general: np.ndarray) -> SweepRe
                        np.empty((nk, 15, 15)))
 
 
-def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward: SweepRecord | None,
+def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forward: SweepRecord | None,
                    out_x: np.ndarray, out_var: np.ndarray, diag: dict) -> tuple[float, list[float]]:
     """The RTS of each segment on its own (``span: segment``): the segment's part of the filter's
-    own record (``forward``, :meth:`ForwardRecord.sweep_arrays`), or, without one, the segment
+    own record (``forward``, :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.sweep_arrays`), or, without one, the segment
     replayed into the record (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
     swept back from zero adjoints at its end. Returns as :func:`_rts`."""
     failed = 0
@@ -494,10 +242,10 @@ def _segmented_rts(r: _Record, bounds: np.ndarray, general: np.ndarray, forward:
     return (0.0 if forward is not None else _rebuild_error(P, r.P_end)), latencies
 
 
-def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
+def _rts(r: RunRecord, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
          diag: dict) -> tuple[float, list[float]]:
     """RTS over the whole run (the sweep carried back across blocks, each replayed once from the
-    filter's covariance at its start: :meth:`ForwardRecord.checkpoints`, :func:`_blocks`,
+    filter's covariance at its start: :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.checkpoints`, :func:`_blocks`,
     :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.block_sweep`) or per segment. Returns the
     covariance rebuild's relative error (:func:`_rebuild_error`: at the run's end, and the whole
     run's at every block end) and the per-segment latencies (segmented only)."""
@@ -519,14 +267,14 @@ def _rts(r: _Record, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var
     return _rebuild_error(P_replayed, np.concatenate([P_start[1:], r.P_end[None]])), []
 
 
-def _fb(r: _Record, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
+def _fb(r: RunRecord, bounds: np.ndarray, with_rts: bool, out_x: np.ndarray, out_var: np.ndarray,
         diag: dict) -> tuple[float, list[float]]:
     """FB or FB-RTS segment by segment in time order (see the module docstring), one compiled
     call per segment (:func:`~bodyfusion.plugins.foot_ins.smoothing_fb.fb_segment`). Returns
     the covariance rebuild's relative error at the run's end (:func:`_rebuild_error`) and the
     per-segment latencies."""
     size = int(np.max(np.diff(bounds))) + 1
-    buf = _Pass(size, 2)
+    buf = BlockBuffers(size, 2)
     fused_P = np.zeros((size, 0, 0) if with_rts else (size, 3, 3))  # the fused position block (FB)
     params_bw = r.params.backward()
     gain_failures = fusion_failures = 0
@@ -556,7 +304,7 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
         log.warning("smoothing: %s; keeping the filter's result", msg)
         return SmoothingResult(None, None, diag)
 
-    r = _Record(rec)
+    r = RunRecord(rec)
     if r.n < MIN_SAMPLES:
         return warn(f"run too short to smooth ({r.n} samples, need {MIN_SAMPLES})")
     if not r.stance[1:].any():

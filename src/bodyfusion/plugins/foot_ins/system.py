@@ -35,7 +35,8 @@ from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM,
 from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, stance_findings
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
-from bodyfusion.plugins.foot_ins.smoothing import ForwardRecord, smooth_system
+from bodyfusion.plugins.foot_ins.smoothing import smooth_system
+from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 
 MIN_LOCKOUT_SAMPLES = 5
 """Stance updates a stance needs before all of them beyond the gate count as a lockout."""
@@ -411,7 +412,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
 
     def plan_smoothing(self, cfg: SmootherConfig) -> None:
         """Before the run: the filter records what the layout's ``smoother`` needs as it runs when
-        :meth:`~bodyfusion.plugins.foot_ins.smoothing.ForwardRecord.plan` says so; restarts when that changes."""
+        :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.plan` says so; restarts when that changes."""
         if self._forward_record.plan(cfg, self.config.filter.kind, self._params, self.stance):
             self.restart()
 
