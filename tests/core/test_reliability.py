@@ -11,7 +11,7 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.cli import counted_policies
 from bodyfusion.core.layout import MAX_YAML_NODES, load_layout, read_yaml
 from bodyfusion.runner import run_layout
-from bodyfusion.io.tables import apply_timestamp_policy, timestamp_spikes
+from bodyfusion.io.timestamps import apply_timestamp_policy, timestamp_spikes
 from bodyfusion.io.truth import read_truth_csv
 from tests.fuzz.recording import write_recording
 from tests.paths import CONFIGS

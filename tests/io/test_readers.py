@@ -11,7 +11,8 @@ import pytest
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.io.imu import ACC_UNITS, GYRO_UNITS, read_imu_csv
-from bodyfusion.io.tables import TIMESTAMP_POLICIES, apply_timestamp_policy, read_table
+from bodyfusion.io.tables import read_table
+from bodyfusion.io.timestamps import TIMESTAMP_POLICIES, apply_timestamp_policy
 from bodyfusion.io.truth import read_truth_csv
 from tests.paths import SHARED_DATA, needs_shared
 

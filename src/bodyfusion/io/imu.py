@@ -16,16 +16,8 @@ from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import DataPath, TableSection
 from bodyfusion.base.types import ImuStream
 from bodyfusion.io.imu_checks import check_imu
-from bodyfusion.io.tables import (
-    TIMESTAMP_POLICIES,
-    apply_timestamp_policy,
-    check_columns,
-    check_time_source,
-    read_source,
-    row_error,
-    sample_times,
-    source_name,
-)
+from bodyfusion.io.tables import check_columns, read_source, row_error, source_name
+from bodyfusion.io.timestamps import TIMESTAMP_POLICIES, apply_timestamp_policy, check_time_source, sample_times
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.frames import AxisMap
 

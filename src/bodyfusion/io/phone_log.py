@@ -25,7 +25,7 @@ from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import InputReport
 from bodyfusion.io.gnss import GnssFixes, clean_fixes
 from bodyfusion.io.imu import ACC_LIMIT_MPS2, GYRO_LIMIT_RADPS, MAX_GAP_S
-from bodyfusion.io.tables import apply_timestamp_policy
+from bodyfusion.io.timestamps import apply_timestamp_policy
 
 USED_TYPES = {"ACCE": 5, "GYRO": 5, "MAGN": 5, "GNSS": 10, "POSI": 6}
 """Line type → number of numeric fields after the type that are used."""

@@ -13,18 +13,16 @@ from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.io.tables import (
-    apply_timestamp_policy,
     check_columns,
-    check_time_source,
     has_column,
     read_labelled_table,
     read_source,
-    sample_times,
     source_name,
     table_columns,
     table_text_column,
     tables_by_name,
 )
+from bodyfusion.io.timestamps import apply_timestamp_policy, check_time_source, sample_times
 
 
 def read_truth_csv(

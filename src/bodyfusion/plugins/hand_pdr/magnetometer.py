@@ -29,7 +29,8 @@ import numpy as np
 
 from bodyfusion.io.imu import ImuCsvConfig
 from bodyfusion.base.errors import InputError
-from bodyfusion.io.tables import apply_timestamp_policy, read_source
+from bodyfusion.io.tables import read_source
+from bodyfusion.io.timestamps import apply_timestamp_policy
 from bodyfusion.plugins.hand_pdr.config import FieldCheckConfig, MagnetometerConfig, QuasiStaticConfig
 
 MAG_UNITS: dict[str, float] = {"uT": 1.0, "nT": 1e-3, "G": 100.0}

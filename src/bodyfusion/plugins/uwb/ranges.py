@@ -20,15 +20,8 @@ import numpy as np
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
-from bodyfusion.io.tables import (
-    clean_cell,
-    read_lines,
-    row_error,
-    source_name,
-    split_line,
-    table_columns,
-    table_text_column,
-)
+from bodyfusion.io.tables import clean_cell, row_error, source_name, split_line, table_columns, table_text_column
+from bodyfusion.io.lines import read_lines
 
 
 @dataclass
