@@ -28,13 +28,8 @@ from pydantic import BaseModel
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.progress import ProgressCallback, reporting
 from bodyfusion.core import registry as plugin_registry
-from bodyfusion.core.layout import (
-    LoadedLayout,
-    apply_overrides,
-    plain,
-    read_yaml,
-    validate_layout,
-)
+from bodyfusion.core.layout import LoadedLayout, validate_layout
+from bodyfusion.core.layout_io import apply_overrides, plain, read_yaml
 from bodyfusion.outputs.write import write_outputs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner import run_layout

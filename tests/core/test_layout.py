@@ -13,13 +13,8 @@ import pytest
 import yaml
 
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.core.layout import (
-    Layout,
-    apply_overrides,
-    load_layout,
-    parse_override,
-    read_yaml,
-)
+from bodyfusion.core.layout import Layout, load_layout
+from bodyfusion.core.layout_io import apply_overrides, parse_override, read_yaml
 from tests.paths import CONFIGS, ROOT
 
 VICON_CFG = CONFIGS / "dual_foot_vicon.yaml"

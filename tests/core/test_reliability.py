@@ -9,7 +9,8 @@ from pydantic import ValidationError
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.cli import counted_policies
-from bodyfusion.core.layout import MAX_YAML_NODES, load_layout, read_yaml
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.layout_io import MAX_YAML_NODES, read_yaml
 from bodyfusion.runner import run_layout
 from bodyfusion.io.timestamps import apply_timestamp_policy, timestamp_spikes
 from bodyfusion.io.truth import read_truth_csv

@@ -11,7 +11,8 @@ import pytest
 import yaml
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import Layout, load_layout, validate_section
+from bodyfusion.core.layout import Layout, load_layout
+from bodyfusion.core.layout_io import validate_section
 from bodyfusion.runner import run_layout
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.sim import load_scenario, simulate

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from bodyfusion.core.layout import Layout, load_layout, validate_section
+from bodyfusion.core.layout import Layout, load_layout
+from bodyfusion.core.layout_io import validate_section
 from bodyfusion.io.gnss import read_gnss_csv
 from bodyfusion.nav.strapdown import integrate
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig, StepConfig

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import Layout, validate_section
+from bodyfusion.core.layout import Layout
+from bodyfusion.core.layout_io import validate_section
 from bodyfusion.base.seeding import stable_hash
 from bodyfusion.io.imu import read_imu_csv
 from bodyfusion.nav.attitude import azimuth_pitch_roll

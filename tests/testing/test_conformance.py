@@ -10,7 +10,7 @@ import pytest
 from pydantic import Field
 
 from bodyfusion.base.sections import StrictModel
-from bodyfusion.core.layout import read_yaml
+from bodyfusion.core.layout_io import read_yaml
 from bodyfusion.core.system import SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.plugins.foot_ins import FootIns

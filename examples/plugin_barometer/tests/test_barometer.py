@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bodyfusion.core.layout import validate_section
+from bodyfusion.core.layout_io import validate_section
 from bodyfusion.testing import check_system, default_context, with_value
 from bodyfusion_barometer import Barometer, atmosphere
 

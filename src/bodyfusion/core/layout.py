@@ -21,15 +21,7 @@ from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, Strict
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.body import body_limit
 from bodyfusion.core.data_tables import bind_tables, require_data
-from bodyfusion.core.layout_io import (  # the file handling was here: its names stay importable
-    MAX_YAML_BYTES,  # noqa: F401
-    MAX_YAML_NODES,  # noqa: F401
-    apply_overrides,
-    parse_override,  # noqa: F401
-    plain,
-    read_yaml,
-    validate_section,
-)
+from bodyfusion.core.layout_io import apply_overrides, plain, read_yaml, validate_section
 from bodyfusion.nav.frames import NAMED_FRAMES, AxisMap, AxisSigns
 
 

@@ -63,7 +63,8 @@ from bodyfusion.core import registry as plugin_registry
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.sections import StrictModel
-from bodyfusion.core.layout import Layout, apply_overrides, read_yaml, validate_section
+from bodyfusion.core.layout import Layout
+from bodyfusion.core.layout_io import apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind, SystemOutput
 from bodyfusion.sim.files import FLOAT_FORMAT, printed, savetxt_rows
 from bodyfusion.sim.gait import plan_gait

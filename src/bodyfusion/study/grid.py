@@ -28,7 +28,7 @@ from typing import Any
 import yaml
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import apply_overrides, read_yaml
+from bodyfusion.core.layout_io import apply_overrides, read_yaml
 from bodyfusion.study.results import cell
 from bodyfusion.study.spec import LoadedStudy
 

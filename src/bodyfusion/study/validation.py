@@ -15,7 +15,8 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.core.layout import Layout, apply_overrides, load_layout, read_yaml, validate_section
+from bodyfusion.core.layout import Layout, load_layout
+from bodyfusion.core.layout_io import apply_overrides, read_yaml, validate_section
 from bodyfusion.core.registry import get_registry
 from bodyfusion.sim.gait import plan_gait
 from bodyfusion.sim.scenario import load_scenario

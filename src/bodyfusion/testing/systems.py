@@ -74,7 +74,7 @@ from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.core.capabilities import HeadingAlignment, TransitionTracking, offers
-from bodyfusion.core.layout import validate_section
+from bodyfusion.core.layout_io import validate_section
 from bodyfusion.core.system import LayoutContext, SensorSystem
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.testing.compare import max_diff, same_bits

@@ -16,7 +16,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import load_layout, read_yaml
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.layout_io import read_yaml
 from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.error_state import FilterParams, accumulate_propagation, filter_params, process_noise_diag
 from bodyfusion.plugins.foot_ins import FootIns

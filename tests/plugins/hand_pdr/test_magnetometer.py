@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.core.layout import load_layout, read_yaml
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.layout_io import read_yaml
 from bodyfusion.runner import run_layout
 from bodyfusion.io.imu import ImuCsvConfig
 from bodyfusion.plugins.hand_pdr import HandPdr
@@ -241,7 +242,7 @@ def test_quasi_static_check_keeps_a_fixed_field_and_refuses_one_that_turns_on_it
 def test_phone_log_defaults_are_those_of_an_android_phone_read_while_walking(tmp_path):
     """A phone log: magnetometer unset (on when the log has MAGN lines), device axis +y (the
     top of the screen), holding offset 0, gyro bias σ 0.01 rad/s; an IMU CSV: off, +x, auto, 0.002."""
-    from bodyfusion.core.layout import validate_section
+    from bodyfusion.core.layout_io import validate_section
     from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 
     (tmp_path / "log.txt").write_text("")

@@ -8,7 +8,8 @@ import numpy as np
 import pymap3d
 import pytest
 
-from bodyfusion.core.layout import load_layout, read_yaml
+from bodyfusion.core.layout import load_layout
+from bodyfusion.core.layout_io import read_yaml
 from bodyfusion.runner import run_layout
 from bodyfusion.plugins.hand_pdr import HandPdr
 from bodyfusion.sim import simulate
