@@ -48,6 +48,7 @@ from bodyfusion.core.layout import load_layout
 from bodyfusion.runner import run_layout
 from bodyfusion.evaluation.consistency import NeesTrack, chi2_band
 from bodyfusion.evaluation.plots import plot_nees, save_figure
+from bodyfusion.evaluation.scored_run import ScoredTracks
 from bodyfusion.sim import simulate
 
 SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "consistency_walk.yaml"
@@ -210,7 +211,7 @@ def save(table: dict[tuple[str, int, str], Runs], minutes: list[int], out: Path,
         tracks = {CASES[key].label + (f" ({row})" if len(CASES[key].rows) > 1 else ""):
                   NeesTrack(runs.grid, runs.monte_carlo(), runs=len(runs.nees))
                   for (key, mm, row), runs in table.items() if mm == m and runs.nees}
-        save_figure(plot_nees(tracks, title=f"Monte-Carlo horizontal NEES, {m}-minute walks"),
+        save_figure(plot_nees(ScoredTracks(nees=tracks), title=f"Monte-Carlo horizontal NEES, {m}-minute walks"),
                     out / f"nees_profile_{m}min.png")
 
 

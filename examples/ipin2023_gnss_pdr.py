@@ -58,7 +58,7 @@ def errors(result) -> np.ndarray:
 def gnss_errors(log_path: Path, result) -> np.ndarray:
     """The fixes as a trajectory, scored against the same points and origin as ``result``."""
     gnss = read_getsensordata(log_path).gnss
-    enu = gnss.enu(result.geodetic_origin)
+    enu = gnss.enu(result.frame.geodetic_origin)
     _, scores = score_systems({"hand_phone": Trajectory(gnss.t, enu, np.zeros_like(enu))},
                               {"hand_phone": result.truths["hand_phone"]}, alignment="none")
     return scores["hand_phone"].horizontal_error_m

@@ -37,13 +37,13 @@ def test_trajectory_files_are_written_without_pandas(tmp_path):
     loaded = _modules_after(
         "import numpy as np\n"
         "from pathlib import Path\n"
-        "from bodyfusion.base.types import Trajectory\n"
+        "from bodyfusion.base.types import NavigationFrame, Trajectory\n"
         "from bodyfusion.outputs.trajectories import write_trajectories_parquet, write_tum\n"
         "t = np.arange(5.0)\n"
         "tr = {'a': Trajectory(t, np.ones((5, 3)), np.ones((5, 3)), np.zeros(5)),\n"
         "      'b': Trajectory(t, np.ones((5, 3)), np.ones((5, 3)))}\n"
         f"out = Path({str(tmp_path)!r})\n"
-        "write_trajectories_parquet(out / 'x.parquet', tr, config_sha256='0', geodetic_origin=None)\n"
+        "write_trajectories_parquet(out / 'x.parquet', tr, config_sha256='0', frame=NavigationFrame())\n"
         "write_tum(out / 'tum', tr, {}, 1)")
     assert not loaded
     assert (tmp_path / "x.parquet").is_file()

@@ -1,6 +1,7 @@
-"""Figures for papers: every plot returns a Figure and draws into a given Axes, saving is
-separate (PNG, PDF, SVG at a dpi), σ bands on the error, start and end markers, estimate and
-truth told apart, methods compared on one axes, study plots readable at a few runs."""
+"""Figures for papers: every plot takes a run (a ScoredRun: a run's result or what a folder
+holds), returns a Figure and draws into a given Axes, saving is separate (PNG, PDF, SVG at a
+dpi), σ bands on the error, start and end markers, estimate and truth told apart, methods
+compared on one axes, study plots readable at a few runs."""
 
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from bodyfusion.core.layout import load_layout
 from bodyfusion.runner import run
 from bodyfusion.evaluation.consistency import NeesTrack
 from bodyfusion.evaluation.figure_process import FigureProcess
-from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
+from bodyfusion.evaluation.metrics import score_systems
+from bodyfusion.evaluation.scored_run import ScoredTracks
 from bodyfusion.evaluation.plots import (
     new_figure,
     plot_against_outage_duration,
@@ -47,7 +49,7 @@ def scored():
                                                                                sparse=True)}
     estimates = {"left": walk(t, 0.25), "right": walk(t, -0.05)}
     transform, scores = score_systems(estimates, truths, alignment="none")
-    return estimates, scores, transform, truths
+    return ScoredTracks(estimates, truths, transform, scores, nees_tracks())
 
 
 def nees_tracks() -> dict[str, NeesTrack]:
@@ -57,14 +59,13 @@ def nees_tracks() -> dict[str, NeesTrack]:
 
 
 def every_plot(scored):
-    estimates, scores, transform, truths = scored
+    rts = ScoredTracks({"left": walk(scored.trajectories["left"].t, 0.2)})
     return {
-        "trajectories": lambda **kw: plot_trajectories(estimates, scores, transform, truths, **kw),
-        "methods": lambda **kw: plot_method_comparison({"filter": estimates["left"], "rts": walk(
-            estimates["left"].t, 0.2)}, truths["left"], **kw),
-        "error_vs_time": lambda **kw: plot_error_vs_time(scores, estimates, **kw),
-        "error_cdf": lambda **kw: plot_error_cdf(scores, **kw),
-        "nees": lambda **kw: plot_nees(nees_tracks(), **kw),
+        "trajectories": lambda **kw: plot_trajectories(scored, **kw),
+        "methods": lambda **kw: plot_method_comparison({"filter": scored, "rts": rts}, "left", **kw),
+        "error_vs_time": lambda **kw: plot_error_vs_time(scored, **kw),
+        "error_cdf": lambda **kw: plot_error_cdf(scored, **kw),
+        "nees": lambda **kw: plot_nees(scored, **kw),
         "outage": lambda **kw: plot_against_outage_duration({"a": {0.0: [1.0, 1.2], 30.0: [2.0, 2.5]}}, "t", **kw),
     }
 
@@ -100,9 +101,9 @@ def test_every_plot_keeps_its_texts_and_legend_inside_the_figure_and_gives_the_a
 def test_wide_tick_labels_and_long_legend_entries_still_fit():
     t = np.linspace(0.0, 10.0, 101)
     far = Trajectory(t, np.column_stack([-123456.7 + t, 4567890.1 + t, 0 * t]), np.full((t.size, 3), 0.1))
-    fig = plot_trajectories({"a system named at length for its mounting and firmware": far})
+    fig = plot_trajectories(ScoredTracks({"a system named at length for its mounting and firmware": far}))
     assert _inside_the_figure(fig)
-    crowded = plot_trajectories({f"system {'x' * 70} {k}": walk(t, k) for k in range(3)})
+    crowded = plot_trajectories(ScoredTracks({f"system {'x' * 70} {k}": walk(t, k) for k in range(3)}))
     assert _inside_the_figure(crowded)  # the Axes would get less than a quarter: constrained layout
     assert fig.axes[0].get_position(original=True).width > 0.4 > crowded.axes[0].get_position(original=True).width
 
@@ -119,26 +120,28 @@ def test_panels_of_a_new_figure_get_constrained_layout(scored):
 def test_nees_axis_labels_its_decades_in_plain_text_and_its_minor_ticks_when_narrow():
     """10ᵏ with Unicode superscripts, no mathtext ($...$, whose first use costs a process
     ~0.2 s); a Monte-Carlo NEES spanning under a decade still gets numbers between decades."""
-    fig = plot_nees(nees_tracks())
+    fig = plot_nees(ScoredTracks(nees=nees_tracks()))
     fig.canvas.draw()
     ax = fig.axes[0]
     major = [label.get_text() for label in ax.get_yticklabels() if label.get_text()]
     assert "10⁰" in major and "10¹" in major and not any("$" in text for text in major)
     t = np.linspace(0.0, 100.0, 500)
-    narrow = plot_nees({"mc": NeesTrack(t, np.random.default_rng(0).chisquare(400, t.size) / 200, runs=200)})
+    narrow = plot_nees(ScoredTracks(nees={"mc": NeesTrack(t, np.random.default_rng(0).chisquare(400, t.size) / 200,
+                                                          runs=200)}))
     narrow.canvas.draw()
     minor = [label.get_text() for label in narrow.axes[0].get_yticklabels(minor=True) if label.get_text()]
     assert "2" in minor and not any("$" in text for text in minor)
 
 
 def test_plots_of_nothing_still_render(tmp_path):
-    for fig in (plot_trajectories({}), plot_error_vs_time({}), plot_error_cdf({}), plot_nees({}),
-                plot_method_comparison({}), plot_against_outage_duration({}, "none")):
+    nothing = ScoredTracks()
+    for fig in (plot_trajectories(nothing), plot_error_vs_time(nothing), plot_error_cdf(nothing), plot_nees(nothing),
+                plot_method_comparison({}, "left"), plot_against_outage_duration({}, "none")):
         assert save_figure(fig, tmp_path / "empty")[0].stat().st_size > 1000
 
 
 def test_save_figure_writes_each_format_at_the_dpi_beside_the_name(tmp_path):
-    fig = plot_error_cdf({})
+    fig = plot_error_cdf(ScoredTracks())
     written = save_figure(fig, tmp_path / "sub" / "cdf.png", ["png", "pdf", "svg"], dpi=60)
     assert [p.name for p in written] == ["cdf.png", "cdf.pdf", "cdf.svg"]
     for path in written:
@@ -150,23 +153,19 @@ def test_save_figure_writes_each_format_at_the_dpi_beside_the_name(tmp_path):
 
 
 def test_a_runs_plots_keep_their_png_names_and_take_the_layouts_formats(scored, tmp_path):
-    estimates, scores, transform, truths = scored
-    names = [p.name for p in write_run_plots(tmp_path / "a", estimates, scores, transform, truths, nees_tracks())]
+    names = [p.name for p in write_run_plots(tmp_path / "a", scored)]
     assert names == ["trajectory.png", "error_vs_time.png", "error_cdf.png", "nees.png"]
     figures = FiguresConfig(formats=["pdf", "svg"], dpi=80)
-    written = write_run_plots(tmp_path / "b", estimates, None, transform, None, {}, figures)
+    written = write_run_plots(tmp_path / "b", ScoredTracks(scored.trajectories), figures)
     assert [p.name for p in written] == ["trajectory.pdf", "trajectory.svg"]
 
 
 @pytest.mark.parametrize("is_scored", [True, False])
 def test_the_figure_process_writes_the_files_this_process_would(scored, tmp_path, is_scored):
-    estimates, scores, transform, truths = scored
-    if not is_scored:  # the trajectory alone: drawn without a second fork
-        scores, truths = None, None
-    here = write_run_plots(tmp_path / "here", estimates, scores, transform, truths, nees_tracks())
+    run = scored if is_scored else ScoredTracks(scored.trajectories)  # the trajectory alone: no second fork
+    here = write_run_plots(tmp_path / "here", run)
     with FigureProcess() as beside:  # forked in two halves: the files in the same order, the same bytes
-        beside.submit(out_dir=tmp_path / "beside", estimates=estimates, scores=scores, transform=transform,
-                      truths=truths, nees=nees_tracks(), figures=None)
+        beside.submit(tmp_path / "beside", run, FiguresConfig())
         written = beside.written()
     assert [p.name for p in written] == [p.name for p in here] == (
         ["trajectory.png", "error_vs_time.png", "error_cdf.png", "nees.png"] if is_scored else ["trajectory.png"])
@@ -174,11 +173,9 @@ def test_the_figure_process_writes_the_files_this_process_would(scored, tmp_path
 
 
 def test_a_drawing_error_in_the_figure_process_is_raised_here_with_its_traceback(scored, tmp_path):
-    estimates, scores, transform, truths = scored
     (tmp_path / "a_file").write_text("")
     with FigureProcess() as beside:
-        beside.submit(out_dir=tmp_path / "a_file" / "plots", estimates=estimates, scores=scores, transform=transform,
-                      truths=truths, nees=nees_tracks(), figures=None)
+        beside.submit(tmp_path / "a_file" / "plots", scored, FiguresConfig())
         with pytest.raises(NotADirectoryError) as raised:
             beside.written()
     assert "in save_figure" in raised.value.__notes__[-1]
@@ -198,9 +195,9 @@ def test_the_figure_process_is_not_forked_beside_other_threads():
 
 
 def test_error_vs_time_shades_the_2drms_band_behind_and_follows_the_errors(scored):
-    estimates, scores, _, _ = scored
-    wide = {name: Trajectory(e.t, e.pos_n, np.full_like(e.pos_sd, 5.0)) for name, e in estimates.items()}
-    ax = plot_error_vs_time(scores, wide).axes[0]
+    scores = scored.scores
+    wide = {name: Trajectory(e.t, e.pos_n, np.full_like(e.pos_sd, 5.0)) for name, e in scored.trajectories.items()}
+    ax = plot_error_vs_time(ScoredTracks(wide, scored.truths, scored.transform, scores)).axes[0]
     bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
     assert len(bands) == 2
     lines = [line for line in ax.lines if line.get_label() in scores]
@@ -212,8 +209,8 @@ def test_error_vs_time_shades_the_2drms_band_behind_and_follows_the_errors(score
 
 
 def test_plan_view_marks_start_and_end_and_draws_truth_in_another_style_and_colour(scored):
-    estimates, scores, transform, truths = scored
-    ax = plot_trajectories(estimates, scores, transform, truths).axes[0]
+    estimates = scored.trajectories
+    ax = plot_trajectories(scored).axes[0]
     estimate = next(line for line in ax.lines if line.get_label().startswith("left (RMSE"))
     truth = next(line for line in ax.lines if line.get_label() == "left truth")
     assert estimate.get_linestyle() == "-" and truth.get_linestyle() == "--"
@@ -229,10 +226,10 @@ def test_plan_view_marks_start_and_end_and_draws_truth_in_another_style_and_colo
 
 def test_methods_are_compared_on_one_axes_with_their_rmse_against_the_truth():
     t = np.linspace(0.0, 10.0, 101)
-    truth = TruthTrack(t, walk(t).pos_n)
-    turn = PlanarTransform(0.0, np.array([0.0, 0.0]), 0.0)
-    fig = plot_method_comparison({"filter": walk(t, 0.3), "rts": walk(t, 0.1), "fb-rts": walk(t, 0.05)}, truth, turn,
-                                 system="left_foot")
+    truth = {"left_foot": TruthTrack(t, walk(t).pos_n)}
+    runs = {"filter": ScoredTracks({"left_foot": walk(t, 0.3)}, truth),
+            "rts": ScoredTracks({"left_foot": walk(t, 0.1)}), "fb-rts": ScoredTracks({"left_foot": walk(t, 0.05)})}
+    fig = plot_method_comparison(runs, "left_foot")
     ax = fig.axes[0]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels[:4] == ["truth", "filter (RMSE 0.30 m)", "rts (RMSE 0.10 m)", "fb-rts (RMSE 0.05 m)"]

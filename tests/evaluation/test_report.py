@@ -156,19 +156,19 @@ def test_the_report_scores_the_folder_as_the_run_did_from_truth_csv_or_tum(tmp_p
     metrics = json.loads((folder / "metrics.json").read_text())
     content = read_folder(folder)
     assert isinstance(content, RunFolder) and content.truth_source == "truth.csv"
-    for name, score in content.scores.items():
+    for name, score in content.tracks.scores.items():
         recorded = metrics["systems"][name]["horizontal_error_m"]
         assert score.metrics["horizontal_error_m"]["rmse"] == pytest.approx(recorded["rmse"], abs=1e-4)
     shutil.rmtree(folder / "tum", ignore_errors=True)
     (folder / "tum").mkdir()
-    for name, truth in content.truths.items():
+    for name, truth in content.tracks.truths.items():
         rows = np.column_stack([truth.t, truth.pos_n, np.zeros((truth.t.size, 3)), np.ones(truth.t.size)])
         np.savetxt(folder / "tum" / f"{name}_truth.txt", rows)
     (folder / "truth.csv").unlink()
     from_tum = read_folder(folder)
     assert from_tum.truth_source == "tum/<system>_truth.txt"
-    assert from_tum.scores["walker_1"].metrics["horizontal_error_m"] == pytest.approx(
-        content.scores["walker_1"].metrics["horizontal_error_m"])
+    assert from_tum.tracks.scores["walker_1"].metrics["horizontal_error_m"] == pytest.approx(
+        content.tracks.scores["walker_1"].metrics["horizontal_error_m"])
 
 
 def test_a_run_folder_without_truth_shows_the_uncertainty_alone(tmp_path):
@@ -181,8 +181,8 @@ def test_a_run_folder_without_truth_shows_the_uncertainty_alone(tmp_path):
 
 def test_long_series_are_thinned_for_the_page(tmp_path):
     content = read_folder(walkers_run(tmp_path / "run", duration_s=450.0))  # 45,001 samples per walker
-    assert len(content.trajectories["walker_1"].t) > 2 * MAX_POINTS
-    assert all(len(trace.x) <= MAX_POINTS for trace in plan_view(content).data)
+    assert len(content.tracks.trajectories["walker_1"].t) > 2 * MAX_POINTS
+    assert all(len(trace.x) <= MAX_POINTS for trace in plan_view(content.tracks).data)
 
 
 def test_nis_means_are_drawn_beside_their_dimension():

@@ -14,7 +14,7 @@ import pymap3d
 import pytest
 
 import bodyfusion
-from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.outputs import trajectories as exports
 from bodyfusion.outputs.trajectories import (
     GEOJSON_STEP_S,
@@ -92,7 +92,8 @@ def test_parquet_holds_the_csv_values_typed_with_units_frame_and_provenance(geo_
 
 def test_read_trajectories_round_trips_the_parquet_exactly_and_the_csv_to_its_precision(tmp_path):
     trajs = synthetic()
-    write_trajectories_parquet(tmp_path / "t.parquet", trajs, config_sha256="0" * 64, geodetic_origin=None)
+    write_trajectories_parquet(tmp_path / "t.parquet", trajs, config_sha256="0" * 64,
+                               frame=NavigationFrame())
     write_trajectories_csv(tmp_path / "t.csv", trajs)
     from_parquet = read_trajectories(tmp_path / "t.parquet")
     from_csv = read_trajectories(tmp_path / "t.csv")

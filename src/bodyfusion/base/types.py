@@ -7,7 +7,10 @@ time in seconds (float64); specific force in m/s^2; angular rate in rad/s.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import ClassVar
 
 import numpy as np
 
@@ -114,6 +117,51 @@ class Trajectory:
         cov[:, 1, 1] = self.pos_sd[:, 1] ** 2
         cov[:, 0, 1] = cov[:, 1, 0] = 0.0 if self.pos_cov_en is None else self.pos_cov_en
         return cov
+
+
+@dataclass(frozen=True)
+class NavigationFrame:
+    """The frame a run's trajectories are in: local East-North-Up, metres, its origin the
+    ``geodetic_origin`` (lat deg, lon deg, ellipsoidal height m) where known, else the start of
+    the run; azimuths from ``heading_reference`` (``north``: a system with a geographic heading,
+    GNSS or a magnetometer, set it; else the name of the system whose initial heading every
+    other was aligned to, so north is unknown). Times in s of the input's clock.
+    :data:`UNITS` gives the unit of every quantity a result carries."""
+
+    geodetic_origin: tuple[float, float, float] | None = None
+    heading_reference: str = "north"
+
+    UNITS: ClassVar[Mapping[str, str]] = MappingProxyType({
+        "t": "s", "position": "m", "velocity": "m/s", "attitude": "deg", "quaternion": "1 (scalar first, body to ENU)",
+        "position_covariance": "m^2", "error": "m", "nees": "1"})
+    """Unit of each quantity in a run's results."""
+
+    def to_dict(self) -> dict:
+        """The frame as outputs record it (the Parquet schema's ``bodyfusion.frame``, metrics.json ``frame``)."""
+        origin = None if self.geodetic_origin is None else dict(zip(("lat_deg", "lon_deg", "height_m"),
+                                                                    map(float, self.geodetic_origin)))
+        return {"name": "ENU", "axes": ["east", "north", "up"], "unit": "m",
+                "origin": "the geodetic origin" if origin else "the start of the run (no geodetic origin)",
+                "geodetic_origin": origin, "heading_reference": self.heading_reference,
+                "alignment": "none (before any evaluation alignment)",
+                "time": {"unit": "s", "epoch": "the input's clock (no absolute epoch)"}}
+
+    def describe(self) -> str:
+        """One line: origin and where azimuths are taken from."""
+        origin = ("the run's start" if self.geodetic_origin is None else
+                  "lat {:.6f}°, lon {:.6f}°, h {:.1f} m".format(*self.geodetic_origin))
+        heading = {"north": "azimuths from North", "unknown": "azimuths from an unknown direction"}.get(
+            self.heading_reference, f"azimuths from {self.heading_reference}'s initial heading (North unknown)")
+        return f"ENU, metres, origin at {origin}; {heading}"
+
+    @classmethod
+    def from_dict(cls, doc: dict | None) -> NavigationFrame:
+        """The frame :meth:`to_dict` wrote (a folder without one: ENU from the start, heading unknown)."""
+        if not doc:
+            return cls(None, "unknown")
+        origin = doc.get("geodetic_origin")
+        return cls(None if origin is None else (origin["lat_deg"], origin["lon_deg"], origin["height_m"]),
+                   doc.get("heading_reference", "unknown"))
 
 
 @dataclass

@@ -2,9 +2,10 @@
 
 :class:`FigureProcess` forks a process as a command starts. That process imports matplotlib and
 the figure code (:mod:`bodyfusion.evaluation.plots`) and draws a figure into memory while the run
-computes — half a second or more that would otherwise follow the run — and, handed the run's
-result, draws the figures (:func:`~bodyfusion.evaluation.plots.write_run_plots`) in two halves,
-one in a process it forks for the purpose, while the calling process writes the other outputs.
+computes — half a second or more that would otherwise follow the run — and, handed what the
+figures show of the result (:class:`~bodyfusion.evaluation.scored_run.ScoredTracks`), draws them
+(:func:`~bodyfusion.evaluation.plots.write_run_plots`) in two halves, one in a process it forks
+for the purpose, while the calling process writes the other outputs.
 The files are the bytes the calling process would write itself. Forking is only safe from a
 process with a single thread on Linux: :meth:`FigureProcess.start` returns None elsewhere, and
 the caller draws in-process."""
@@ -13,22 +14,33 @@ from __future__ import annotations
 
 import io
 import multiprocessing
-from collections.abc import Mapping
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
+from typing import NamedTuple
 
 from bodyfusion.base.forking import Forked, fork_is_safe, outcome, raised_or_value
+from bodyfusion.base.sections import FiguresConfig
+from bodyfusion.evaluation.scored_run import ScoredRun, ScoredTracks
 
 
-def _draw_in_two(kwargs: Mapping[str, Any]) -> list[Path]:
-    """Draw the run's figures (``write_run_plots(**kwargs)``): the first half here, the second
-    in a forked process; the files in :data:`~bodyfusion.evaluation.plots.RUN_FIGURES` order."""
+class FigureJob(NamedTuple):
+    """What the figure process is sent: where to draw, the run's figures' content, the formats."""
+
+    out_dir: Path
+    run: ScoredTracks
+    figures: FiguresConfig
+
+
+def _draw_in_two(job: FigureJob) -> list[Path]:
+    """Draw the run's figures (:func:`~bodyfusion.evaluation.plots.write_run_plots`): the first
+    half here, the second in a forked process; the files in
+    :data:`~bodyfusion.evaluation.plots.RUN_FIGURES` order."""
     from bodyfusion.evaluation.plots import run_figure_names, write_run_plots
 
-    names = run_figure_names(kwargs["scores"])
-    second = Forked(lambda: write_run_plots(**kwargs, names=names[len(names) // 2:]), fork=len(names) > 1)
-    first = write_run_plots(**kwargs, names=names[:len(names) // 2])
+    names = run_figure_names(job.run)
+    second = Forked(lambda: write_run_plots(job.out_dir, job.run, job.figures, names[len(names) // 2:]),
+                    fork=len(names) > 1)
+    first = write_run_plots(job.out_dir, job.run, job.figures, names[:len(names) // 2])
     return [*first, *second.result()]
 
 
@@ -42,7 +54,7 @@ def _ready() -> None:
     from bodyfusion.evaluation.plots import plot_nees
 
     t = np.linspace(0.0, 1.0, 11)
-    plot_nees({"ready": NeesTrack(t, 1.0 + t)}).savefig(io.BytesIO(), format="png")
+    plot_nees(ScoredTracks(nees={"ready": NeesTrack(t, 1.0 + t)})).savefig(io.BytesIO(), format="png")
 
 
 def _serve(conn: Connection) -> None:
@@ -50,10 +62,10 @@ def _serve(conn: Connection) -> None:
     sent (none if the caller closes its end first)."""
     _ready()
     try:
-        kwargs = conn.recv()
+        job = conn.recv()
     except EOFError:
         return
-    conn.send(outcome(lambda: _draw_in_two(kwargs)))
+    conn.send(outcome(lambda: _draw_in_two(job)))
 
 
 class FigureProcess:
@@ -74,10 +86,11 @@ class FigureProcess:
         in this process)."""
         return cls() if fork_is_safe() else None
 
-    def submit(self, **kwargs: Any) -> None:
-        """Hand over the run's figures: the arguments of
-        :func:`~bodyfusion.evaluation.plots.write_run_plots` (without ``names``)."""
-        self._conn.send(kwargs)
+    def submit(self, out_dir: Path, run: ScoredRun, figures: FiguresConfig) -> None:
+        """Hand over the run's figures: what :func:`~bodyfusion.evaluation.plots.write_run_plots`
+        takes; of the run only its :class:`~bodyfusion.evaluation.scored_run.ScoredTracks` is
+        sent."""
+        self._conn.send(FigureJob(Path(out_dir), ScoredTracks.of(run), figures))
 
     def written(self) -> list[Path]:
         """The files drawn (as :func:`~bodyfusion.evaluation.plots.write_run_plots` returns them),

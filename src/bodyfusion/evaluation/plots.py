@@ -2,8 +2,11 @@
 horizontal error against time with its σ band, error CDF, horizontal NEES against time) and of
 studies (an error against the GNSS outage duration).
 
-Positions are ENU metres (plan view: east vs north, after the evaluation transform), time in
-seconds. Every ``plot_*`` function returns a :class:`matplotlib.figure.Figure`: with ``ax=`` it
+A run's figures take the run: a :class:`~bodyfusion.evaluation.scored_run.ScoredRun`, such as
+the :class:`~bodyfusion.results.run_result.RunResult` a run returns or the
+:class:`~bodyfusion.evaluation.scored_run.ScoredTracks` read back from a run folder. Positions
+are ENU metres in the run's frame (plan view: east vs north, after the evaluation transform),
+time in seconds. Every ``plot_*`` function returns a :class:`matplotlib.figure.Figure`: with ``ax=`` it
 draws into that Axes (a panel of the caller's figure) and returns ``ax.figure``; without, it
 draws into a new figure of its own. Saving is separate (:func:`save_figure`, any of PNG, PDF,
 SVG at a chosen dpi; :func:`write_run_plots` for a run's standard set). New figures use the Agg
@@ -32,14 +35,8 @@ from matplotlib.ticker import LogFormatter
 
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.base.types import Trajectory, TruthTrack
-from bodyfusion.evaluation.consistency import NeesTrack
-from bodyfusion.evaluation.metrics import (
-    PlanarTransform,
-    SystemScore,
-    error_cdf,
-    horizontal_sigma_m,
-    score_systems,
-)
+from bodyfusion.evaluation.metrics import SystemScore, error_cdf, horizontal_sigma_m, score_systems
+from bodyfusion.evaluation.scored_run import ScoredRun
 from bodyfusion.evaluation.thinning import thin_index
 
 DPI = FiguresConfig().dpi
@@ -236,10 +233,10 @@ def _draw_truth(ax: Axes, truth: TruthTrack, colour, label: str) -> None:
         ax.plot(p[idx, 0], p[idx, 1], "--", color=colour, lw=1.0, label=label, zorder=2)
 
 
-def _finish_plan_view(ax: Axes, title: str, drawn: bool) -> None:
+def _finish_plan_view(ax: Axes, title: str, drawn: bool, north_note: str = "") -> None:
     ax.set_title(title)
     ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
+    ax.set_ylabel(f"north [m]{north_note}")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     if not drawn:
@@ -257,41 +254,45 @@ def _rmse_label(name: str, score: SystemScore | None) -> str:
     return f"{name} (RMSE {score.metrics['horizontal_error_m']['rmse']:.2f} m)"
 
 
-def plot_trajectories(estimates: Mapping[str, Trajectory], scores: Mapping[str, SystemScore] | None = None,
-                      transform: PlanarTransform | None = None, truths: Mapping[str, TruthTrack] | None = None,
-                      *, ax: Axes | None = None) -> Figure:
-    """Plan view (east vs north, m, equal aspect) of each system's estimate after ``transform``
-    (the evaluation alignment; default none) as a solid line, with its truth as a dashed line
-    in a darker shade (surveyed points as crosses); open circles mark the starts, squares the
-    ends. With ``scores`` the legend gives each system's horizontal RMSE."""
-    transform = transform or PlanarTransform.identity()
-    truths = truths or {}
-    scores = scores or {}
-    colour = _colours(list(dict.fromkeys([*estimates, *truths])))
+def _frame_note(run: ScoredRun) -> str:
+    """Where "north" of the plan view is, when the run's own frame is drawn (no evaluation
+    rotation) and its azimuths are not from North."""
+    frame = run.frame
+    if frame.heading_reference == "north" or run.transform.rotation_rad != 0.0:
+        return ""
+    return f" (heading of {frame.heading_reference})" if frame.heading_reference != "unknown" else " (heading unknown)"
+
+
+def plot_trajectories(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
+    """Plan view (east vs north, m, equal aspect) of each system's estimate of ``run`` after its
+    evaluation alignment as a solid line, with its truth as a dashed line in a darker shade
+    (surveyed points as crosses); open circles mark the starts, squares the ends. Where the run
+    is scored the legend gives each system's horizontal RMSE."""
+    transform = run.transform
+    colour = _colours(list(dict.fromkeys([*run.trajectories, *run.truths])))
     ax = _axes(ax, 8.0, 6.0)
-    for name, traj in estimates.items():
+    for name, traj in run.trajectories.items():
         _draw_track(ax, transform.apply(np.asarray(traj.pos_n, dtype=float)), colour[name],
-                    _rmse_label(name, scores.get(name)))
-    for name, truth in truths.items():
+                    _rmse_label(name, run.scores.get(name)))
+    for name, truth in run.truths.items():
         _draw_truth(ax, truth, _darker(colour[name]), f"{name} truth")
     title = "Trajectories (plan view)"
     if transform.rotation_rad != 0.0 or np.any(np.asarray(transform.translation_m) != 0):
         title += f", estimates aligned: rotation {np.degrees(transform.rotation_rad):.1f}°"
-    _finish_plan_view(ax, title, bool(estimates or truths))
+    _finish_plan_view(ax, title, bool(run.trajectories or run.truths), _frame_note(run))
     return ax.figure
 
 
-def plot_method_comparison(tracks: Mapping[str, Trajectory], truth: TruthTrack | None = None,
-                           transform: PlanarTransform | None = None, *, system: str = "",
-                           ax: Axes | None = None) -> Figure:
-    """Plan view (east vs north, m) of one system's track as estimated by several methods
-    (label → trajectory, e.g. ``filter``, ``rts``, ``fb-rts``), each after ``transform``, in
-    its own colour, against its truth (black, dashed); with truth the legend gives each
-    method's horizontal RMSE. Starts and ends marked as in :func:`plot_trajectories`."""
-    transform = transform or PlanarTransform.identity()
+def plot_method_comparison(runs: Mapping[str, ScoredRun], system: str, *, ax: Axes | None = None) -> Figure:
+    """Plan view (east vs north, m) of ``system``'s track as several runs estimated it (label →
+    run, e.g. ``filter``, ``rts``, ``fb-rts``), each after its run's evaluation alignment, in its
+    own colour, against the truth of the first run that has one (black, dashed); with truth the
+    legend gives each method's horizontal RMSE. Starts and ends marked as in :func:`plot_trajectories`."""
+    tracks = {label: run for label, run in runs.items() if system in run.trajectories}
     colour = _colours(list(tracks))
-    aligned = {label: Trajectory(t.t, transform.apply(np.asarray(t.pos_n, dtype=float)), t.pos_sd, t.pos_cov_en)
-               for label, t in tracks.items()}
+    aligned = {label: Trajectory(t.t, run.transform.apply(np.asarray(t.pos_n, dtype=float)), t.pos_sd, t.pos_cov_en)
+               for label, run in tracks.items() for t in (run.trajectories[system],)}
+    truth = next((run.truths[system] for run in runs.values() if system in run.truths), None)
     scores: dict[str, SystemScore] = {}
     if truth is not None and aligned:
         _, scores = score_systems(aligned, dict.fromkeys(aligned, truth), alignment="none")
@@ -308,13 +309,12 @@ def plot_method_comparison(tracks: Mapping[str, Trajectory], truth: TruthTrack |
 # --------------------------------------------------------------------------- errors
 
 
-def plot_error_vs_time(scores: Mapping[str, SystemScore], estimates: Mapping[str, Trajectory] | None = None,
-                       *, ax: Axes | None = None) -> Figure:
-    """Horizontal error (m) against time (s) at the truth epochs, one line per system; with
-    ``estimates`` each system's 2DRMS band (0 to 2 √(σ_E² + σ_N²), about 95–98 % of a consistent
-    filter's errors) shaded lightly behind it, its edge dotted. The vertical axis follows the errors: a band
-    wider than them is cut at the top rather than squeezing the errors flat."""
-    estimates = estimates or {}
+def plot_error_vs_time(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
+    """Horizontal error (m) against time (s) at the truth epochs, one line per scored system of
+    ``run``, with its 2DRMS band (0 to 2 √(σ_E² + σ_N²), about 95–98 % of a consistent filter's
+    errors) shaded lightly behind it, its edge dotted. The vertical axis follows the errors: a
+    band wider than them is cut at the top rather than squeezing the errors flat."""
+    scores, estimates = run.scores, run.trajectories
     ax = _axes(ax)
     colour = _colours(list(scores))
     top = 0.0
@@ -342,8 +342,9 @@ def plot_error_vs_time(scores: Mapping[str, SystemScore], estimates: Mapping[str
     return ax.figure
 
 
-def plot_error_cdf(scores: Mapping[str, SystemScore], *, ax: Axes | None = None) -> Figure:
-    """Empirical CDF of the horizontal error (m) per system."""
+def plot_error_cdf(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
+    """Empirical CDF of the horizontal error (m) per scored system of ``run``."""
+    scores = run.scores
     ax = _axes(ax)
     colour = _colours(list(scores))
     for name, sc in scores.items():
@@ -364,12 +365,13 @@ def plot_error_cdf(scores: Mapping[str, SystemScore], *, ax: Axes | None = None)
     return ax.figure
 
 
-def plot_nees(tracks: Mapping[str, NeesTrack], title: str = "Horizontal position NEES against time",
+def plot_nees(run: ScoredRun, title: str = "Horizontal position NEES against time",
               *, ax: Axes | None = None) -> Figure:
-    """Horizontal NEES (2 dof) against time (s) per system, log scale, with the two-sided 95 %
-    chi-square band of one epoch (of a Monte-Carlo mean: of ``runs`` runs) shaded and the
-    expected value (the dof) as a line; the legend gives each system's mean NEES and the
-    share of epochs inside the band."""
+    """Horizontal NEES (2 dof) against time (s) per scored system of ``run``, log scale, with
+    the two-sided 95 % chi-square band of one epoch (of a Monte-Carlo mean: of ``runs`` runs)
+    shaded and the expected value (the dof) as a line; the legend gives each system's mean NEES
+    and the share of epochs inside the band."""
+    tracks = run.nees
     ax = _axes(ax)
     colour = _colours(list(tracks))
     low = []
@@ -461,22 +463,21 @@ RUN_FIGURES = ("trajectory", "error_vs_time", "error_cdf", "nees")
 where something was scored."""
 
 
-def run_figure_names(scores: Mapping[str, SystemScore] | None) -> list[str]:
-    """The figures of :data:`RUN_FIGURES` a run with these ``scores`` draws."""
-    return list(RUN_FIGURES) if scores else ["trajectory"]
+def run_figure_names(run: ScoredRun) -> list[str]:
+    """The figures of :data:`RUN_FIGURES` ``run`` draws."""
+    return list(RUN_FIGURES) if run.scores else ["trajectory"]
 
 
-def write_run_plots(out_dir: str | Path, estimates: Mapping[str, Trajectory],
-                    scores: Mapping[str, SystemScore] | None, transform: PlanarTransform,
-                    truths: Mapping[str, TruthTrack] | None, nees: Mapping[str, NeesTrack],
-                    figures: FiguresConfig | None = None, names: Sequence[str] | None = None) -> list[Path]:
-    """A run's plots in ``out_dir`` in the ``figures`` formats and dpi (default PNG): trajectory;
+_RUN_PLOTS = {"trajectory": plot_trajectories, "error_vs_time": plot_error_vs_time, "error_cdf": plot_error_cdf,
+              "nees": plot_nees}
+
+
+def write_run_plots(out_dir: str | Path, run: ScoredRun, figures: FiguresConfig | None = None,
+                    names: Sequence[str] | None = None) -> list[Path]:
+    """``run``'s plots in ``out_dir`` in the ``figures`` formats and dpi (default PNG): trajectory;
     where something was scored, error_vs_time (with the 2DRMS bands), error_cdf and nees
     (:func:`run_figure_names`); ``names``: only those of them. Returns the files written."""
     figures = figures or FiguresConfig()
     out_dir = Path(out_dir)
-    draw = {"trajectory": lambda: plot_trajectories(estimates, scores, transform, truths),
-            "error_vs_time": lambda: plot_error_vs_time(scores, estimates),
-            "error_cdf": lambda: plot_error_cdf(scores), "nees": lambda: plot_nees(nees)}
-    return [path for name in run_figure_names(scores) if names is None or name in names
-            for path in save_figure(draw[name](), out_dir / name, figures.formats, figures.dpi)]
+    return [path for name in run_figure_names(run) if names is None or name in names
+            for path in save_figure(_RUN_PLOTS[name](run), out_dir / name, figures.formats, figures.dpi)]

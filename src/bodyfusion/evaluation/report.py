@@ -136,6 +136,7 @@ def _run_facts(run: RunFolder) -> list[list[Any]]:
     inp = m.get("input") or {}
     facts = [["config", m.get("config")], ["config SHA-256", m.get("config_sha256")],
              ["evaluation alignment", m.get("alignment")], ["alignment rotation deg", tf.get("rotation_deg")],
+             ["navigation frame", run.tracks.frame.describe()],
              ["truth in this folder", run.truth_source or "none"],
              ["constraints", c.get("method", "none")], ["input samples dropped", inp.get("dropped_samples")],
              ["input warnings", len(inp.get("warnings") or [])], ["samples", rt.get("samples")],
@@ -158,10 +159,10 @@ def run_page(run: RunFolder) -> str:
         _section("Health findings", _findings(m)),
         _section("Metrics", table(SYSTEM_HEADER, _system_rows(m)), table(("run", "value"), _run_facts(run)),
                  "".join(_note(f"warning: {w}") for w in warnings)),
-        _section("Trajectory", _note(truth_note), _figure(figures.plan_view(run), "plot-trajectory", "")),
+        _section("Trajectory", _note(truth_note), _figure(figures.plan_view(run.tracks), "plot-trajectory", "")),
         _section("Horizontal error", _note("2DRMS = 2 √(σ_E² + σ_N²) of the trajectory covariance: about "
                                            "95–98 % of a consistent filter's horizontal errors lie below it."),
-                 _figure(figures.error_vs_time(run), "plot-error", "")),
+                 _figure(figures.error_vs_time(run.tracks), "plot-error", "")),
         _section("Consistency: NEES", _figure(figures.nees_profile(m), "plot-nees",
                                               "No NEES: the run had no truth to score against.")),
         _section("Consistency: NIS", _figure(figures.nis_means(m), "plot-nis", "No aiding update was made.")),

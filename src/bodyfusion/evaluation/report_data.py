@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +22,9 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 
 from bodyfusion.base.errors import FusionError, InputError
-from bodyfusion.base.types import Trajectory, TruthTrack
-from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore, score_systems
+from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
+from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
+from bodyfusion.evaluation.scored_run import ScoredTracks
 from bodyfusion.io.truth import read_truth_long_csv
 
 TRAJECTORY_COLUMNS = ("system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
@@ -31,19 +32,17 @@ TRAJECTORY_COLUMNS = ("system", "t", "east_m", "north_m", "up_m", "sd_east_m", "
 TRAJECTORY_HEADER = ",".join(TRAJECTORY_COLUMNS)
 
 
-@dataclass
+@dataclass(frozen=True)
 class RunFolder:
-    """A run folder's contents: ``metrics`` (metrics.json), ``trajectories`` (navigation frame),
-    ``truths`` (their own frame) and where they came from (``truth_source``, None: no truth in
-    the folder), the recorded evaluation ``transform`` and the ``scores`` it gives."""
+    """A run folder's contents: ``metrics`` (metrics.json), the ``tracks`` it holds (the
+    trajectories in the frame metrics.json records, the truths in their own frame, the recorded
+    evaluation transform and the scores it gives; no NEES series) and where the truth came from
+    (``truth_source``, None: no truth in the folder)."""
 
     folder: Path
     metrics: dict[str, Any]
-    trajectories: dict[str, Trajectory]
-    truths: dict[str, TruthTrack] = field(default_factory=dict)
+    tracks: ScoredTracks
     truth_source: str | None = None
-    transform: PlanarTransform = field(default_factory=PlanarTransform.identity)
-    scores: dict[str, SystemScore] = field(default_factory=dict)
 
 
 @dataclass
@@ -132,7 +131,9 @@ def read_run_folder(folder: Path) -> RunFolder:
         _, scores = score_systems(aligned, scorable, alignment="none")
     except FusionError as err:  # a truth on another clock than the estimates
         raise FusionError(f"{folder}: {err}") from None
-    return RunFolder(folder, metrics, trajectories, truths, source, transform, scores)
+    frame = NavigationFrame.from_dict(metrics.get("frame"))
+    tracks = ScoredTracks(trajectories, truths, transform, scores, frame=frame)
+    return RunFolder(folder, metrics, tracks, source)
 
 
 def read_study_folder(folder: Path) -> StudyFolder:

@@ -17,7 +17,7 @@ from plotly.colors import qualitative
 from plotly.subplots import make_subplots
 
 from bodyfusion.evaluation.metrics import horizontal_sigma_m
-from bodyfusion.evaluation.report_data import RunFolder
+from bodyfusion.evaluation.scored_run import ScoredRun
 from bodyfusion.evaluation.thinning import thin_index
 
 PALETTE = qualitative.Plotly
@@ -52,7 +52,7 @@ def _legend_marks(fig: go.Figure) -> None:
                         marker={"symbol": symbol, "size": 10, "color": "#555"})
 
 
-def plan_view(run: RunFolder) -> go.Figure:
+def plan_view(run: ScoredRun) -> go.Figure:
     """Estimates (solid, after the evaluation transform) against truth (dashed, darker; surveyed
     points as crosses), east vs north at equal scale; circles at the starts, squares at the ends."""
     fig = go.Figure()
@@ -84,7 +84,7 @@ def plan_view(run: RunFolder) -> go.Figure:
     return fig
 
 
-def error_vs_time(run: RunFolder) -> go.Figure:
+def error_vs_time(run: ScoredRun) -> go.Figure:
     """Horizontal error (m) against time (s) at the truth epochs with each system's 2DRMS band
     (0 to 2 √(σ_E² + σ_N²)), the axis following the errors; without truth, the 2DRMS alone."""
     fig = go.Figure()

@@ -40,7 +40,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.core.system import SensorSystem
 from bodyfusion.io.gnss import enu_to_geodetic
 
@@ -91,16 +91,6 @@ def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], d
                 system, t, *numbers = piece[:len(TRAJECTORY_COLUMNS)]
                 writer.write_batch(pa.RecordBatch.from_arrays(
                     [system.dictionary_decode(), pc.round(t, 6), *(pc.round(v, 5) for v in numbers)], schema=schema))
-
-
-def frame_metadata(geodetic_origin: tuple[float, float, float] | None) -> dict:
-    """The navigation frame as the Parquet schema records it (``bodyfusion.frame``)."""
-    origin = None if geodetic_origin is None else dict(zip(("lat_deg", "lon_deg", "height_m"),
-                                                           map(float, geodetic_origin)))
-    return {"name": "ENU", "axes": ["east", "north", "up"], "unit": "m",
-            "origin": "the geodetic origin" if origin else "the start of the run (no geodetic origin)",
-            "geodetic_origin": origin, "alignment": "none (before any evaluation alignment)",
-            "time": {"unit": "s", "epoch": "the input's clock (no absolute epoch)"}}
 
 
 def _numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
@@ -158,16 +148,16 @@ def trajectory_table(trajectories: Mapping[str, Trajectory], decimate: int = 1) 
 
 
 def write_trajectories_parquet(path: Path, trajectories: Mapping[str, Trajectory], *, config_sha256: str,
-                               geodetic_origin: tuple[float, float, float] | None, decimate: int = 1) -> None:
+                               frame: NavigationFrame, decimate: int = 1) -> None:
     """``trajectories.parquet``: :func:`trajectory_table` with the schema metadata
     ``bodyfusion.format_version``, ``bodyfusion.version``, ``bodyfusion.config_sha256`` and
-    ``bodyfusion.frame`` (JSON, :func:`frame_metadata`); written :data:`ROWS` epochs of one
-    system at a time (a row group each)."""
+    ``bodyfusion.frame`` (JSON, :meth:`~bodyfusion.base.types.NavigationFrame.to_dict`); written
+    :data:`ROWS` epochs of one system at a time (a row group each)."""
     from bodyfusion import __version__
 
     meta = {"bodyfusion.format_version": TRAJECTORY_FORMAT_VERSION, "bodyfusion.version": __version__,
             "bodyfusion.config_sha256": config_sha256,
-            "bodyfusion.frame": json.dumps(frame_metadata(geodetic_origin))}
+            "bodyfusion.frame": json.dumps(frame.to_dict())}
     writer = None
     try:
         for piece in _trajectory_pieces(trajectories, decimate):

@@ -96,6 +96,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
                           "translation_m": [float(v) for v in t.translation_m],
                           "vertical_offset_m": float(t.vertical_offset_m)},
         },
+        "frame": result.frame.to_dict(),
         "heading_alignment_deg": {k: float(np.rad2deg(v)) for k, v in result.heading_rotations_rad.items()},
         "heading_ties": {tie.system: tie.summary() for tie in result.fuser.heading_ties},
         "health": {"findings": [f.to_dict() for f in result.findings]},
@@ -135,8 +136,9 @@ def _write_tracks(result: RunResult, out_dir: Path) -> None:
     """The TUM files and, for a geo-referenced run, track.geojson."""
     decimate = result.loaded.layout.output.decimate
     write_tum(out_dir / "tum", result.trajectories, result.truths, decimate, attitudes=SystemAttitudes(result.systems))
-    if result.geodetic_origin is not None:
-        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.geodetic_origin, decimate)
+    if result.frame.geodetic_origin is not None:
+        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.frame.geodetic_origin,
+                      decimate)
 
 
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
@@ -150,18 +152,16 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     output = result.loaded.layout.output
-    figures = dict(out_dir=out_dir, estimates=result.trajectories, scores=result.scores, transform=result.transform,
-                   truths=result.truths, nees=result.nees, figures=output.figures)
     if output.plots and figure_process is not None:
         log.info("plotting beside the other outputs")
-        figure_process.submit(**figures)
+        figure_process.submit(out_dir, result, output.figures)
     log.info("writing the outputs to %s", out_dir)
     long = sum(len(track.t) for track in result.trajectories.values()) // output.decimate > ROWS  # worth a fork
     beside = Forked(lambda: _write_tracks(result, out_dir), fork=long)  # at the same time as the two tables
     write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
     write_strides_csv(out_dir / "strides.csv", result.systems)
     write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
-                               config_sha256=result.loaded.sha256, geodetic_origin=result.geodetic_origin)
+                               config_sha256=result.loaded.sha256, frame=result.frame)
     doc = metrics_document(result, config_label, total_wall_s)
     (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     beside.result()
@@ -171,4 +171,4 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
         from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
         log.info("plotting")
-        plots.write_run_plots(**figures)
+        plots.write_run_plots(out_dir, result, output.figures)

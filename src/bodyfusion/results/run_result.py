@@ -1,9 +1,12 @@
-"""What a run produced: the systems with their histories, the trajectories, the truth, the
-scores and the consistency figures, the fuser's and the smoothers' reports (:class:`RunResult`)."""
+"""What a run produced: the systems with their histories, the trajectories in their frame, the
+truth, the scores and the consistency figures, the fuser's and the smoothers' reports, the
+findings (:class:`RunResult`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -12,7 +15,7 @@ from bodyfusion.core.fuser import FuserReport
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, CovarianceHistory, SensorSystem
 from bodyfusion.base.findings import Finding
-from bodyfusion.base.types import InputReport, Trajectory, TruthTrack
+from bodyfusion.base.types import InputReport, NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.evaluation.consistency import NeesTrack
 from bodyfusion.nav.filter_health import CovarianceHealth
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
@@ -21,35 +24,51 @@ if TYPE_CHECKING:  # pandas loads when a table is asked for
     import pandas as pd
 
 
-@dataclass
+_MAPPINGS = ("systems", "trajectories", "truths", "scores", "heading_rotations_rad", "timings_s", "aiding", "nees",
+             "sensor_alone")
+
+
+@dataclass(frozen=True)
 class RunResult:
-    """Everything a run produced: systems (with their histories), trajectories, scores; its
-    tables as pandas DataFrames (:meth:`to_frame`, :meth:`states`, :meth:`covariances`,
-    :meth:`events`, :meth:`innovations`, :meth:`constraint_events`, :meth:`errors`,
-    :meth:`truth_frame`)."""
+    """Everything a run produced: systems (with their histories), trajectories in ``frame``
+    (units: :data:`~bodyfusion.base.types.NavigationFrame.UNITS`), scores, findings; its tables
+    as pandas DataFrames (:meth:`to_frame`, :meth:`states`, :meth:`covariances`, :meth:`events`,
+    :meth:`innovations`, :meth:`constraint_events`, :meth:`errors`, :meth:`truth_frame`), each
+    with the frame and units in its ``attrs``.
+
+    Frozen: its attributes cannot be set and its mappings are read-only views. Building one
+    copies nothing: it holds what the run made. It is a
+    :class:`~bodyfusion.evaluation.scored_run.ScoredRun`: the figures
+    (:mod:`bodyfusion.evaluation.plots`) take it as it is."""
 
     loaded: LoadedLayout
-    systems: dict[str, SensorSystem]
-    trajectories: dict[str, Trajectory]
-    truths: dict[str, TruthTrack]
+    systems: Mapping[str, SensorSystem]
+    trajectories: Mapping[str, Trajectory]
+    truths: Mapping[str, TruthTrack]
     transform: PlanarTransform
-    scores: dict[str, SystemScore]
+    scores: Mapping[str, SystemScore]
     fuser: FuserReport
-    heading_rotations_rad: dict[str, float]
-    geodetic_origin: tuple[float, float, float] | None
-    timings_s: dict[str, float]
-    aiding: dict[str, AidingSource] = field(default_factory=dict)
+    heading_rotations_rad: Mapping[str, float]
+    frame: NavigationFrame
+    """The navigation frame of ``trajectories``: ENU m, its geodetic origin where known, its heading reference."""
+    timings_s: Mapping[str, float]
+    aiding: Mapping[str, AidingSource] = field(default_factory=dict)
     """Aiding sources (UWB tags...): no trajectory; diagnostics in metrics.json ``aiding``."""
     smoothed_constraints: dict | None = None
     """Counts of the constraints applied to the smoothed tracks (``smoother.constrain_smoothed``)."""
-    nees: dict[str, NeesTrack] = field(default_factory=dict)
+    nees: Mapping[str, NeesTrack] = field(default_factory=dict)
     """Horizontal NEES against truth of every scored system (after the evaluation alignment)."""
-    sensor_alone: dict[str, dict] = field(default_factory=dict)
+    sensor_alone: Mapping[str, dict] = field(default_factory=dict)
     """Per system with an absolute sensor (a phone's GNSS) and geo-referenced truth: the errors
     of that sensor used alone (:func:`bodyfusion.evaluation.metrics.sensor_alone_score`)."""
-    findings: list[Finding] = field(default_factory=list)
+    findings: tuple[Finding, ...] = ()
     """Health findings of the run (:class:`~bodyfusion.base.findings.Finding`): the systems', the
     fuser's and the evaluation's, in that order."""
+
+    def __post_init__(self) -> None:
+        for name in _MAPPINGS:  # read-only views of the run's own dicts: nothing copied
+            object.__setattr__(self, name, MappingProxyType(getattr(self, name)))
+        object.__setattr__(self, "findings", tuple(self.findings))
 
     def health(self) -> dict[str, dict]:
         """metrics.json ``systems.<name>.health``: each system's own figures
@@ -72,6 +91,13 @@ class RunResult:
         return int(np.sum([s.samples for s in (*self.systems.values(), *self.aiding.values())]))
 
     # --- tables ------------------------------------------------------------------------
+
+    @staticmethod
+    def _in_frame(table: pd.DataFrame, frame: dict | str) -> pd.DataFrame:
+        """``table`` with ``attrs`` ``frame`` (its positions' frame) and ``units`` (of each quantity)."""
+        table.attrs.update(frame=frame, units=dict(NavigationFrame.UNITS))
+        return table
+
     # Each returns a pandas DataFrame (results/frames.py, imported when a table is asked
     # for: a run from the command line needs none, and pandas takes a while to load).
 
@@ -89,7 +115,7 @@ class RunResult:
         (:func:`bodyfusion.results.frames.trajectories`)."""
         from bodyfusion.results import frames
 
-        return frames.trajectories(self.trajectories, self.systems)
+        return self._in_frame(frames.trajectories(self.trajectories, self.systems), self.frame.to_dict())
 
     def truth_frame(self) -> pd.DataFrame:
         """The truth tracks in long form: ``system``, ``t`` (s), ``east_m``, ``north_m``, ``up_m``."""
@@ -102,7 +128,7 @@ class RunResult:
         (:func:`bodyfusion.results.frames.errors`)."""
         from bodyfusion.results import frames
 
-        return frames.errors(self.scores)
+        return self._in_frame(frames.errors(self.scores), "the truth's, the estimates after the evaluation alignment")
 
     def states(self, name: str) -> pd.DataFrame:
         """System ``name``'s estimated states over time, in the column names every plugin shares
@@ -112,7 +138,7 @@ class RunResult:
         random walk its position."""
         import pandas as pd
 
-        return pd.DataFrame(self.system(name).states())
+        return self._in_frame(pd.DataFrame(self.system(name).states()), self.frame.to_dict())
 
     def covariances(self, name: str) -> CovarianceHistory:
         """System ``name``'s covariance over time as it stores it

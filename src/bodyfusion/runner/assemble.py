@@ -1,13 +1,14 @@
 """A layout's systems built and their frame set up: the run's context (gravity, latitude, seed,
 outages), one system or aiding source per layout entry (found through the plugin registry), the
-ENU frame's geodetic origin, and the truth tracks read in that frame."""
+ENU frame (its geodetic origin and heading reference), and the truth tracks read in that frame."""
 
 from __future__ import annotations
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.forking import Forked
-from bodyfusion.base.types import TruthTrack
+from bodyfusion.base.types import NavigationFrame, TruthTrack
 from bodyfusion.core import registry as plugin_registry
+from bodyfusion.core.heading import heading_reference, with_heading
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.system import AidingSource, LayoutContext, SensorSystem
 from bodyfusion.nav.earth import normal_gravity
@@ -48,6 +49,19 @@ def geodetic_origin(loaded: LoadedLayout, systems: dict[str, SensorSystem]) -> t
     if loaded.layout.geodetic_origin is not None:
         return loaded.layout.geodetic_origin
     return next((s.geodetic_origin for s in systems.values() if s.geodetic_origin is not None), None)
+
+
+def navigation_frame(loaded: LoadedLayout, systems: dict[str, SensorSystem],
+                     origin: tuple[float, float, float] | None) -> NavigationFrame:
+    """The run's frame: ENU about ``origin``; azimuths from North where the heading reference
+    (:func:`~bodyfusion.core.heading.heading_reference`) has a geographic heading or one set in
+    the layout, else from that reference system's initial heading (``unknown``: no system has a
+    heading, and the positions are as the data give them)."""
+    ref = heading_reference(systems, loaded.layout.heading_alignment)
+    if ref is None:
+        return NavigationFrame(origin, "north" if origin is not None else "unknown")
+    system = with_heading(systems)[ref]
+    return NavigationFrame(origin, ref if system.heading_is_auto and not system.heading_is_absolute else "north")
 
 
 def load_truth(loaded: LoadedLayout, origin: tuple[float, float, float] | None = None) -> dict[str, TruthTrack]:

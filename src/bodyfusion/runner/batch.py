@@ -27,7 +27,7 @@ from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_fi
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
 from bodyfusion.outputs.write import write_outputs
 from bodyfusion.results.run_result import RunResult
-from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth
+from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth, navigation_frame
 
 __all__ = ["run", "run_layout"]
 
@@ -105,15 +105,15 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
              and offers(systems[name], AbsoluteFixes) and (fixes := systems[name].absolute_fixes()) is not None}
     timings["scoring_s"] = time.perf_counter() - t0
     log.debug("stage times: %s", ", ".join(f"{k} {v:.3f}" for k, v in timings.items()))
-    result = RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations, origin, timings,
-                       aiding, smoothed_constraints, nees, sensor_alone=alone)
-    result.findings = [f for s in (*systems.values(), *aiding.values()) for f in s.findings()]
+    findings = [f for s in (*systems.values(), *aiding.values()) for f in s.findings()]
     if report.limits is not None:
-        result.findings += report.limits.findings()
-        result.findings += truth_separation_findings(constraints, report.constraint_log, truths)
-    result.findings += sensor_alone_findings(scores, alone)
-    result.findings += large_error_findings(scores, result.findings)
-    return result
+        findings += report.limits.findings()
+        findings += truth_separation_findings(constraints, report.constraint_log, truths)
+    findings += sensor_alone_findings(scores, alone)
+    findings += large_error_findings(scores, findings)
+    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations,
+                     navigation_frame(loaded, systems, origin), timings, aiding, smoothed_constraints, nees,
+                     sensor_alone=alone, findings=tuple(findings))
 
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
