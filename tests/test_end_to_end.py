@@ -55,7 +55,7 @@ def test_run_writes_the_contract_outputs_for_a_simulation(perfect_walk, tmp_path
         assert set(block["horizontal_error_m"]) == {"rmse", "mean", "max", "p50", "p75", "p90", "p95", "p99"}
         assert block["distance_m"] > 60
     lines = (out / "trajectories.csv").read_text().splitlines()
-    assert lines[0] == "system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m"
+    assert lines[0].startswith("system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m,v_east_mps,")
     assert len(lines) - 1 == sum(b["samples"] for b in doc["systems"].values())
     for png in ("trajectory.png", "error_vs_time.png", "error_cdf.png"):
         assert (out / png).stat().st_size > 1000

@@ -1,5 +1,6 @@
 """The trajectory files other tools read (bodyfusion.outputs.trajectories): trajectories.parquet beside
-the CSV, TUM files for evo, track.geojson with times and truth, and the reader of both tables."""
+the CSV with velocity and attitude, TUM files for evo, track.geojson with times and truth, and the
+reader of both tables (bodyfusion.io.trajectory_files)."""
 
 from __future__ import annotations
 
@@ -16,10 +17,12 @@ import pytest
 import bodyfusion
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.outputs import trajectories as exports
+from bodyfusion.io.trajectory_files import MOTION_COLUMNS, MOTION_SD_COLUMNS, TRAJECTORY_COLUMNS, read_trajectories
+from bodyfusion.nav.attitude import quat_from_azimuth_pitch_roll
 from bodyfusion.outputs.trajectories import (
     GEOJSON_STEP_S,
     _json_floats,
-    read_trajectories,
+    euler_deg,
     write_geojson,
     write_trajectories_csv,
     write_trajectories_parquet,
@@ -58,7 +61,7 @@ def synthetic(n: int = 50) -> dict[str, Trajectory]:
 def read_csv_rows(path: Path) -> tuple[list[str], np.ndarray]:
     with path.open() as fh:
         rows = list(csv.reader(fh))[1:]
-    return [r[0] for r in rows], np.array([[float(v) for v in r[1:]] for r in rows])
+    return [r[0] for r in rows], np.array([[float(v) if v else np.nan for v in r[1:]] for r in rows])
 
 
 # --------------------------------------------------------------------------- trajectories.parquet
@@ -68,23 +71,25 @@ def test_parquet_holds_the_csv_values_typed_with_units_frame_and_provenance(geo_
     result, out = geo_run
     table = pq.read_table(out / "trajectories.parquet")
     names, values = read_csv_rows(out / "trajectories.csv")
-    assert table.column_names[:8] == ["system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m",
-                                      "sd_up_m"]
+    assert table.column_names == [*TRAJECTORY_COLUMNS, "cov_east_north_m2"]
     assert table.schema.field("system").type == pa.dictionary(pa.int32(), pa.string())
     assert all(table.schema.field(c).type == pa.float64() for c in table.column_names[1:])
     assert table.column("system").to_pylist() == names
-    parquet = np.column_stack([table.column(c).to_numpy() for c in table.column_names[1:8]])
-    np.testing.assert_allclose(parquet, values, rtol=0, atol=5e-6)  # the CSV prints µs and 10 µm
+    parquet = np.column_stack([table.column(c).to_numpy(zero_copy_only=False) for c in TRAJECTORY_COLUMNS[1:]])
+    np.testing.assert_allclose(parquet, values, rtol=0, atol=5e-6)  # the CSV prints µs and 10 µm; null: empty
     cov = table.column("cov_east_north_m2").to_numpy(zero_copy_only=False)
     np.testing.assert_array_equal(cov, np.concatenate([tr.pos_cov_en for tr in result.trajectories.values()]))
 
     units = {f.name: f.metadata[b"unit"].decode() for f in table.schema if f.metadata and b"unit" in f.metadata}
-    assert units == {"t": "s", "east_m": "m", "north_m": "m", "up_m": "m", "sd_east_m": "m", "sd_north_m": "m",
-                     "sd_up_m": "m", "cov_east_north_m2": "m^2"}
+    assert {k: v for k, v in units.items() if k[:3] not in ("v_e", "v_n", "v_u", "sd_") or k.endswith("_m")} == {
+        "t": "s", "east_m": "m", "north_m": "m", "up_m": "m", "sd_east_m": "m", "sd_north_m": "m", "sd_up_m": "m",
+        "qw": "1", "qx": "1", "qy": "1", "qz": "1", "roll_deg": "deg", "pitch_deg": "deg", "yaw_deg": "deg",
+        "cov_east_north_m2": "m^2"}
+    assert units["v_up_mps"] == units["sd_v_east_mps"] == "m/s" and units["sd_yaw_deg"] == "deg"
     meta = {k.decode(): v.decode() for k, v in table.schema.metadata.items()}
     assert meta["bodyfusion.version"] == bodyfusion.__version__
     assert meta["bodyfusion.config_sha256"] == result.loaded.sha256
-    assert meta["bodyfusion.format_version"] == "1"
+    assert meta["bodyfusion.format_version"] == "2"
     frame = json.loads(meta["bodyfusion.frame"])
     assert frame["name"] == "ENU" and frame["unit"] == "m"
     assert frame["geodetic_origin"] == {"lat_deg": ORIGIN[0], "lon_deg": ORIGIN[1], "height_m": ORIGIN[2]}
@@ -147,7 +152,8 @@ def test_tum_text_is_what_the_csv_writer_prints_of_the_float64_columns(tmp_path,
     truths = {"foot": TruthTrack(t.copy(), rng.normal(size=(50, 3))),  # its system's times
               "hand": TruthTrack(t[::-1] * -1e-6, rng.normal(size=(50, 3)))}
     q = rng.normal(size=(50, 4))
-    write_tum(tmp_path, trajs, truths, attitudes={"foot": q})
+    trajs["foot"].q_nb = q
+    write_tum(tmp_path, trajs, truths)
     for name, (tt, pos, quat) in {"foot": (t, trajs["foot"].pos_n, q), "hand": (t[::2], trajs["hand"].pos_n, None),
                                   "foot_truth": (t, truths["foot"].pos_n, None),
                                   "hand_truth": (truths["hand"].t, truths["hand"].pos_n, None)}.items():
@@ -242,7 +248,7 @@ def test_the_csv_prints_each_number_rounded_to_its_unit_and_quotes_names_only_wh
     trajs = {"foot": Trajectory(t, pos, sd), "hand, left": Trajectory(t, pos[::-1], sd[::-1])}
     write_trajectories_csv(tmp_path / "t.csv", trajs)
     rows = list(csv.reader((tmp_path / "t.csv").open()))
-    assert rows[0] == ["system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m"]
+    assert rows[0] == list(TRAJECTORY_COLUMNS)
     lines = (tmp_path / "t.csv").read_text().splitlines()
     assert lines[1].startswith('"foot",') and lines[501].startswith('"hand, left",')
     write_trajectories_csv(tmp_path / "bare.csv", {"foot": trajs["foot"]})
@@ -251,5 +257,50 @@ def test_the_csv_prints_each_number_rounded_to_its_unit_and_quotes_names_only_wh
         body = rows[1 + 500 * k:1 + 500 * (k + 1)]
         assert {r[0] for r in body} == {name}
         printed = [[float(f"{v:.6f}")] + [float(f"{x:.5f}") for x in (*p, *s)] for v, p, s in zip(tr.t, tr.pos_n, tr.pos_sd)]
-        assert [[float(c) for c in r[1:]] for r in body] == printed
-        assert all(len(c.partition(".")[2]) <= (6 if j == 1 else 5) for r in body for j, c in enumerate(r) if j)
+        assert [[float(c) for c in r[1:8]] for r in body] == printed
+        assert all(len(c.partition(".")[2]) <= (6 if j == 1 else 5) for r in body for j, c in enumerate(r[:8]) if j)
+        assert all(c == "" for r in body for c in r[8:])  # no velocity, no attitude: empty cells
+
+
+# --------------------------------------------------------------------------- velocity and attitude
+
+
+def test_velocity_and_attitude_follow_the_positions_with_euler_angles_in_enu(tmp_path):
+    """The contract's columns after the positions: the foot's velocity, quaternion and ZYX Euler
+    angles (yaw counter-clockwise from East: 90° − azimuth), the σ columns empty; a system
+    without such states has empty cells; both files read back to what was written."""
+    n = 40
+    t = np.arange(n) * 0.01
+    angles = np.column_stack([np.linspace(10.0, 350.0, n), np.linspace(-20.0, 20.0, n), np.linspace(5.0, -5.0, n)])
+    q = np.array([quat_from_azimuth_pitch_roll(*np.radians(a)) for a in angles])
+    vel = np.column_stack([np.sin(t), np.cos(t), 0.1 * t])
+    foot = Trajectory(t, np.zeros((n, 3)), np.ones((n, 3)), vel_n=vel, q_nb=q)
+    trajs = {"foot": foot, "hand": Trajectory(t, np.ones((n, 3)), np.ones((n, 3)))}
+    roll_pitch_yaw = euler_deg(q)
+    np.testing.assert_allclose(roll_pitch_yaw[:, :2], angles[:, [2, 1]], atol=1e-9)
+    np.testing.assert_allclose(np.mod(90.0 - roll_pitch_yaw[:, 2], 360.0), angles[:, 0], atol=1e-9)
+    write_trajectories_csv(tmp_path / "t.csv", trajs)
+    write_trajectories_parquet(tmp_path / "t.parquet", trajs, config_sha256="0", frame=NavigationFrame())
+    rows = list(csv.DictReader((tmp_path / "t.csv").open()))
+    foot_rows = [r for r in rows if r["system"] == "foot"]
+    np.testing.assert_allclose([[float(r[c]) for c in MOTION_COLUMNS] for r in foot_rows],
+                               np.column_stack([vel, q, roll_pitch_yaw]), rtol=0, atol=5e-6)
+    assert all(r[c] == "" for r in foot_rows for c in MOTION_SD_COLUMNS)
+    assert all(r[c] == "" for r in rows if r["system"] == "hand" for c in (*MOTION_COLUMNS, *MOTION_SD_COLUMNS))
+    table = pq.read_table(tmp_path / "t.parquet")
+    assert table.schema.field("yaw_deg").metadata[b"unit"] == b"deg"
+    assert table.schema.field("sd_v_east_mps").metadata[b"unit"] == b"m/s"
+    for path, atol in ((tmp_path / "t.parquet", 0.0), (tmp_path / "t.csv", 5e-8)):
+        back = read_trajectories(path)
+        np.testing.assert_allclose(back["foot"].q_nb, q, rtol=0, atol=atol)
+        np.testing.assert_allclose(back["foot"].vel_n, vel, rtol=0, atol=max(atol * 100, 0.0))
+        assert back["hand"].vel_n is None and back["hand"].q_nb is None
+
+
+def test_a_foot_runs_csv_carries_its_filters_velocity_and_attitude(geo_run):
+    result, out = geo_run
+    back = read_trajectories(out / "trajectories.parquet")
+    states = result.states("left_foot")
+    np.testing.assert_array_equal(back["left_foot"].vel_n, states[["v_east_mps", "v_north_mps", "v_up_mps"]])
+    np.testing.assert_array_equal(back["left_foot"].q_nb, states[["qw", "qx", "qy", "qz"]])
+    assert back["hand_phone"].q_nb is None

@@ -102,13 +102,17 @@ class Trajectory:
     """Estimated track of one system in the navigation frame (ENU, m).
 
     t: (N,) s.  pos_n: (N, 3) m.  pos_sd: (N, 3) one-sigma position, m.  pos_cov_en: (N,)
-    east–north position covariance, m² (None: not given, taken as 0).
+    east–north position covariance, m² (None: not given, taken as 0).  vel_n: (N, 3) velocity,
+    ENU m/s, and q_nb: (N, 4) attitude quaternion (scalar first, body to ENU), where the system
+    estimates them (None: it does not).
     """
 
     t: np.ndarray
     pos_n: np.ndarray
     pos_sd: np.ndarray
     pos_cov_en: np.ndarray | None = None
+    vel_n: np.ndarray | None = None
+    q_nb: np.ndarray | None = None
 
     def horizontal_covariance(self) -> np.ndarray:
         """(N, 2, 2) east–north position covariance, m²."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Set
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 
 import numpy as np
 
@@ -87,5 +88,5 @@ def constrain_trajectories(trajectories: Mapping[str, Trajectory], smoothed: Set
     for k, name in enumerate(order):
         tr = trajectories[name]
         dp = np.column_stack([np.interp(tr.t, grid, corr[:, 3 * k + ax]) for ax in range(3)])
-        out[name] = Trajectory(tr.t, tr.pos_n + dp, tr.pos_sd, tr.pos_cov_en)
+        out[name] = replace(tr, pos_n=tr.pos_n + dp)
     return out, {"constrained_samples": count, "method": method}

@@ -19,17 +19,14 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.csv as pacsv
 
 from bodyfusion.base.errors import FusionError, InputError
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems
 from bodyfusion.evaluation.scored_run import ScoredTracks
+from bodyfusion.io.trajectory_files import read_trajectories
 from bodyfusion.io.truth import read_truth_long_csv
 
-TRAJECTORY_COLUMNS = ("system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
-"""The columns of ``trajectories.csv`` (docs/contract.md)."""
-TRAJECTORY_HEADER = ",".join(TRAJECTORY_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -68,26 +65,6 @@ def _read_json(path: Path) -> dict[str, Any]:
     return doc
 
 
-def read_trajectories_csv(path: Path) -> dict[str, Trajectory]:
-    """``trajectories.csv`` → one :class:`Trajectory` per system, in the order of the file."""
-    types = {"system": pa.string(), **{c: pa.float64() for c in TRAJECTORY_COLUMNS[1:]}}
-    try:
-        table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(column_types=types,
-                                                                          include_columns=list(TRAJECTORY_COLUMNS)))
-    except pa.ArrowInvalid as err:
-        raise InputError(path, f"not a trajectories table ({TRAJECTORY_HEADER}): {err}") from None
-    except OSError as err:
-        raise InputError(path, f"cannot read: {err}") from None
-    names = np.asarray(table.column("system").to_numpy(zero_copy_only=False), dtype=str)
-    data = np.column_stack([table.column(c).to_numpy() for c in TRAJECTORY_COLUMNS[1:]])
-    unique, first, which = np.unique(names, return_index=True, return_inverse=True)
-    out = {}
-    for u in np.argsort(first):
-        rows = data[which == u]
-        out[str(unique[u])] = Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:7])
-    return out
-
-
 def read_tum_truth(path: Path, *, sparse: bool = False) -> TruthTrack:
     """A TUM file (``t x y z qx qy qz qw`` per line, s and m) as a truth track."""
     try:
@@ -122,7 +99,7 @@ def read_run_folder(folder: Path) -> RunFolder:
     metrics = _read_json(folder / "metrics.json")
     if not (folder / "trajectories.csv").is_file():
         raise FusionError(f"{folder}: no trajectories.csv beside metrics.json: not a complete run folder")
-    trajectories = read_trajectories_csv(folder / "trajectories.csv")
+    trajectories = read_trajectories(folder / "trajectories.csv")
     truths, source = _truths(folder, metrics)
     transform = _transform(metrics)
     aligned = {n: Trajectory(tr.t, transform.apply(tr.pos_n), tr.pos_sd) for n, tr in trajectories.items()}

@@ -4,7 +4,10 @@ Every file holds positions in the navigation frame (ENU, m; docs/conventions.md)
 evaluation alignment, times in seconds of the input's clock (the run has no absolute epoch,
 so no calendar time is written):
 
-- ``trajectories.csv``: the long format of docs/contract.md (:func:`write_trajectories_csv`).
+- ``trajectories.csv``: the long format of docs/contract.md (:func:`write_trajectories_csv`):
+  positions and their σ, then velocity and attitude (quaternion and ZYX Euler angles) where
+  the system has them and their σ where it gives them
+  (:data:`~bodyfusion.io.trajectory_files.TRAJECTORY_COLUMNS`).
 - ``trajectories.parquet``: the same columns, float64 at full precision, plus
   ``cov_east_north_m2`` (the east–north position covariance, null where the system gives
   none); every field carries its unit in its metadata and the schema carries the frame,
@@ -12,18 +15,18 @@ so no calendar time is written):
   :data:`TRAJECTORY_FORMAT_VERSION` (:func:`write_trajectories_parquet`).
 - ``tum/<system>.txt`` and, where truth exists, ``tum/<system>_truth.txt``: the TUM RGB-D
   format ``timestamp tx ty tz qx qy qz qw`` read by evo (``evo_ape tum tum/x_truth.txt
-  tum/x.txt -a``). The orientation is the system's attitude (body to ENU) where it estimates
-  one (:func:`system_attitudes`: the foot INS), else the identity quaternion, as for every
-  truth track (a :class:`~bodyfusion.base.types.Trajectory` or a truth holds no attitude): compare
-  positions (evo's default APE ``--pose_relation trans_part``). A truth without heights is
-  written with ``tz`` 0; compare it with ``--project_to_plane xy`` (:func:`write_tum`).
+  tum/x.txt -a``). The orientation is the trajectory's attitude (body to ENU) where it has
+  one (the foot INS), else the identity quaternion, as for every truth track (a truth holds
+  no attitude): compare positions (evo's default APE ``--pose_relation trans_part``). A truth
+  without heights is written with ``tz`` 0; compare it with ``--project_to_plane xy``
+  (:func:`write_tum`).
 - ``track.geojson`` (runs with a geodetic origin only; without one no file is written): a
   WGS84 FeatureCollection, one LineString per system with per-vertex ``times`` (s) and
   one-sigma ``sd_east_m``/``sd_north_m``/``sd_up_m``, and the truth of each system, a
   LineString with its ``times`` or, for surveyed points, one Point per point with its ``t``;
   lines keep at most one vertex in each :data:`GEOJSON_STEP_S` (:func:`write_geojson`).
 
-:func:`read_trajectories` reads the CSV or the Parquet file back into trajectories.
+:func:`bodyfusion.io.trajectory_files.read_trajectories` reads the CSV or the Parquet file back.
 """
 
 from __future__ import annotations
@@ -38,31 +41,38 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
+from scipy.spatial.transform import Rotation
 
-from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
-from bodyfusion.core.system import SensorSystem
 from bodyfusion.io.gnss import enu_to_geodetic
+from bodyfusion.io.trajectory_files import (
+    COV_EN_COLUMN,
+    MOTION_COLUMNS,
+    POSITION_COLUMNS,
+    TRAJECTORY_COLUMNS,
+    TRAJECTORY_HEADER,
+    UNITS,
+)
 
-TRAJECTORY_COLUMNS = ("system", "t", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
-"""The columns of ``trajectories.csv`` (docs/contract.md), in order."""
+TRAJECTORY_FORMAT_VERSION = "2"
+"""Version of the Parquet trajectory layout (``bodyfusion.format_version`` in its schema): 2
+added velocity, attitude and their 1σ."""
 
-TRAJECTORY_HEADER = ",".join(TRAJECTORY_COLUMNS)
-
-COV_EN_COLUMN = "cov_east_north_m2"
-"""The Parquet file's east–north position covariance column (m²)."""
-
-TRAJECTORY_FORMAT_VERSION = "1"
-"""Version of the Parquet trajectory layout (``bodyfusion.format_version`` in its schema)."""
-
-_UNITS = {"t": "s", "east_m": "m", "north_m": "m", "up_m": "m", "sd_east_m": "m", "sd_north_m": "m",
-          "sd_up_m": "m", COV_EN_COLUMN: "m^2"}
 _DESCRIPTIONS = {
     "system": "system name", "t": "time of the input's clock",
     "east_m": "east position", "north_m": "north position", "up_m": "up position",
     "sd_east_m": "one-sigma east position", "sd_north_m": "one-sigma north position",
-    "sd_up_m": "one-sigma up position", COV_EN_COLUMN: "east-north position covariance (null: not given)",
+    "sd_up_m": "one-sigma up position",
+    "v_east_mps": "east velocity", "v_north_mps": "north velocity", "v_up_mps": "up velocity",
+    "qw": "attitude quaternion, scalar part (body to ENU)", "qx": "attitude quaternion, x",
+    "qy": "attitude quaternion, y", "qz": "attitude quaternion, z",
+    "roll_deg": "roll (ZYX Euler angles in ENU)", "pitch_deg": "pitch (ZYX Euler angles in ENU)",
+    "yaw_deg": "yaw, counter-clockwise from East (ZYX Euler angles in ENU)",
+    COV_EN_COLUMN: "east-north position covariance (null: not given)",
 }
+_DESCRIPTIONS.update({f"sd_{c}": f"one-sigma {_DESCRIPTIONS[c]} (null: not given)" for c in MOTION_COLUMNS})
+for _c in MOTION_COLUMNS:
+    _DESCRIPTIONS[_c] += " (null: no such state)"
 
 
 ROWS = 1 << 16
@@ -77,10 +87,16 @@ def _pieces(n: int, decimate: int) -> Iterator[slice]:
         yield slice(a, min(a + step, n), decimate)
 
 
+_CSV_DECIMALS = {c: 7 for c in ("qw", "qx", "qy", "qz", "sd_qw", "sd_qx", "sd_qy", "sd_qz")}
+"""Decimals of a CSV column where not 5 (quaternion components: 1e-7, about 0.00001°)."""
+
+
 def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], decimate: int = 1) -> None:
-    """``trajectories.csv``: long format, times s rounded to the µs, positions and σ m rounded to
-    10 µm, each printed as the shortest decimal that reads back as that rounded number (``0.5``,
-    not ``0.50000``); written :data:`ROWS` rows at a time by Arrow's CSV writer."""
+    """``trajectories.csv``: long format (:data:`TRAJECTORY_COLUMNS`), times s rounded to the µs,
+    positions and σ m, velocities m/s and angles deg rounded to 1e-5, quaternions to 1e-7, each
+    printed as the shortest decimal that reads back as that rounded number (``0.5``, not
+    ``0.50000``), empty where not given; written :data:`ROWS` rows at a time by Arrow's CSV
+    writer."""
     with path.open("wb") as fh:
         fh.write((TRAJECTORY_HEADER + "\n").encode())
         schema = pa.schema([(c, pa.string() if c == "system" else pa.float64()) for c in TRAJECTORY_COLUMNS])
@@ -90,7 +106,9 @@ def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], d
             for piece in _trajectory_pieces(trajectories, decimate):
                 system, t, *numbers = piece[:len(TRAJECTORY_COLUMNS)]
                 writer.write_batch(pa.RecordBatch.from_arrays(
-                    [system.dictionary_decode(), pc.round(t, 6), *(pc.round(v, 5) for v in numbers)], schema=schema))
+                    [system.dictionary_decode(), pc.round(t, 6),
+                     *(pc.round(v, _CSV_DECIMALS.get(c, 5)) for c, v in zip(TRAJECTORY_COLUMNS[2:], numbers))],
+                    schema=schema))
 
 
 def _numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
@@ -110,19 +128,44 @@ def _strings(values: list[str]) -> pa.Array:
     return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
 
 
+def euler_deg(q_nb: np.ndarray) -> np.ndarray:
+    """(N, 3) roll, pitch, yaw (deg) of quaternions q_nb (N, 4; scalar first, body to ENU): the
+    ZYX Euler angles in ENU, yaw counter-clockwise from East in (−180°, 180°]."""
+    if not len(q_nb):
+        return np.empty((0, 3))
+    yaw, pitch, roll = Rotation.from_quat(q_nb, scalar_first=True).as_euler("ZYX", degrees=True).T
+    return np.column_stack([roll, pitch, yaw])
+
+
+def _motion(traj: Trajectory, epochs: slice) -> list[np.ndarray | None]:
+    """Velocity, quaternion and Euler columns at ``epochs`` (None where the system has no such
+    state), then their 1σ (None: no system gives them yet)."""
+    vel = None if traj.vel_n is None else np.asarray(traj.vel_n)[epochs]
+    q = None if traj.q_nb is None else np.asarray(traj.q_nb)[epochs]
+    euler = None if q is None else euler_deg(q)
+    values = [*(None if vel is None else vel[:, j] for j in range(3)), *(None if q is None else q[:, j] for j in range(4)),
+              *(None if euler is None else euler[:, j] for j in range(3))]
+    return values + [None] * len(MOTION_COLUMNS)
+
+
 def _trajectory_columns(names: list[str], k: int, traj: Trajectory, epochs: slice) -> list[pa.Array]:
-    """The long-format table's columns for the ``epochs`` of system ``k`` of ``names``."""
+    """The long-format table's columns (:data:`TRAJECTORY_COLUMNS`, then the east–north
+    covariance) for the ``epochs`` of system ``k`` of ``names``; null where not given."""
     t = traj.t[epochs]
-    cov = np.full(len(t), np.nan) if traj.pos_cov_en is None else np.asarray(traj.pos_cov_en)[epochs]
+    none = np.ones(len(t), dtype=bool)
+    missing = np.full(len(t), np.nan)
+    cov = missing if traj.pos_cov_en is None else np.asarray(traj.pos_cov_en)[epochs]
     system = pa.DictionaryArray.from_arrays(_numbers(np.full(len(t), k, dtype=np.int32)), _strings(names))
     return [system, _numbers(t), *(_numbers(getattr(traj, a)[epochs, j]) for a in ("pos_n", "pos_sd") for j in range(3)),
+            *(_numbers(missing, mask=none) if v is None else _numbers(v) for v in _motion(traj, epochs)),
             _numbers(cov, mask=np.full(len(t), traj.pos_cov_en is None))]
 
 
 def _trajectory_schema(columns: list[pa.Array]) -> pa.Schema:
-    """The table's schema: field metadata ``unit`` and ``description``, the covariance nullable."""
-    return pa.schema([pa.field(c, a.type, nullable=c == COV_EN_COLUMN,
-                               metadata={"description": _DESCRIPTIONS[c], **({"unit": _UNITS[c]} if c in _UNITS else {})})
+    """The table's schema: field metadata ``unit`` and ``description``; velocity, attitude, their
+    σ and the covariance nullable."""
+    return pa.schema([pa.field(c, a.type, nullable=c not in POSITION_COLUMNS,
+                               metadata={"description": _DESCRIPTIONS[c], **({"unit": UNITS[c]} if c in UNITS else {})})
                       for c, a in zip((*TRAJECTORY_COLUMNS, COV_EN_COLUMN), columns)])
 
 
@@ -170,66 +213,6 @@ def write_trajectories_parquet(path: Path, trajectories: Mapping[str, Trajectory
             writer.close()
 
 
-def read_trajectories(path: str | Path) -> dict[str, Trajectory]:
-    """Trajectories from ``trajectories.parquet`` or ``trajectories.csv`` (by the suffix), one
-    per system in file order: ENU m, s; ``pos_cov_en`` from the Parquet file's covariance
-    column where given (the CSV has none)."""
-    path = Path(path)
-    try:
-        if path.suffix == ".parquet":
-            table = pq.read_table(path)
-        else:
-            types = {c: pa.string() if c == "system" else pa.float64() for c in TRAJECTORY_COLUMNS}
-            table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(column_types=types))
-    except (OSError, pa.ArrowInvalid) as err:
-        raise InputError(path, f"not a trajectory file: {str(err).splitlines()[0]}") from None
-    missing = [c for c in TRAJECTORY_COLUMNS if c not in table.column_names]
-    if missing:
-        raise InputError(path, f"missing column(s) {missing}")
-    system = pc.dictionary_encode(table.column("system").cast(pa.string()).combine_chunks())  # first-seen order
-    codes = system.indices.to_numpy(zero_copy_only=False)
-    cols = {c: table.column(c).to_numpy() for c in TRAJECTORY_COLUMNS[1:]}
-    cov = table.column(COV_EN_COLUMN) if COV_EN_COLUMN in table.column_names else None
-    out: dict[str, Trajectory] = {}
-    for code, name in enumerate(system.dictionary.to_pylist()):
-        rows = np.flatnonzero(codes == code)
-        c = None if cov is None else cov.take(pa.array(rows))
-        out[name] = Trajectory(cols["t"][rows], np.column_stack([cols[k][rows] for k in TRAJECTORY_COLUMNS[2:5]]),
-                               np.column_stack([cols[k][rows] for k in TRAJECTORY_COLUMNS[5:8]]),
-                               None if c is None or c.null_count == len(c) else c.to_numpy(zero_copy_only=False))
-    return out
-
-
-QUATERNION_STATES = ("qw", "qx", "qy", "qz")
-"""The attitude columns of :meth:`~bodyfusion.core.system.SensorSystem.states` (scalar first, body to ENU)."""
-
-
-def system_attitudes(systems: Mapping[str, SensorSystem]) -> dict[str, np.ndarray]:
-    """(N, 4) attitude quaternions ``[w, x, y, z]`` (body to ENU) at the trajectory's epochs of
-    every system whose :meth:`~bodyfusion.core.system.SensorSystem.states` give one."""
-    return dict(SystemAttitudes(systems))
-
-
-class SystemAttitudes(Mapping[str, np.ndarray]):
-    """:func:`system_attitudes` computed one system at a time, when asked for (the writers hold
-    one system's states at once, not every system's)."""
-
-    def __init__(self, systems: Mapping[str, SensorSystem]) -> None:
-        self._systems = systems
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        states = self._systems[name].states()
-        if not all(k in states for k in QUATERNION_STATES):
-            raise KeyError(name)
-        return np.column_stack([states[k] for k in QUATERNION_STATES])
-
-    def __iter__(self) -> Iterator[str]:
-        return (name for name in self._systems if self.get(name) is not None)
-
-    def __len__(self) -> int:
-        return sum(1 for _ in self)
-
-
 _TUM_COLUMNS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 
 
@@ -251,17 +234,14 @@ def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None, time
 
 
 def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapping[str, TruthTrack],
-              decimate: int = 1, attitudes: Mapping[str, np.ndarray] | None = None) -> list[Path]:
+              decimate: int = 1) -> list[Path]:
     """``<folder>/<system>.txt`` per system and ``<system>_truth.txt`` per truth track (dense
     truth decimated like the estimate, surveyed points all): ``timestamp tx ty tz qx qy qz qw``,
-    s and ENU m at full precision, space-separated, no header. ``attitudes``: a system's (N, 4)
-    quaternions ``[w, x, y, z]`` (body to ENU) at its trajectory's epochs
-    (:func:`system_attitudes`, or :class:`SystemAttitudes`: asked for one system at a time);
-    the identity for the others and the truth. Each file is written :data:`ROWS` rows at a
-    time. Returns the files written."""
-    attitudes = attitudes if attitudes is not None else {}
-    tracks: dict[str, tuple[np.ndarray, np.ndarray, int, str | None]] = {
-        name: (tr.t, tr.pos_n, decimate, name) for name, tr in trajectories.items()}
+    s and ENU m at full precision, space-separated, no header; the orientation is the
+    trajectory's attitude ``q_nb`` (body to ENU) where it has one, else the identity (and for
+    every truth). Each file is written :data:`ROWS` rows at a time. Returns the files written."""
+    tracks: dict[str, tuple[np.ndarray, np.ndarray, int, np.ndarray | None]] = {
+        name: (tr.t, tr.pos_n, decimate, tr.q_nb) for name, tr in trajectories.items()}
     for name, tr in truths.items():
         tracks[f"{name}_truth"] = (tr.t, tr.pos_n, 1 if tr.sparse else decimate, None)
     folder.mkdir(parents=True, exist_ok=True)
@@ -269,13 +249,11 @@ def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapp
     schema = pa.schema([(c, pa.string()) for c in _TUM_COLUMNS])
     written = []
     times: dict[bytes, pa.Array] = {}
-    for name, (t, pos, step, system) in tracks.items():
+    for name, (t, pos, step, q) in tracks.items():
         written.append(folder / f"{name}.txt")
-        q = None if system is None else attitudes.get(system)
         with pacsv.CSVWriter(written[-1], schema, write_options=options) as writer:
             for epochs in _pieces(len(t), step):
                 writer.write_table(_tum_table(t[epochs], pos[epochs], None if q is None else q[epochs], times))
-        del q
     return written
 
 

@@ -14,7 +14,6 @@ from bodyfusion.base.errors import FusionError
 from bodyfusion.base.forking import Forked
 from bodyfusion.outputs.trajectories import (
     ROWS,
-    SystemAttitudes,
     write_geojson,
     write_strides_csv,
     write_trajectories_csv,
@@ -135,7 +134,7 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
 def _write_tracks(result: RunResult, out_dir: Path) -> None:
     """The TUM files and, for a geo-referenced run, track.geojson."""
     decimate = result.loaded.layout.output.decimate
-    write_tum(out_dir / "tum", result.trajectories, result.truths, decimate, attitudes=SystemAttitudes(result.systems))
+    write_tum(out_dir / "tum", result.trajectories, result.truths, decimate)
     if result.frame.geodetic_origin is not None:
         write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.frame.geodetic_origin,
                       decimate)

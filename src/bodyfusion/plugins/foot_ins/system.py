@@ -431,7 +431,8 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
         x, cov = self._history()
-        return Trajectory(self.stream.t[:len(x)], x[:, 0:3], np.sqrt(np.maximum(cov[:, :3], 0.0)), cov[:, 3].copy())
+        return Trajectory(self.stream.t[:len(x)], x[:, 0:3], np.sqrt(np.maximum(cov[:, :3], 0.0)), cov[:, 3].copy(),
+                          vel_n=x[:, 3:6], q_nb=x[:, 6:10])
 
     def _history(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, 16) nominal states and (N, 4) position covariances so far, smoothed where smoothed."""
