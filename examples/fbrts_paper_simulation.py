@@ -59,7 +59,7 @@ def run_seed(seed: int, out: Path, overrides: list[str]) -> dict:
     rec = system.smoothing_record()
     t = rec["t"]
     pos_true = np.column_stack([np.interp(t, truth.t, truth.pos_n[:, k]) for k in range(2)])
-    sd_f = np.hypot(*np.sqrt(system.hist_pos_cov[:t.size, :2]).T)
+    sd_f = np.hypot(*np.sqrt(system.hist_cov[:t.size, :2]).T)
     last = t >= t[-1] - LAST_S
 
     def error(x: np.ndarray) -> tuple[float, float, float]:

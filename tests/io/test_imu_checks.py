@@ -146,9 +146,9 @@ def test_the_foot_ins_inflates_its_covariance_across_a_gap(tmp_path, write_yaml)
         runs[name] = run_layout(load_layout(cfg))
     gap, whole = runs["imu.csv"].systems["foot"], runs["whole.csv"].systems["foot"]
     i = int(gap.stream.checks.gap_index[0])  # the inflation lands before the step to i (row i − 1)
-    before, after = gap.hist_pos_cov[i - 2, :3].sum(), gap.hist_pos_cov[i, :3].sum()
+    before, after = gap.hist_cov[i - 2, :3].sum(), gap.hist_cov[i, :3].sum()
     j = int(np.searchsorted(whole.stream.t, gap.stream.t[i]))
-    assert after - before > 10 * (whole.hist_pos_cov[j, :3].sum() - whole.hist_pos_cov[j - 2, :3].sum())
+    assert after - before > 10 * (whole.hist_cov[j, :3].sum() - whole.hist_cov[j - 2, :3].sum())
     assert gap.diagnostics()["input_checks"]["gaps"] == 1
 
 

@@ -267,8 +267,9 @@ def test_the_csv_prints_each_number_rounded_to_its_unit_and_quotes_names_only_wh
 
 def test_velocity_and_attitude_follow_the_positions_with_euler_angles_in_enu(tmp_path):
     """The contract's columns after the positions: the foot's velocity, quaternion and ZYX Euler
-    angles (yaw counter-clockwise from East: 90° − azimuth), the σ columns empty; a system
-    without such states has empty cells; both files read back to what was written."""
+    angles (yaw counter-clockwise from East: 90° − azimuth), the σ columns empty without a
+    covariance; a system without such states has empty cells; both files read back to what was
+    written."""
     n = 40
     t = np.arange(n) * 0.01
     angles = np.column_stack([np.linspace(10.0, 350.0, n), np.linspace(-20.0, 20.0, n), np.linspace(5.0, -5.0, n)])
@@ -297,10 +298,18 @@ def test_velocity_and_attitude_follow_the_positions_with_euler_angles_in_enu(tmp
         assert back["hand"].vel_n is None and back["hand"].q_nb is None
 
 
-def test_a_foot_runs_csv_carries_its_filters_velocity_and_attitude(geo_run):
+def test_a_foot_runs_files_carry_its_filters_velocity_and_attitude_and_their_sigma(geo_run):
     result, out = geo_run
     back = read_trajectories(out / "trajectories.parquet")
     states = result.states("left_foot")
     np.testing.assert_array_equal(back["left_foot"].vel_n, states[["v_east_mps", "v_north_mps", "v_up_mps"]])
     np.testing.assert_array_equal(back["left_foot"].q_nb, states[["qw", "qx", "qy", "qz"]])
     assert back["hand_phone"].q_nb is None
+    table = pq.read_table(out / "trajectories.parquet")
+    foot = table.filter(pa.compute.equal(table.column("system"), "left_foot"))
+    sd = np.column_stack([foot.column(c).to_numpy() for c in MOTION_SD_COLUMNS])
+    assert np.all(np.isfinite(sd)) and np.all(sd[:, :3] >= 0) and np.all(sd[:, 7:] > 0)
+    cov = result.trajectories["left_foot"].motion_cov
+    np.testing.assert_array_equal(sd[:, :3], np.sqrt(cov[:, :3]))  # the filter's own velocity σ
+    hand = table.filter(pa.compute.equal(table.column("system"), "hand_phone"))
+    assert all(hand.column(c).null_count == hand.num_rows for c in MOTION_SD_COLUMNS)

@@ -104,7 +104,9 @@ class Trajectory:
     t: (N,) s.  pos_n: (N, 3) m.  pos_sd: (N, 3) one-sigma position, m.  pos_cov_en: (N,)
     east–north position covariance, m² (None: not given, taken as 0).  vel_n: (N, 3) velocity,
     ENU m/s, and q_nb: (N, 4) attitude quaternion (scalar first, body to ENU), where the system
-    estimates them (None: it does not).
+    estimates them (None: it does not).  motion_cov: (N, 9) their covariance where given: the
+    velocity variances east, north, up (m²/s²), then the attitude error's covariance (δθ in the
+    navigation frame, q_true = [1, δθ/2] ⊗ q_nb; rad²) packed EE, NN, UU, EN, EU, NU.
     """
 
     t: np.ndarray
@@ -113,6 +115,7 @@ class Trajectory:
     pos_cov_en: np.ndarray | None = None
     vel_n: np.ndarray | None = None
     q_nb: np.ndarray | None = None
+    motion_cov: np.ndarray | None = None
 
     def horizontal_covariance(self) -> np.ndarray:
         """(N, 2, 2) east–north position covariance, m²."""

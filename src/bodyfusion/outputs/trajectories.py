@@ -45,6 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.io.gnss import enu_to_geodetic
+from bodyfusion.nav.attitude_uncertainty import euler_sd_deg, quaternion_sd, unpack_covariance
 from bodyfusion.io.trajectory_files import (
     COV_EN_COLUMN,
     MOTION_COLUMNS,
@@ -137,15 +138,23 @@ def euler_deg(q_nb: np.ndarray) -> np.ndarray:
     return np.column_stack([roll, pitch, yaw])
 
 
+def _columns(block: np.ndarray | None, width: int) -> list[np.ndarray | None]:
+    return [None] * width if block is None else [block[:, j] for j in range(width)]
+
+
 def _motion(traj: Trajectory, epochs: slice) -> list[np.ndarray | None]:
     """Velocity, quaternion and Euler columns at ``epochs`` (None where the system has no such
-    state), then their 1σ (None: no system gives them yet)."""
+    state), then their 1σ (None where it gives no covariance: ``Trajectory.motion_cov``;
+    :mod:`bodyfusion.nav.attitude_uncertainty`)."""
     vel = None if traj.vel_n is None else np.asarray(traj.vel_n)[epochs]
     q = None if traj.q_nb is None else np.asarray(traj.q_nb)[epochs]
     euler = None if q is None else euler_deg(q)
-    values = [*(None if vel is None else vel[:, j] for j in range(3)), *(None if q is None else q[:, j] for j in range(4)),
-              *(None if euler is None else euler[:, j] for j in range(3))]
-    return values + [None] * len(MOTION_COLUMNS)
+    cov = None if traj.motion_cov is None else np.asarray(traj.motion_cov)[epochs]
+    vel_sd = None if cov is None or vel is None else np.sqrt(np.maximum(cov[:, :3], 0.0))
+    att = None if cov is None or q is None else unpack_covariance(cov[:, 3:9])
+    return [*_columns(vel, 3), *_columns(q, 4), *_columns(euler, 3), *_columns(vel_sd, 3),
+            *_columns(None if att is None else quaternion_sd(q, att), 4),
+            *_columns(None if att is None else euler_sd_deg(q, att), 3)]
 
 
 def _trajectory_columns(names: list[str], k: int, traj: Trajectory, epochs: slice) -> list[pa.Array]:
@@ -157,7 +166,8 @@ def _trajectory_columns(names: list[str], k: int, traj: Trajectory, epochs: slic
     cov = missing if traj.pos_cov_en is None else np.asarray(traj.pos_cov_en)[epochs]
     system = pa.DictionaryArray.from_arrays(_numbers(np.full(len(t), k, dtype=np.int32)), _strings(names))
     return [system, _numbers(t), *(_numbers(getattr(traj, a)[epochs, j]) for a in ("pos_n", "pos_sd") for j in range(3)),
-            *(_numbers(missing, mask=none) if v is None else _numbers(v) for v in _motion(traj, epochs)),
+            *(_numbers(missing, mask=none) if v is None else _numbers(v, mask=~np.isfinite(v))
+              for v in _motion(traj, epochs)),
             _numbers(cov, mask=np.full(len(t), traj.pos_cov_en is None))]
 
 

@@ -27,7 +27,8 @@ from bodyfusion.plugins.foot_ins.coloured import (
 )
 from bodyfusion.plugins.foot_ins.kernels import (C_CALL_RECORDS, C_COLOURED, C_ZUPTS, COUNTERS_SIZE,
                                                  run_foot_ins, run_foot_ins_coloured)
-from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, StepScratch, no_record
+from bodyfusion.plugins.foot_ins.records import (RECORDED_COVARIANCE, FilterHistory, FilterState, ImuSamples,
+                                                 StepScratch, no_record)
 from bodyfusion.testing import check_system, default_context, random_nominal_state, with_value
 from tests.paths import ROOT
 
@@ -150,7 +151,7 @@ def test_ckf_first_stance_sample_takes_the_stationary_noise():
 
     def run(kernel, sigma_ekf: float | None = None):
         x, P = x0.copy(), P0.copy()
-        hist_x, hist_cov, hist_nis, counters = np.zeros((2, 16)), np.zeros((2, 4)), np.zeros(2), np.zeros(COUNTERS_SIZE)
+        hist_x, hist_cov, hist_nis, counters = np.zeros((2, 16)), np.zeros((2, RECORDED_COVARIANCE)), np.zeros(2), np.zeros(COUNTERS_SIZE)
         if sigma_ekf is None:
             post_idx, post_P = np.zeros(1, dtype=np.int64), np.zeros((1, 15, 15))
             kernel(FilterState(x, P, np.zeros(6), np.empty((0, 0))), ImuSamples(t, acc, gyro, stance), 1, 2, params,
@@ -409,3 +410,18 @@ def test_a_first_runs_step_is_compiled_ahead_in_a_copy_and_never_here():
         gate.set()
         other.join()
     assert beside == {} and step.moved_in == []
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ckf", "enekf", "cenekf"])
+def test_every_filter_records_its_velocity_and_attitude_covariance_with_the_state(vicon_slice, kind):
+    """The history's row after the last sample holds P's velocity variances and attitude block
+    (RECORDED_COVARIANCE; for an ensemble, the members' spread), and the trajectory hands them on."""
+    s = left_foot(vicon_slice, kind_overrides(kind))
+    s.advance(s.t_start + 12.0)
+    P = s.covariance()
+    expected = [P[3, 3], P[4, 4], P[5, 5], P[6, 6], P[7, 7], P[8, 8], P[6, 7], P[6, 8], P[7, 8]]
+    np.testing.assert_allclose(s.hist_cov[s._i, 4:], expected, rtol=1e-9, atol=1e-18)
+    traj = s.trajectory()
+    np.testing.assert_array_equal(traj.motion_cov[-1], s.hist_cov[s._i, 4:])
+    attitude = traj.motion_cov[:, 3:6]
+    assert np.all(np.isfinite(traj.motion_cov)) and np.all(attitude > 0) and np.all(traj.motion_cov[:, :3] >= 0)

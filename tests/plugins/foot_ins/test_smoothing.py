@@ -455,7 +455,7 @@ def test_rts_is_not_worse_than_its_filter_on_a_matched_model_walk(tmp_path_facto
         res = smooth_record(rec, KINDS["rts"])
         filt.append(_rmse(rec["hist_x"], pos))
         rts.append(_rmse(res.x, pos))
-        var_f = result.systems["foot"].hist_pos_cov[:, :2]
+        var_f = result.systems["foot"].hist_cov[:, :2]
         assert np.all(res.pos_var[:, :2] <= var_f * (1 + 1e-9) + 1e-15)
     filt, rts = np.asarray(filt), np.asarray(rts)
     assert rts.mean() <= filt.mean(), (filt, rts)
@@ -537,3 +537,15 @@ def test_whole_run_span_is_refused_for_the_segmented_kinds(kind):
     with pytest.raises(ConfigError) as ei:
         load_layout(VICON_CFG, [f"smoother.kind={kind}", "smoother.span=whole"])
     assert "smoother.span" in str(ei.value) and "per segment" in str(ei.value)
+
+
+def test_a_smoothed_track_carries_the_smoothed_velocity_and_attitude_without_their_sigma(walk):
+    """The smoothers keep the position block of the covariance only: a smoothed trajectory's
+    velocity and attitude are the smoothed states, and it gives no σ for them (not the filter's)."""
+    sim, _, _ = walk
+    result = run_layout(load_layout(sim.config_path, ["smoother.kind=rts"]))
+    foot = result.systems["foot"]
+    traj = result.trajectories["foot"]
+    assert traj.motion_cov is None
+    np.testing.assert_array_equal(traj.vel_n, foot.smoothed_x[:, 3:6])
+    np.testing.assert_array_equal(traj.q_nb, foot.smoothed_x[:, 6:10])

@@ -157,13 +157,13 @@ def test_restart_then_advance_reproduces_the_run_bit_for_bit():
     res = run_layout(load_layout(VICON_CFG, INDEPENDENT))
     for name in SYSTEMS:
         s = res.systems[name]
-        hist_x, hist_var, P, x = s.hist_x.copy(), s.hist_pos_cov.copy(), s.P.copy(), s.x.copy()
+        hist_x, hist_var, P, x = s.hist_x.copy(), s.hist_cov.copy(), s.P.copy(), s.x.copy()
         counters = s.counters.copy()
         s.restart()
         assert s.t_now == s.t_start
         s.advance(s.t_end)
         np.testing.assert_array_equal(s.hist_x, hist_x)
-        np.testing.assert_array_equal(s.hist_pos_cov, hist_var)
+        np.testing.assert_array_equal(s.hist_cov, hist_var)
         np.testing.assert_array_equal(s.P, P)
         np.testing.assert_array_equal(s.x, x)
         np.testing.assert_array_equal(s.counters, counters)

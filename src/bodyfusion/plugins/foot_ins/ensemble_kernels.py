@@ -74,6 +74,25 @@ def ensemble_mean(ens: np.ndarray, out: np.ndarray) -> None:
     out[6], out[7], out[8], out[9] = quat_normalised((out[6], out[7], out[8], out[9]))
 
 
+MOTION_PAIRS = ((3, 3), (4, 4), (5, 5), (6, 6), (7, 7), (8, 8), (6, 7), (6, 8), (7, 8))
+"""Error-state index pairs of the recorded velocity and attitude entries, in the order of
+:data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE` columns 4–12."""
+
+
+@numba.njit(cache=True)
+def _record_motion_covariance(ens: np.ndarray, mean: np.ndarray, D: np.ndarray, row: np.ndarray) -> None:
+    """``row[4:13]`` ← the members' sample covariance of the velocity and attitude deviations
+    (:data:`MOTION_PAIRS`)."""
+    M = ens.shape[0]
+    ensemble_deviations(ens, mean, D, True)
+    for c in range(9):
+        a, b = MOTION_PAIRS[c]
+        s = 0.0
+        for j in range(M):
+            s += D[j, a] * D[j, b]
+        row[4 + c] = s / (M - 1)
+
+
 @numba.njit(cache=True)
 def ensemble_deviations(ens: np.ndarray, mean: np.ndarray, D: np.ndarray, centre: bool) -> None:
     """D (M, n) = error-state deviations of the members from ``mean``: rows
@@ -248,13 +267,14 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, samples: ImuSamples, i0: i
     ``ens`` (M, n_s) and ``memory`` (M, 6) (each member's two-sample mechanisation memory)
     are updated in place; ``noise`` (i1 − i0, M, 21) holds the draws; ``mean`` (n_s,)
     receives the ensemble mean after the last sample; of the ``history``, row i of ``hist_x``
-    (N, 16) and ``hist_pos_cov`` (N, 4) the mean nominal state and the members' position
-    covariance (variances east, north, up and the east–north covariance, m^2) (the ensemble
-    keeps no NIS: ``hist_nis`` is not written), ``counters`` accumulates [ZUPTs, ZARUs, sum of
+    (N, 16) and ``hist_cov`` (N, 13) the mean nominal state and the members' covariance
+    entries (:data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`; velocity and
+    attitude from the members' error-state deviations) (the ensemble keeps no NIS: ``hist_nis``
+    is not written), ``counters`` accumulates [ZUPTs, ZARUs, sum of
     ZUPT NIS].
     """
     t, acc_b, gyro_b, stance = samples
-    hist_x, hist_pos_cov, _, counters = history
+    hist_x, hist_cov, _, counters = history
     M = ens.shape[0]
     g = params.gravity
     w_ie = params.earth_rate.copy()
@@ -267,6 +287,7 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, samples: ImuSamples, i0: i
     w = np.empty(3)
     zero = np.zeros(3)
     z = np.empty(3)
+    D = np.empty((M, 15))  # the members' error-state deviations from the mean
     basis = np.empty((M, ens.shape[1] + NOISE_WIDTH))
     used = np.zeros(NOISE_WIDTH, dtype=np.bool_)  # the draws this filter uses
     for k in range(12):
@@ -319,8 +340,9 @@ def run_ensemble(ens: np.ndarray, memory: np.ndarray, samples: ImuSamples, i0: i
             for j in range(M):
                 d = ens[j, k] - mean[k]
                 s += d * d
-            hist_pos_cov[i, k] = s / (M - 1)
+            hist_cov[i, k] = s / (M - 1)
         s = 0.0
         for j in range(M):
             s += (ens[j, 0] - mean[0]) * (ens[j, 1] - mean[1])
-        hist_pos_cov[i, 3] = s / (M - 1)
+        hist_cov[i, 3] = s / (M - 1)
+        _record_motion_covariance(ens, mean, D, hist_cov[i])

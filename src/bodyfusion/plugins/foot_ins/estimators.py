@@ -56,7 +56,7 @@ class RunData:
     stance: np.ndarray
     params: FilterParams
     hist_x: np.ndarray
-    hist_pos_cov: np.ndarray
+    hist_cov: np.ndarray
     hist_nis: np.ndarray
     counters: np.ndarray
     override_idx: list[np.ndarray] = field(default_factory=list)
@@ -71,7 +71,7 @@ class RunData:
 
     def history(self) -> FilterHistory:
         """The rows the kernels fill."""
-        return FilterHistory(self.hist_x, self.hist_pos_cov, self.hist_nis, self.counters)
+        return FilterHistory(self.hist_x, self.hist_cov, self.hist_nis, self.counters)
 
 
 class Estimator:
@@ -100,7 +100,7 @@ class Estimator:
         :data:`~bodyfusion.plugins.foot_ins.kernels.NO_RESET`: record the state as it is). Returns
         whether the covariance is exactly symmetric."""
         return set_state(self.x, self.P, np.ascontiguousarray(dx, dtype=np.float64),
-                         np.ascontiguousarray(P, dtype=np.float64), i, data.hist_x, data.hist_pos_cov, packed)
+                         np.ascontiguousarray(P, dtype=np.float64), i, data.hist_x, data.hist_cov, packed)
 
     def position_fix(self, z_n: np.ndarray, sigma_m: float, gate: float, counts: GateCounts,
                      phi: np.ndarray) -> None:

@@ -25,7 +25,7 @@ from bodyfusion.nav.initial_alignment import (AXIS_VECTORS, StillInterval, attit
                                               find_still_interval, heading_axis, mean_standard_error)
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.kernels import C_GATED, C_ZUPTS, COUNTERS_SIZE, run_foot_ins
-from bodyfusion.plugins.foot_ins.records import FilterHistory, FilterState, ImuSamples, no_record
+from bodyfusion.plugins.foot_ins.records import RECORDED_COVARIANCE, FilterHistory, FilterState, ImuSamples, no_record
 
 MIN_STILL_SAMPLES = 10
 """Fewest samples in a still window: its spreads must measure the sensor's noise."""
@@ -111,7 +111,7 @@ class InitialState:
         Pb = P_s * flip
         t_r, acc_r, gyro_r = -self._t_nav[s - r], st.acc_b[src], -st.gyro_b[src]
         stance_r = np.ascontiguousarray(self.stance[s - r])
-        hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, 4))
+        hist_x, hist_cov = np.empty((s + 1, NOMINAL_SIZE)), np.empty((s + 1, RECORDED_COVARIANCE))
         self.backward_counters = np.zeros(COUNTERS_SIZE)
         run_foot_ins(FilterState(xb, Pb, np.zeros(6), np.empty((0, 0))), ImuSamples(t_r, acc_r, gyro_r, stance_r), 1,
                      s + 1, params, FilterHistory(hist_x, hist_cov, np.empty(s + 1), self.backward_counters),

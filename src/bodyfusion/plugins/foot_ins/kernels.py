@@ -128,19 +128,26 @@ def _count(params: FilterParams, nis: float, counters: np.ndarray) -> None:
 
 
 @numba.njit(inline="always")
-def _record_sample(x: np.ndarray, P: np.ndarray, nis: float, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray,
+def _record_sample(x: np.ndarray, P: np.ndarray, nis: float, i: int, hist_x: np.ndarray, hist_cov: np.ndarray,
                    hist_nis: np.ndarray) -> None:
     hist_nis[i] = nis
-    _record_row(x, P, i, hist_x, hist_pos_cov)
+    _record_row(x, P, i, hist_x, hist_cov)
 
 
 @numba.njit(inline="always")
-def _record_row(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_pos_cov: np.ndarray) -> None:
+def _record_row(x: np.ndarray, P: np.ndarray, i: int, hist_x: np.ndarray, hist_cov: np.ndarray) -> None:
+    """Row i of the history: the state x and P's entries in the
+    :data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE` layout."""
     for k in range(16):
         hist_x[i, k] = x[k]
     for k in range(3):
-        hist_pos_cov[i, k] = P[k, k]
-    hist_pos_cov[i, 3] = P[0, 1]
+        hist_cov[i, k] = P[k, k]
+        hist_cov[i, 4 + k] = P[3 + k, 3 + k]
+        hist_cov[i, 7 + k] = P[6 + k, 6 + k]
+    hist_cov[i, 3] = P[0, 1]
+    hist_cov[i, 10] = P[6, 7]
+    hist_cov[i, 11] = P[6, 8]
+    hist_cov[i, 12] = P[7, 8]
 
 
 @numba.njit(inline="always")
@@ -191,17 +198,17 @@ NOT_PACKED = np.empty(0)
 
 @numba.njit(cache=True)
 def set_state(x: np.ndarray, P: np.ndarray, dx: np.ndarray, P_new: np.ndarray, i: int, hist_x: np.ndarray,
-              hist_pos_cov: np.ndarray, packed: np.ndarray) -> bool:
+              hist_cov: np.ndarray, packed: np.ndarray) -> bool:
     """A state set outside the compiled loop, at sample i, in one call: the closed-loop reset by
     dx (15,) and P_new (n, n) (:func:`bodyfusion.nav.error_state.closed_loop_reset`; both empty,
     :data:`NO_RESET`: none, x (16,) and P (n, n) already set); row i of ``hist_x`` (N, 16) ← x and
-    of ``hist_pos_cov`` (N, 4) ← P's position variances east, north, up and east–north covariance
+    of ``hist_cov`` (N, 13) ← P's entries (:data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`)
     (m²); unless ``packed`` is empty (:data:`NOT_PACKED`), ``packed`` (:data:`~bodyfusion.plugins.foot_ins.records.PACKED_SIZE`,) ← the
     upper triangle of P (15, 15) by rows. Returns whether P is exactly symmetric (then ``packed``
     holds all of it; a NaN makes it not); True when nothing is packed."""
     if dx.shape[0] > 0:
         closed_loop_reset(x, P, dx, P_new)
-    _record_row(x, P, i, hist_x, hist_pos_cov)
+    _record_row(x, P, i, hist_x, hist_cov)
     return packed.shape[0] == 0 or _pack_symmetric(P, packed)
 
 
@@ -234,8 +241,8 @@ def run_foot_ins(state: FilterState, imu: ImuSamples, i0: int, i1: int, params: 
     The ``state`` (:class:`~bodyfusion.plugins.foot_ins.records.FilterState`: x, P, the
     mechanisation memory of :func:`bodyfusion.nav.strapdown.mechanise`, the transition Φ
     accumulated for the fuser) is updated in place; of the ``history``, row i of ``hist_x`` and
-    ``hist_pos_cov`` (N, 4) receives the state and the position covariance after sample i
-    (variances east, north, up and the east–north covariance, m^2), and ``hist_nis`` (N,) its
+    ``hist_cov`` (N, 13) receives the state and the covariance entries after sample i
+    (:data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`), and ``hist_nis`` (N,) its
     stance update's NIS before gating (:data:`NO_STANCE` at a swing sample); ``counters``
     accumulates (layout ``C_*``).
 
@@ -247,7 +254,7 @@ def run_foot_ins(state: FilterState, imu: ImuSamples, i0: int, i1: int, params: 
     sample a correction from outside the loop would be made at)."""
     x, P, _, _ = state
     _, _, gyro_b, stance = imu
-    hist_x, hist_pos_cov, hist_nis, counters = history
+    hist_x, hist_cov, hist_nis, counters = history
     Pu, f_ns, st_v, st_P, x_prior, P_prior = record
     scratch = StepScratch(process_noise_diag(params), np.empty(3), np.empty((3, 3)), np.empty((15, 15)), np.empty(15))
     f_n = scratch.f_n
@@ -264,7 +271,7 @@ def run_foot_ins(state: FilterState, imu: ImuSamples, i0: int, i1: int, params: 
                               int(counters[C_STANCE_RECORDS]), st_v, st_P)
                 counters[C_STANCE_RECORDS] += 1
             record_posterior(P, f_n, i, Pu, f_ns)
-        _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
+        _record_sample(x, P, nis, i, hist_x, hist_cov, hist_nis)
 
 
 @numba.njit(cache=True)
@@ -280,7 +287,7 @@ def run_foot_ins_coloured(state: FilterState, imu: ImuSamples, i0: int, i1: int,
     of the chunk; ``counters[C_CALL_RECORDS]`` says how many were written."""
     x, P, _, phi = state
     t, _, gyro_b, stance = imu
-    hist_x, hist_pos_cov, hist_nis, counters = history
+    hist_x, hist_cov, hist_nis, counters = history
     scratch = StepScratch(process_noise_diag(params), np.empty(3), np.empty((3, 3)), np.empty((15, 15)), np.empty(15))
     q_diag, f_n, C, work, dx = scratch
     ordinary = stationary_zupt_params(params, alpha)
@@ -311,4 +318,4 @@ def run_foot_ins_coloured(state: FilterState, imu: ImuSamples, i0: int, i1: int,
                 for c in range(15):
                     post_P[n_post, r, c] = P[r, c]
             counters[C_CALL_RECORDS] += 1
-        _record_sample(x, P, nis, i, hist_x, hist_pos_cov, hist_nis)
+        _record_sample(x, P, nis, i, hist_x, hist_cov, hist_nis)

@@ -40,13 +40,22 @@ class FilterState(NamedTuple):
     phi: np.ndarray
 
 
+RECORDED_COVARIANCE = 13
+"""Columns of the covariance a filter records per sample (``hist_cov``): 0–2 the position
+variances east, north, up and 3 the east–north covariance (m²); 4–6 the velocity variances
+east, north, up (m²/s²); 7–12 the attitude error's covariance (δθ, navigation frame, rad²),
+packed ``EE, NN, UU, EN, EU, NU``."""
+VELOCITY_VARIANCE = slice(4, 7)
+ATTITUDE_COVARIANCE = slice(7, 13)
+
+
 class FilterHistory(NamedTuple):
-    """The rows a filter fills per sample: nominal state ``hist_x`` (N, 16), position covariance
-    ``hist_pos_cov`` (N, 4: variances east, north, up and the east–north covariance, m²), the
-    stance update's NIS ``hist_nis`` (N,), and ``counters`` (the kernels' ``C_*`` layout)."""
+    """The rows a filter fills per sample: nominal state ``hist_x`` (N, 16), covariance entries
+    ``hist_cov`` (N, :data:`RECORDED_COVARIANCE`), the stance update's NIS ``hist_nis`` (N,),
+    and ``counters`` (the kernels' ``C_*`` layout)."""
 
     hist_x: np.ndarray
-    hist_pos_cov: np.ndarray
+    hist_cov: np.ndarray
     hist_nis: np.ndarray
     counters: np.ndarray
 

@@ -36,6 +36,7 @@ from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, s
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
+from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 
 MIN_LOCKOUT_SAMPLES = 5
@@ -148,7 +149,7 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         self.filter: Estimator = ESTIMATORS[self.config.filter.kind](self._x0, self._P0, self.config.filter,
                                                                      self.context.seed, self.name)
         self.run_data = RunData(self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance, self._params,
-                                np.empty((n, NOMINAL_SIZE)), np.empty((n, 4)), np.full(n, NO_STANCE),
+                                np.empty((n, NOMINAL_SIZE)), np.empty((n, RECORDED_COVARIANCE)), np.full(n, NO_STANCE),
                                 np.zeros(COUNTERS_SIZE))
         self.run_data.record = self._forward_record.restart(self._P0, self.run_data.counters)
         self.phi = np.eye(15) if getattr(self, "_tracking", False) else np.empty((0, 0))
@@ -182,10 +183,11 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         return self.run_data.hist_x
 
     @property
-    def hist_pos_cov(self) -> np.ndarray:
-        """(N, 4) position covariance after each sample: variances east, north, up and the
-        east–north covariance, m²."""
-        return self.run_data.hist_pos_cov
+    def hist_cov(self) -> np.ndarray:
+        """(N, 13) covariance entries after each sample
+        (:data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`): position variances
+        and east–north covariance (m²), velocity variances (m²/s²), the attitude error's block (rad²)."""
+        return self.run_data.hist_cov
 
     @property
     def counters(self) -> np.ndarray:
@@ -423,23 +425,30 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
 
     def set_smoothed(self, x: np.ndarray | None, pos_cov: np.ndarray | None, diagnostics: dict) -> None:
         """Store the smoother's result: (n, 16) nominal states and (n, 4) position covariances (as
-        :attr:`hist_pos_cov`) replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
+        :attr:`hist_cov`) replace the filter's in :meth:`trajectory` (None keeps the filter's)."""
         self.smoothed_x = x
         self.smoothed_pos_cov = pos_cov
         self.smoothing_diagnostics = diagnostics
 
     # --- results ----------------------------------------------------------------------
     def trajectory(self) -> Trajectory:
+        """Position, velocity and attitude of every sample so far with their covariances (a
+        smoothed track's velocity and attitude come without: the smoothers keep the position
+        block only)."""
         x, cov = self._history()
+        smoothed = cov.shape[1] < RECORDED_COVARIANCE
         return Trajectory(self.stream.t[:len(x)], x[:, 0:3], np.sqrt(np.maximum(cov[:, :3], 0.0)), cov[:, 3].copy(),
-                          vel_n=x[:, 3:6], q_nb=x[:, 6:10])
+                          vel_n=x[:, 3:6], q_nb=x[:, 6:10],
+                          motion_cov=None if smoothed else cov[:, VELOCITY_VARIANCE.start:ATTITUDE_COVARIANCE.stop])
 
     def _history(self) -> tuple[np.ndarray, np.ndarray]:
-        """(N, 16) nominal states and (N, 4) position covariances so far, smoothed where smoothed."""
+        """(N, 16) nominal states and their covariance entries so far: the filter's (N, 13,
+        :data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`), or where smoothed the
+        smoother's states and position covariances (N, 4)."""
         n = self._i + 1
         smoothed = self.smoothed_x is not None and self.smoothed_pos_cov is not None
         return ((self.smoothed_x if smoothed else self.hist_x)[:n],
-                (self.smoothed_pos_cov if smoothed else self.hist_pos_cov)[:n])
+                (self.smoothed_pos_cov if smoothed else self.hist_cov)[:n])
 
     def states(self) -> dict[str, np.ndarray]:
         """Every sample's nominal state (:func:`~bodyfusion.plugins.foot_ins.results.foot_states`)."""
