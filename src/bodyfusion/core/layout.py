@@ -132,7 +132,9 @@ class SmootherConfig(StrictModel):
     (:mod:`bodyfusion.plugins.foot_ins.smoothing`, [Shen2025] §3).
 
     ``kind``: ``none``; ``rts`` (fixed-interval Rauch–Tung–Striebel over the forward filter's
-    error states); ``fb`` (forward–backward: the filter and a backward navigation started
+    error states); ``fixed-lag`` (each segment RTS-smoothed with the data up to the first
+    segment boundary at least ``lag_s`` after its end: what a live run can emit with that
+    delay, :func:`bodyfusion.plugins.foot_ins.smoothing.lag_windows`); ``fb`` (forward–backward: the filter and a backward navigation started
     without information, fused by covariance, position recomputed from the fused velocity);
     ``fb-rts`` (both passes RTS-smoothed before the fusion). Segments run between stance
     midpoints (stance runs shorter than ``min_stance_s`` are ignored; segments longer than
@@ -148,17 +150,24 @@ class SmootherConfig(StrictModel):
     (``fuser.method`` not ``none``); ``true`` also after independent filters; ``false`` never.
     """
 
-    kind: Literal["none", "rts", "fb", "fb-rts"] = "none"
+    kind: Literal["none", "rts", "fixed-lag", "fb", "fb-rts"] = "none"
     span: Literal["whole", "segment"] | None = None
+    lag_s: float = Field(default=2.0, gt=0, le=3600.0)
+    """The fixed-lag smoother's least delay (s): the future data each estimate is smoothed with."""
     min_stance_s: float = Field(default=0.04, ge=0)
     max_segment_s: float = Field(default=10.0, gt=0)
     constrain_smoothed: bool | None = None
 
     @model_validator(mode="after")
     def _span_of_kind(self) -> "SmootherConfig":
-        if self.kind in ("fb", "fb-rts") and self.span == "whole":
-            raise KeyedError("span", f"{self.kind} runs per segment ([Shen2025]); whole applies to rts only")
+        if self.kind in ("fb", "fb-rts", "fixed-lag") and self.span == "whole":
+            raise KeyedError("span", f"{self.kind} runs per segment; whole applies to rts only")
         return self
+
+    @property
+    def rts_sweep(self) -> bool:
+        """An RTS sweep over the filter's record (``rts``, ``fixed-lag``)."""
+        return self.kind in ("rts", "fixed-lag")
 
     @property
     def segmented(self) -> bool:

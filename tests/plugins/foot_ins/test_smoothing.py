@@ -9,7 +9,7 @@ from bodyfusion.base.errors import ConfigError
 from bodyfusion.core.layout import SmootherConfig, load_layout
 from bodyfusion.runner import build_systems, layout_context, run_layout
 from bodyfusion.nav.strapdown import integrate
-from bodyfusion.plugins.foot_ins.smoothing import segment_bounds, smooth_record
+from bodyfusion.plugins.foot_ins.smoothing import lag_windows, segment_bounds, smooth_record
 from bodyfusion.plugins.foot_ins.smoothing_record import BlockBuffers, RunRecord
 from bodyfusion.plugins.foot_ins.records import (FilterReplay, FilterState, ImuSamples, PassBuffers,
                                                  SmoothedOutput)
@@ -510,7 +510,7 @@ def test_too_short_or_no_stance_gives_the_filter_result_and_a_counted_warning(wa
 # --------------------------------------------------------------------------- config
 
 
-@pytest.mark.parametrize("kind", ["none", "rts", "fb", "fb-rts"])
+@pytest.mark.parametrize("kind", ["none", "rts", "fixed-lag", "fb", "fb-rts"])
 def test_smoother_kind_accepted(kind):
     assert load_layout(VICON_CFG, [f"smoother.kind={kind}"]).layout.smoother.kind == kind
 
@@ -525,6 +525,7 @@ def test_span_names_what_runs():
 
 @pytest.mark.parametrize("override,key", [("smoother.kind=fbrts", "smoother.kind"),
                                           ("smoother.span=all", "smoother.span"),
+                                          ("smoother.lag_s=0", "smoother.lag_s"),
                                           ("smoother.colour=red", "smoother.colour")])
 def test_bad_smoother_settings_are_refused_with_the_key_path(override, key):
     with pytest.raises(ConfigError) as ei:
@@ -532,7 +533,7 @@ def test_bad_smoother_settings_are_refused_with_the_key_path(override, key):
     assert key in str(ei.value)
 
 
-@pytest.mark.parametrize("kind", ["fb", "fb-rts"])
+@pytest.mark.parametrize("kind", ["fb", "fb-rts", "fixed-lag"])
 def test_whole_run_span_is_refused_for_the_segmented_kinds(kind):
     with pytest.raises(ConfigError) as ei:
         load_layout(VICON_CFG, [f"smoother.kind={kind}", "smoother.span=whole"])
@@ -549,3 +550,53 @@ def test_a_smoothed_track_carries_the_smoothed_velocity_and_attitude_without_the
     assert traj.motion_cov is None
     np.testing.assert_array_equal(traj.vel_n, foot.smoothed_x[:, 3:6])
     np.testing.assert_array_equal(traj.q_nb, foot.smoothed_x[:, 6:10])
+
+
+# --------------------------------------------------------------------------- fixed lag
+
+
+def test_lag_windows_reach_the_lag_past_each_segment_or_the_runs_end():
+    t = np.arange(1000) * 0.01
+    bounds = np.array([0, 90, 200, 310, 420, 999])
+    ends = lag_windows(t, bounds, 1.5)
+    np.testing.assert_array_equal(ends, [3, 4, 5, 5, 5])  # 0.9 + 1.5 → 3.1 s: bound 3; 2.0 + 1.5 → 4.2 s: bound 4
+    assert np.all(t[bounds[ends]] >= np.minimum(t[bounds[1:]] + 1.5, t[-1]))
+    np.testing.assert_array_equal(lag_windows(t, bounds, 1e-6), [2, 3, 4, 5, 5])  # any lag reaches past the segment
+
+
+def test_a_fixed_lag_longer_than_the_run_is_the_whole_run_rts(walk):
+    _, rec, _ = walk
+    whole = smooth_record(rec, SmootherConfig(kind="rts"))
+    lag = smooth_record(rec, SmootherConfig(kind="fixed-lag", lag_s=1e3))
+    np.testing.assert_allclose(lag.x, whole.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(lag.pos_var, whole.pos_var, rtol=1e-9, atol=1e-15)
+
+
+def test_the_fixed_lag_estimate_of_a_stride_uses_no_data_past_its_window(walk):
+    """Change every filter state and IMU sample after the window of one stride: that stride's
+    smoothed states stay the same bits, the strides after it change (what a live run emits
+    once the lag has passed is final)."""
+    _, rec, _ = walk
+    cfg = SmootherConfig(kind="fixed-lag", lag_s=1.0)
+    bounds = segment_bounds(rec["stance"], rec["rate_hz"], cfg.min_stance_s, cfg.max_segment_s)
+    ends = lag_windows(rec["t"], bounds, cfg.lag_s)
+    k = bounds.size // 2
+    a, b, w = bounds[k], bounds[k + 1], bounds[ends[k]]
+    later = dict(rec)
+    for key in ("hist_x", "acc", "gyro"):
+        later[key] = rec[key].copy()
+        later[key][w + 1:, :3] += 0.5
+    before, after = smooth_record(rec, cfg), smooth_record(later, cfg)
+    assert before.x[a:b].tobytes() == after.x[a:b].tobytes()
+    assert before.pos_var[a:b].tobytes() == after.pos_var[a:b].tobytes()
+    assert not np.array_equal(before.x[w + 1:], after.x[w + 1:])
+    lag = before.diagnostics["lag_s"]
+    assert lag["min"] >= cfg.lag_s and lag["median"] < lag["max"] and lag["tail_s"] > 0
+
+
+def test_fixed_lag_closes_the_gap_to_the_whole_run_rts_as_the_lag_grows(walk):
+    _, rec, pos = walk
+    whole = smooth_record(rec, SmootherConfig(kind="rts")).x[:, :3]
+    gaps = [np.sqrt(np.mean(np.sum((smooth_record(rec, SmootherConfig(kind="fixed-lag", lag_s=lag)).x[:, :3]
+                                    - whole) ** 2, axis=1))) for lag in (0.5, 2.0, 8.0, 1e3)]
+    assert gaps[0] > gaps[1] > gaps[2] > gaps[3] and gaps[3] < 1e-9, gaps

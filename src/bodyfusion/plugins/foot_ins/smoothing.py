@@ -196,24 +196,56 @@ def _blocks(r: RunRecord, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.n
     return idx[order], np.concatenate(new_P)[order]
 
 
-def _sweep_store(r: RunRecord, bounds: np.ndarray, general: np.ndarray) -> SweepRecord:
+def _sweep_store(r: RunRecord, bounds: np.ndarray, general: np.ndarray, ends: np.ndarray | None = None) -> SweepRecord:
     """The record :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes
-    (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[k + 1]``: its
-    samples, stance samples, general updates (``general`` (n,)) and kept corrections."""
-    L = int(np.max(np.diff(bounds)))
-    ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][bounds]))) for f in (r.stance, general))
-    nk = int(np.max(np.diff(np.searchsorted(r.kept_idx, bounds, side="right"))))
+    (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[ends[k]]``
+    (``ends``: default k + 1): its samples, stance samples, general updates (``general`` (n,))
+    and kept corrections."""
+    ends = np.arange(1, bounds.size) if ends is None else ends
+    starts = bounds[:ends.size]
+    L = int(np.max(bounds[ends] - starts))
+    ns, ng = (int(np.max(np.diff(np.r_[0, np.cumsum(f[1:])][bounds][np.c_[np.arange(ends.size), ends]], axis=1)))
+              for f in (r.stance, general))
+    kept = np.searchsorted(r.kept_idx, bounds, side="right")
+    nk = int(np.max(kept[ends] - kept[:ends.size]))
     return SweepRecord(np.empty((L + 1, PACKED_SIZE)), np.empty((L + 1, 3)), np.empty((ns, 6)), np.empty((ns, 15, 4)),
                        np.empty((ng, 15, 15)), np.empty((ng, 15)), np.empty((ng, 2)), np.zeros(ng, dtype=np.bool_),
                        np.empty((nk, 15, 15)))
 
 
+def lag_windows(t: np.ndarray, bounds: np.ndarray, lag_s: float) -> np.ndarray:
+    """For each segment k (``bounds[k]`` … ``bounds[k + 1]``), the index of the first bound at
+    least ``lag_s`` after the segment's end (the last bound where the run ends sooner): the
+    end of the data the fixed-lag smoother has when it emits that segment."""
+    t_bounds = t[bounds]
+    ends = np.searchsorted(t_bounds, t_bounds[1:] + lag_s - 1e-9, side="left")
+    return np.minimum(np.maximum(ends, np.arange(1, bounds.size)), bounds.size - 1)
+
+
+def _achieved_lag(t: np.ndarray, bounds: np.ndarray, ends: np.ndarray) -> dict:
+    """The future data (s) each sample was smoothed with: least, median and largest before the
+    run's last window (``tail_s``: the run's last stretch, smoothed with what was left of it)."""
+    seg = np.repeat(np.arange(bounds.size - 1), np.diff(bounds))
+    lag = t[bounds[ends]][seg] - t[bounds[0]:bounds[-1]]
+    inner = lag[ends[seg] < bounds.size - 1]
+    inner = inner if inner.size else lag
+    tail = np.flatnonzero(ends == bounds.size - 1)[0]
+    return {"min": float(inner.min()), "median": float(np.median(inner)), "max": float(inner.max()),
+            "tail_s": float(t[bounds[-1]] - t[bounds[tail]])}
+
+
 def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forward: SweepRecord | None,
-                   out_x: np.ndarray, out_var: np.ndarray, diag: dict) -> tuple[float, list[float]]:
-    """The RTS of each segment on its own (``span: segment``): the segment's part of the filter's
-    own record (``forward``, :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.sweep_arrays`), or, without one, the segment
-    replayed into the record (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`),
-    swept back from zero adjoints at its end. Returns as :func:`_rts`."""
+                   out_x: np.ndarray, out_var: np.ndarray, diag: dict,
+                   ends: np.ndarray | None = None) -> tuple[float, list[float]]:
+    """The RTS of each segment k given the data up to bound ``ends[k]`` (default k + 1: the
+    segment on its own, ``span: segment``; :func:`lag_windows`: the fixed-lag smoother): the
+    window's part of the filter's own record (``forward``,
+    :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.sweep_arrays`), or,
+    without one, the window replayed into the record
+    (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`), swept back from zero
+    adjoints at its end. Windows go in time order, each writing from its segment's start to
+    its end, so that a segment keeps what its own window gave it. Returns as :func:`_rts`."""
+    ends = np.arange(1, bounds.size) if ends is None else ends
     failed = 0
     latencies: list[float] = []
     if forward is not None:  # entries per stance sample, general update, kept correction up to each bound
@@ -221,21 +253,23 @@ def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forwar
         counts = np.column_stack([np.r_[0, np.cumsum(f[1:])][bounds] for f in (r.stance, general)] +
                                  [np.searchsorted(r.kept_idx, bounds, side="right")])
     else:
-        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general)
+        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general, ends)
+        buf = BlockBuffers(1)
     P = r.P0.copy()
     for k in range(bounds.size - 1):
-        a, b = int(bounds[k]), int(bounds[k + 1])
+        a, b, w = int(bounds[k]), int(bounds[k + 1]), int(bounds[ends[k]])
         t0 = time.perf_counter_ns()
         if forward is not None:
-            (s0, g0, k0), (s1, g1, k1) = counts[k], counts[k + 1]
-            record = SweepRecord(Pu[a:b + 1], f_ns[a:b + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
+            (s0, g0, k0), (s1, g1, k1) = counts[k], counts[ends[k]]
+            record = SweepRecord(Pu[a:w + 1], f_ns[a:w + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
                                  gen_a[g0:g1], gen_kept[g0:g1], kept_P[k0:k1])
         else:
-            P, error, ns, ng, nk = record_pass(r.start(a, P), r.run, general, a, b, store)
+            P_w, error, ns, ng, nk = record_pass(r.start(a, P), r.run, general, a, w, store)
+            P = P_w if w == b else r.forward(a, b, P, False, buf)  # the covariance where the next window starts
             r.state_error = max(r.state_error, error)
             record = SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng],
                                  kept_P[:nk])
-        failed += mbf_sweep(r.run, general, a, b - a, record, np.zeros(15), np.zeros((15, 15)),
+        failed += mbf_sweep(r.run, general, a, w - a, record, np.zeros(15), np.zeros((15, 15)),
                             SmoothedOutput(out_x, out_var))
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
     diag["rts_gain_failures"] = failed
@@ -318,6 +352,12 @@ def smooth_record(rec: dict, cfg: SmootherConfig) -> SmoothingResult:
     out_var = np.zeros((r.n, 4))
     if cfg.kind == "rts":
         rebuild_error, latencies = _rts(r, bounds, not cfg.segmented, out_x, out_var, diag)
+    elif cfg.kind == "fixed-lag":
+        general = r.general_updates()
+        ends = lag_windows(r.t, bounds, cfg.lag_s)
+        rebuild_error, latencies = _segmented_rts(r, bounds, general, r.forward_record.sweep_arrays(r, general), out_x,
+                                                  out_var, diag, ends)
+        diag["lag_s"] = _achieved_lag(r.t, bounds, ends)
     else:
         rebuild_error, latencies = _fb(r, bounds, cfg.kind == "fb-rts", out_x, out_var, diag)
     if latencies:

@@ -165,13 +165,13 @@ class ForwardRecord:
         self.kept = 0
 
     def plan(self, cfg: SmootherConfig, filter_kind: str, params: FilterParams, stance: np.ndarray) -> bool:
-        """Active for the RTS (``kind: rts``, either span) of an ``ekf`` without the ZARU (whose
+        """Active for the RTS (``kind: rts``, either span, or ``fixed-lag``) of an ``ekf`` without the ZARU (whose
         every stance update the sweep takes in general form) whose record of the run with these
         ``stance`` flags fits :data:`STORE_BYTES`; checkpointing for any other whole-run RTS.
         True when either changed."""
         samples, n_stance = stance.size, int(np.count_nonzero(stance[1:]))
         whole = cfg.kind == "rts" and not cfg.segmented
-        active = (cfg.kind == "rts" and filter_kind == "ekf" and params.zaru_sigma == 0.0
+        active = (cfg.rts_sweep and filter_kind == "ekf" and params.zaru_sigma == 0.0
                   and record_bytes(samples, n_stance) <= STORE_BYTES)
         checkpointing = whole and not active
         if (active, checkpointing) == (self.active, self.checkpointing):
