@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.files import file_problem
 from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -194,8 +195,9 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
 
     loaded = load_layout(config, set_ or [])
     for key, path in data_files(loaded):
-        if not path.is_file():
-            raise ConfigError(key, f"no such file: {path}", config)
+        problem = file_problem(path)
+        if problem is not None:
+            raise ConfigError(key, f"{path}: {problem}", config)
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         log.warning("fuser.method is none: the %d constraint(s) are not enforced", len(loaded.layout.constraints))
     for line in disjoint_time_bases(loaded):

@@ -3,14 +3,16 @@ one line naming the file and key, or warned about and counted."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.cli import counted_policies
 from bodyfusion.core.layout import load_layout
-from bodyfusion.core.layout_io import MAX_YAML_NODES, read_yaml
+from bodyfusion.core.layout_io import MAX_YAML_DEPTH, MAX_YAML_NODES, read_yaml
 from bodyfusion.runner import run_layout
 from bodyfusion.io.timestamps import apply_timestamp_policy, timestamp_spikes
 from bodyfusion.io.truth import read_truth_csv
@@ -68,6 +70,49 @@ def test_an_alias_bomb_is_refused_before_it_is_built(tmp_path):
     path.write_text("\n".join(lines) + "\nsystems: {}\n")
     with pytest.raises(ConfigError, match=f"more than {MAX_YAML_NODES} YAML nodes"):
         read_yaml(path)
+
+
+def test_a_yaml_that_is_not_utf8_is_refused_with_its_line_and_byte(tmp_path):
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes("name: x\nsystems: {}\n# Gauß\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"latin1\.yaml:3: not UTF-8 text \(byte 0xdf at offset 25\)"):
+        read_yaml(path)
+
+
+@pytest.mark.parametrize("depth", [MAX_YAML_DEPTH + 1, 900, 50_000])
+def test_a_yaml_nested_beyond_any_layout_is_refused_in_one_line(tmp_path, depth):
+    path = tmp_path / "deep.yaml"
+    path.write_text("a: " + "[" * depth + "]" * depth + "\n")
+    with pytest.raises(ConfigError, match=f"nested deeper than {MAX_YAML_DEPTH} levels"):
+        read_yaml(path)
+
+
+@pytest.mark.parametrize("make", ["fifo", "device", "folder"])
+def test_a_special_file_is_refused_unopened_as_layout_data_or_truth(tmp_path, make, write_yaml):
+    """A FIFO would block the reader for ever and /dev/zero feed it without end: the layout, a
+    system's data and the truth are each refused naming the file, before anything opens them."""
+    import os
+
+    special = {"fifo": tmp_path / "pipe", "device": Path("/dev/zero"), "folder": tmp_path}[make]
+    if make == "fifo":
+        os.mkfifo(special)
+    with pytest.raises(ConfigError, match="not a regular file|is a directory"):
+        read_yaml(special)
+    walker = {"plugin": "foot_ins", "data": {"path": str(special), "rate_hz": 100,
+                                             "acc_columns": ["ax", "ay", "az"], "gyro_columns": ["gx", "gy", "gz"]}}
+    loaded = load_layout(write_yaml({"systems": {"foot": walker}}))
+    with pytest.raises(InputError, match="not a regular file|is a directory"):
+        run_layout(loaded)
+
+
+@pytest.mark.parametrize("name", ["left/foot", "../up", "a\x00b", "..", ".hidden", "x" * 65, "with space"])
+def test_a_system_or_layout_name_that_is_no_file_name_is_refused(write_yaml, name):
+    """Names become files and folders of the outputs (tum/<system>.txt, out/<layout>): one that
+    would reach outside them, or that no file system takes, is refused with its key."""
+    err = refused([], write_yaml({"systems": {name: {"plugin": "random_walk"}}}))
+    assert err.key == "systems" and "not a system name" in err.reason
+    err = refused([], write_yaml({"name": name, "systems": {"walker": {"plugin": "random_walk"}}}))
+    assert err.key == "name"
 
 
 def test_an_oversized_yaml_is_refused_unread(tmp_path):
@@ -158,3 +203,63 @@ def test_size_fields_of_the_foot_filter_are_capped(key, value, tmp_path):
     section[head] = {field: value}
     with pytest.raises(ValidationError, match=rf"{field}\n  Input should be less than or equal to"):
         FootInsConfig.model_validate(section)
+
+
+def _left_foot_layout(write_yaml, tmp_path, imu=None, truth=None, **truth_keys) -> Path:
+    """The Vicon walk's left foot with its truth, its files replaced by ``imu`` / ``truth``
+    (DataFrames written beside the layout) where given."""
+    import pandas as pd
+    import yaml
+
+    layout = yaml.safe_load(VICON.read_text())
+    data = VICON.parent / layout["systems"]["left_foot"]["data"]["path"]
+    truth_path = VICON.parent / layout["truth"]["path"]
+    foot = layout["systems"]["left_foot"]
+    foot["data"]["path"] = str(data)
+    if imu is not None:
+        imu(pd.read_csv(data)).to_csv(tmp_path / "imu.csv", index=False)
+        foot["data"]["path"] = str(tmp_path / "imu.csv")
+    layout["truth"]["path"] = str(truth_path)
+    if truth is not None:
+        truth(pd.read_csv(truth_path)).to_csv(tmp_path / "truth.csv", index=False)
+        layout["truth"]["path"] = str(tmp_path / "truth.csv")
+    layout["truth"].update(truth_keys)
+    layout["truth"]["systems"] = {"left_foot": layout["truth"]["systems"]["left_foot"]}
+    layout["systems"] = {"left_foot": foot}
+    layout.pop("constraints")
+    return write_yaml(layout)
+
+
+def test_an_accelerometer_that_reads_no_gravity_is_refused_naming_its_file(write_yaml, tmp_path):
+    def silent(df):
+        df[["acc_x", "acc_y", "acc_z"]] = 0.0
+        return df
+
+    with pytest.raises(InputError, match=r"imu\.csv: the accelerometer reads 0 m/s\^2 .* no gravity"):
+        run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, imu=silent)))
+
+
+def test_a_truth_with_too_few_epochs_in_the_run_is_refused_before_fusing(write_yaml, tmp_path):
+    layout = _left_foot_layout(write_yaml, tmp_path, truth=lambda df: df.iloc[:2])
+    with pytest.raises(ConfigError) as err:
+        run_layout(load_layout(layout))
+    assert err.value.key == "truth" and "2 truth epoch(s) within its run" in err.value.reason
+
+
+def test_a_truth_in_millimetres_is_named_as_such_and_its_unit_fixes_it(write_yaml, tmp_path):
+    def millimetres(df):
+        df[[c for c in df.columns if c.startswith("pos_")]] *= 1000.0
+        return df
+
+    result = run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, truth=millimetres)))
+    large = [f for f in result.findings if f.kind == "large_error"]
+    assert len(large) == 1 and "truth in mm read as metres" in large[0].cause and "truth.unit: mm" in large[0].advice
+    fixed = run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, truth=millimetres, unit="mm")))
+    assert fixed.scores["left_foot"].metrics["horizontal_error_m"]["rmse"] < 0.3
+
+
+def test_a_foot_imu_below_the_rate_a_stride_needs_is_a_finding(write_yaml, tmp_path):
+    result = run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, imu=lambda df: df.iloc[::6]),
+                                    ["systems.left_foot.initial.stationary_s=2"]))
+    low = [f for f in result.findings if f.kind == "low_rate"]
+    assert len(low) == 1 and "10 Hz" in low[0].message

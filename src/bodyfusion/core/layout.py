@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -197,6 +198,10 @@ class HeadingAlignmentConfig(StrictModel):
     gait phase)."""
 
 
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "ft": 0.3048, "in": 0.0254}
+"""Metres per unit of a truth file's positions (``truth.unit``)."""
+
+
 class TruthConfig(PositionFrame, TableSection):
     """Reference positions (ENU, m) for scoring; ``loop`` when the walk ends where it began.
     From the file ``path`` or a table given in memory (:func:`bodyfusion.run`'s ``truth``).
@@ -208,10 +213,12 @@ class TruthConfig(PositionFrame, TableSection):
     ``frame`` declares the file's position axes: ``enu``, ``ned`` or a signed axis map
     (:data:`AxisMap`) into east, north, up. A system given two columns is horizontal truth
     (its axes are the map's first two entries' sources; vertical errors are not scored).
+    ``unit``: the wide file's position unit (:data:`LENGTH_UNITS`).
     """
 
     path: DataPath | None = None
     """The file; unset: no truth, or the truth given in memory."""
+    unit: Literal["m", "cm", "mm", "ft", "in"] = "m"
     format: Literal["wide", "long", "phone_log"] = "wide"
     systems: dict[str, tuple[str, str, str] | tuple[str, str]] = Field(default_factory=dict)
     """wide format: each system's position columns, x, y[, z] of the file's frame."""
@@ -284,6 +291,16 @@ def _check_feasible(constraints: list[ConstraintConfig]) -> None:
                                                                     f"{c.between[1]} within {bound:g} m")
 
 
+FILE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+FILE_NAME_RULE = "letters, digits, '_', '-' and '.', starting with a letter or digit, at most 64, no '..'"
+"""What a system's or a layout's name may hold: it names files and folders of the outputs."""
+
+
+def is_file_name(name: str) -> bool:
+    """Whether ``name`` is safe as a file or folder name on every system (:data:`FILE_NAME_RULE`)."""
+    return FILE_NAME.fullmatch(name) is not None and ".." not in name
+
+
 class Layout(StrictModel):
     """A whole body layout. ``systems`` maps a name to its plugin section."""
 
@@ -308,6 +325,12 @@ class Layout(StrictModel):
     def _cross_references(self) -> "Layout":
         if not self.systems:
             raise ValueError("systems: at least one system is needed")
+        for name in self.systems:
+            if not is_file_name(name):
+                raise KeyedError("systems", f"{name!r} is not a system name: {FILE_NAME_RULE} (it names files in the "
+                                            "output folder)")
+        if self.name is not None and not is_file_name(self.name):
+            raise KeyedError("name", f"{self.name!r} is not a layout name: {FILE_NAME_RULE} (it names the output folder)")
         names = set(self.systems)
         ref = self.heading_alignment.reference
         if ref is not None and ref not in names:

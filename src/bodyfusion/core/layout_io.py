@@ -12,6 +12,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.files import file_problem
 from bodyfusion.base.sections import KeyedError
 
 
@@ -127,6 +128,8 @@ MAX_YAML_BYTES = 4 * 1024 * 1024
 MAX_YAML_NODES = 100_000
 """Most YAML nodes a file may hold once its aliases are expanded (an alias "bomb" is refused
 before it is built; real layouts hold a few hundred)."""
+MAX_YAML_DEPTH = 32
+"""Deepest nesting of mappings and lists a file may hold (real layouts: about 6)."""
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -165,28 +168,64 @@ def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
     return memo[key]
 
 
+def _depth(node: yaml.Node) -> int:
+    """How deep collections nest in the document (1: a scalar), walked without recursion."""
+    deepest, stack, seen = 0, [(node, 1)], set()
+    while stack:
+        item, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if id(item) in seen or depth > MAX_YAML_DEPTH:
+            continue
+        seen.add(id(item))
+        if isinstance(item, yaml.MappingNode):
+            stack.extend((v, depth + 1) for _, v in item.value)
+        elif isinstance(item, yaml.SequenceNode):
+            stack.extend((v, depth + 1) for v in item.value)
+    return deepest
+
+
+def _text(path: Path, raw: bytes) -> str:
+    """The file's bytes as UTF-8 (a byte-order mark dropped); anything else is refused naming
+    the line and byte."""
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[:err.start].count(b"\n") + 1
+        raise ConfigError("", f"not UTF-8 text (byte 0x{raw[err.start]:02x} at offset {err.start}): save the file as "
+                              "UTF-8", f"{path}:{line}") from None
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
     """Read a YAML mapping; syntax errors name the file and line. A file over
-    :data:`MAX_YAML_BYTES`, or over :data:`MAX_YAML_NODES` nodes once its aliases are
-    expanded, is refused before anything is built."""
+    :data:`MAX_YAML_BYTES`, not UTF-8, nested deeper than :data:`MAX_YAML_DEPTH` or over
+    :data:`MAX_YAML_NODES` nodes once its aliases are expanded is refused before anything is
+    built."""
     try:
+        problem = file_problem(path)
+        if problem is not None:
+            raise ConfigError("", problem, path)
         size = path.stat().st_size
         if size > MAX_YAML_BYTES:
             raise ConfigError("", f"{size} bytes: larger than a layout can be ({MAX_YAML_BYTES} bytes)", path)
-        text = path.read_text()
+        text = _text(path, path.read_bytes())
     except FileNotFoundError:
         raise ConfigError("", "file not found", path) from None
     except OSError as err:
         raise ConfigError("", f"cannot read: {err.strerror}", path) from None
+    too_deep = ConfigError("", f"collections nested deeper than {MAX_YAML_DEPTH} levels: not a layout", path)
     try:
         loader = _UniqueKeyLoader(text)
         try:
             node = loader.get_single_node()
+            if node is not None and _depth(node) > MAX_YAML_DEPTH:
+                raise too_deep
             if node is not None and _expanded_size(node, {}) > MAX_YAML_NODES:
                 raise ConfigError("", f"more than {MAX_YAML_NODES} YAML nodes once its aliases are expanded", path)
             raw = loader.construct_document(node) if node is not None else None
         finally:
             loader.dispose()
+    except RecursionError:  # the parser recurses per level: nesting it cannot follow
+        raise too_deep from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)

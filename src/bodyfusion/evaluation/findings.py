@@ -16,7 +16,7 @@ import numpy as np
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import TruthTrack
 from bodyfusion.core.constraint_log import ConstraintLog
-from bodyfusion.core.layout import ConstraintConfig
+from bodyfusion.core.layout import LENGTH_UNITS, ConstraintConfig
 
 
 def sensor_alone_findings(scores: dict, alone: dict) -> list[Finding]:
@@ -44,6 +44,8 @@ LARGE_ERROR_M = 1.0
 """A horizontal error (m, maximum over the truth epochs) above which a run must say why."""
 SCALE_TOLERANCE = 0.05
 """A track this much larger or smaller than the truth's (relative) has a scale error."""
+UNIT_TOLERANCE = 0.1
+"""A truth this close (relative) to a unit's factor times the track's size is in that unit."""
 HEADING_DRIFT_DEG = 5.0
 """A turn of the track between its first and second half (degrees) that is a heading drift."""
 MAX_TRUTH_SPEED_MPS = 15.0
@@ -71,6 +73,15 @@ def _similarity(est: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     return (float(np.hypot(cross, dot) / spread) if spread > 0 else 1.0), float(np.arctan2(cross, dot))
 
 
+def _truth_unit(scale: float) -> str | None:
+    """The length unit whose metres per unit the truth-to-track ``scale`` is the inverse of
+    (within :data:`UNIT_TOLERANCE`): a truth file in that unit read as metres; None if none."""
+    for unit, metres in LENGTH_UNITS.items():
+        if metres != 1.0 and abs(scale * metres - 1.0) < UNIT_TOLERANCE:
+            return unit
+    return None
+
+
 def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]:
     """A warning per system whose horizontal error exceeds :data:`LARGE_ERROR_M`, naming the
     cause: the run's own findings about the system (or the run's constraints) when it has any,
@@ -92,7 +103,8 @@ def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]
         turn = (turn + 180.0) % 360.0 - 180.0
         jumps = truth_jumps(t, score.pos_truth)
         near = jumps[np.abs(jumps - t[worst]) <= DROPOUT_MARGIN_S]
-        if near.size:
+        unit = _truth_unit(scale)
+        if near.size and unit is None:
             out.append(Finding(
                 "truth_dropout", "info", name, float(near[0]), float(near[-1]),
                 f"the horizontal error reaches {err[worst]:.2f} m at t = {t[worst]:.1f} s, where the truth itself jumps "
@@ -100,7 +112,10 @@ def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]
                 "the reference drops out there (a motion-capture marker lost and found again); the error is the "
                 "truth's.", "nothing in the run; read the maximum error with that in mind."))
             continue
-        if own:
+        if unit is not None:
+            cause = (f"the truth's unit: it is {scale:.4g} times the track's size, as a truth in {unit} read as metres.")
+            advice = f"set truth.unit: {unit} in the layout."
+        elif own:
             cause = "; ".join(f"{f.kind.replace('_', ' ')} at t = {f.t_start:.1f}–{f.t_end:.1f} s"
                               if f.t_start is not None else f.kind.replace('_', ' ') for f in own[:3])
             cause = f"what the run reported about it: {cause} (its findings)."

@@ -160,7 +160,7 @@ def read_imu_csv(
     for c in set(acc_cols) - {time_column, stance_column, *gyro_cols}:
         del arrays[c]  # each column goes once it is used: the file's numbers are held about once
     gyro = _body_frame(tuple(axes), [arrays[c] for c in gyro_cols], GYRO_UNITS[gyro_unit])
-    if kept.size < n:  # the samples the timestamp policy keeps (all, usually: then no copies)
+    if kept.size < n or report.reordered_samples:  # the policy's samples in its order (usually all as read: no copy)
         t, acc, gyro = t[kept], acc[kept], gyro[kept]
         stance = None if stance is None else stance[kept]
     for what, x, limit, unit in (("accelerometer", acc, ACC_LIMIT_MPS2, "m/s^2"),

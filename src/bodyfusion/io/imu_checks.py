@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import ImuChecks
 from bodyfusion.nav.earth import STANDARD_GRAVITY
 from bodyfusion.nav.initial_alignment import window_spreads
@@ -37,6 +38,9 @@ MAX_BODY_RATE_RADPS = 35.0
 """Above any human segment's angular rate and the widest MEMS gyro range (2000 °/s), rad/s."""
 MOTION_ACC_SPREAD_MPS2 = 1.0
 """Standard deviation of ‖f‖ above which a recording certainly holds motion, m/s^2."""
+MIN_REST_SPECIFIC_FORCE_MPS2 = 0.5
+"""Least specific force (m/s^2) an accelerometer may read where it is stillest: gravity is 9.8
+m/s^2 (1 g if mis-declared as m/s^2); below this the accelerometer reads nothing at all."""
 MIN_MOVING_RATE_RADPS = 0.2
 """A moving body-worn sensor exceeds this angular rate somewhere (99.9th percentile), rad/s."""
 RATE_TOLERANCE = 0.02
@@ -60,6 +64,10 @@ def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: s
     out = ImuChecks(source, rate, rest_f, float(w.max()))
     warn = out.warnings.append
     g = STANDARD_GRAVITY
+    if not rest_f >= MIN_REST_SPECIFIC_FORCE_MPS2:
+        raise InputError(source, f"the accelerometer reads {rest_f:.3g} m/s^2 where the IMU is stillest (t = "
+                                 f"{t[rest]:.3g} s): no gravity, so it cannot be levelled; check acc_columns and "
+                                 "acc_unit (an accelerometer at rest reads about 9.8 m/s^2, or 1 g)")
     if not 0.9 * g <= rest_f <= 1.1 * g:
         hint = ""
         if 0.5 <= rest_f <= 2.0 and acc_unit != "g":

@@ -12,19 +12,25 @@ from pathlib import Path
 from typing import BinaryIO
 
 from bodyfusion.base.errors import InputError
+from bodyfusion.base.files import file_problem
 
 CHUNK_BYTES = 1 << 20
 """A file is read and parsed this many bytes (whole lines) at a time: reading it holds the numbers
 (in arrays sized once from its line count) and one chunk's text, never all its lines at once."""
 
 
+def regular_file(path: Path) -> Path:
+    """``path``, once it names a regular file (:func:`~bodyfusion.base.files.file_problem`: not a
+    FIFO, device or folder); else an :class:`InputError` naming it."""
+    problem = file_problem(path)
+    if problem is not None:
+        raise InputError(path, problem)
+    return path
+
+
 def _opened(path: Path) -> BinaryIO:
     try:
-        return path.open("rb")
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except IsADirectoryError:
-        raise InputError(path, "is a directory, not a file") from None
+        return regular_file(path).open("rb")
     except OSError as err:
         raise InputError(path, f"cannot read file: {err.strerror or err}") from None
 

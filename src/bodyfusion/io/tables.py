@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from bodyfusion.base.errors import InputError
+from bodyfusion.base.files import file_problem
 from bodyfusion.base.sections import TableSection
 from bodyfusion.io.arrow_tables import read_clean_table
 from bodyfusion.io.lines import line_chunks, scan_text
@@ -55,6 +56,8 @@ def file_time_span(path: str | Path, time_column: str, *, time_scale: float = 1.
     """(first, last) value of ``time_column`` × ``time_scale`` (s) in a delimited file, read from
     its header, first data line and last line only (the file's tail, not its body): a cheap look
     at its time base. None when the file or those lines cannot be read as such."""
+    if file_problem(Path(path)) is not None:
+        return None
     try:
         with open(path, "rb") as f:
             head = [line for line in f.read(1 << 16).decode("utf-8-sig", "replace").splitlines()[skip_rows:]

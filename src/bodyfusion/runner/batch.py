@@ -28,6 +28,7 @@ from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor
 from bodyfusion.outputs.write import write_outputs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth, navigation_frame
+from bodyfusion.runner.truth import check_truth_overlap
 
 __all__ = ["run", "run_layout"]
 
@@ -53,6 +54,7 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     plan_smoothing(systems, loaded.layout.smoother)
     origin = geodetic_origin(loaded, systems)
     truths = load_truth(loaded, origin)
+    check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
     timings["load_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -9,14 +9,15 @@ about the layout's geodetic origin). A new format is one function added to the r
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
+from pathlib import Path
 
 import numpy as np
 import pymap3d
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.types import TruthTrack
-from bodyfusion.core.layout import TruthConfig
+from bodyfusion.core.layout import LENGTH_UNITS, TruthConfig
 from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.io.truth import read_truth_csv, read_truth_long_csv
 from bodyfusion.nav.frames import apply_axis_map
@@ -27,7 +28,9 @@ def _wide(truth: TruthConfig, origin: tuple[float, float, float] | None,
     tracks = read_truth_csv(truth, position_columns=truth.systems, time_column=truth.time_column,
                             time_scale=truth.time_scale, rate_hz=truth.rate_hz, skip_rows=truth.skip_rows,
                             delimiter=truth.delimiter, sparse=truth.sparse)
-    return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n), tr.sparse) for name, tr in tracks.items()}
+    metres = LENGTH_UNITS[truth.unit]
+    return {name: TruthTrack(tr.t, apply_axis_map(truth.axes, tr.pos_n) * metres, tr.sparse)
+            for name, tr in tracks.items()}
 
 
 def _long(truth: TruthConfig, origin: tuple[float, float, float] | None,
@@ -55,6 +58,28 @@ def _phone_log(truth: TruthConfig, origin: tuple[float, float, float] | None,
 TruthReader = Callable[[TruthConfig, "tuple[float, float, float] | None", Collection[str]], dict[str, TruthTrack]]
 TRUTH_FORMATS: dict[str, TruthReader] = {"wide": _wide, "long": _long, "phone_log": _phone_log}
 """``truth.format`` → reader(truth section, geodetic origin or None, the layout's system names)."""
+
+
+MIN_TRUTH_EPOCHS = 10
+"""Fewest epochs of a dense truth track inside its system's run that a score is computed from
+(an alignment fitted to two points matches any track)."""
+
+
+def check_truth_overlap(truths: Mapping[str, TruthTrack], spans: Mapping[str, tuple[float, float]],
+                        layout: Path | None) -> None:
+    """Refuse (one line, naming the truth section) a dense truth with fewer than
+    :data:`MIN_TRUTH_EPOCHS` epochs inside its system's time span ``spans[name]`` (s): its score
+    would say nothing, or say 0.000."""
+    for name, track in truths.items():
+        if track.sparse or name not in spans:
+            continue
+        t0, t1 = spans[name]
+        inside = int(np.count_nonzero((track.t >= t0) & (track.t <= t1)))
+        if inside < MIN_TRUTH_EPOCHS:
+            raise ConfigError("truth", f"{name}: {inside} truth epoch(s) within its run (t = {t0:.6g}–{t1:.6g} s; the "
+                                       f"truth spans {track.t[0]:.6g}–{track.t[-1]:.6g} s): a score needs at least "
+                                       f"{MIN_TRUTH_EPOCHS} (check the truth's time column and time_scale)",
+                              layout)
 
 
 def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,

@@ -39,6 +39,9 @@ from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 
+MIN_RATE_HZ = 40.0
+"""Below this sample rate (Hz) a foot INS's run gets a ``low_rate`` finding: a swing of about
+0.4 s is then under 16 samples."""
 MIN_LOCKOUT_SAMPLES = 5
 """Stance updates a stance needs before all of them beyond the gate count as a lockout."""
 RECOVERY_VELOCITY_SD_MPS = 0.1
@@ -533,12 +536,21 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
 
     def findings(self) -> list[Finding]:
         """Missed stances and ZUPT lockouts (:func:`~bodyfusion.plugins.foot_ins.stance.stance_findings`),
-        saturation (:func:`~bodyfusion.plugins.foot_ins.input_policy.saturation_findings`), and a
-        levelling without rest."""
+        saturation (:func:`~bodyfusion.plugins.foot_ins.input_policy.saturation_findings`), a
+        rate below :data:`MIN_RATE_HZ` and a levelling without rest."""
         n = self._i + 1
         out = stance_findings(self.name, self.stance_detection, self.stream.t[:n], self.run_data.hist_nis[:n],
                               float(self._params.zupt_gate), self.zupt_recoveries)
         out += saturation_findings(self.name, self.clipping, self.stream.t)
+        if self._rate_hz < MIN_RATE_HZ:
+            t = self.stream.t
+            out.append(Finding(
+                "low_rate", "warning", self.name, float(t[0]), float(t[n - 1]),
+                f"the IMU samples at {self._rate_hz:.3g} Hz, below the {MIN_RATE_HZ:g} Hz a foot needs: a swing "
+                f"(about 0.4 s) spans {0.4 * self._rate_hz:.0f} samples, too few for the strapdown integration and "
+                "the stance detector; expect errors of metres.",
+                "the recording's rate (or time_scale / rate_hz declaring it wrongly).",
+                "record at 100 Hz or more; check time_scale against the file's time column."))
         if not self.still.still:
             t = self.stream.t
             out.append(Finding(
