@@ -431,7 +431,11 @@ def test_a_walk_too_long_to_hold_is_refused_before_it_is_built(tmp_path):
     with pytest.raises(ConfigError, match="laps"):
         simulate(path, tmp_path / "out")
     scenario["path"]["laps"] = 10_000
-    scenario["gait"]["start_still_s"] = 1e9
+    scenario["gait"]["start_still_s"] = 6e5  # within a week (the unit's bound), but 6e7 samples at 100 Hz
     path.write_text(yaml.safe_dump(scenario))
     with pytest.raises(ConfigError, match=r"samples are simulated"):
+        simulate(path, tmp_path / "out")
+    scenario["gait"]["start_still_s"] = 1e9
+    path.write_text(yaml.safe_dump(scenario))
+    with pytest.raises(ConfigError, match=r"gait.start_still_s: 1e\+09 is beyond 604800 s, a week"):
         simulate(path, tmp_path / "out")

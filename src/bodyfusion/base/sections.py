@@ -1,5 +1,6 @@
 """Building blocks of every layout section (the core's, each plugin's, the simulator's): strict
-models, file paths relative to the layout, and errors that name their dotted key."""
+models whose numbers stay within physical sense, file paths relative to the layout, and errors
+that name their dotted key."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pydantic import (
     PrivateAttr,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
 
 
@@ -28,13 +30,76 @@ def _resolve_path(value: Path, info: ValidationInfo) -> Path:
 DataPath = Annotated[Path, AfterValidator(_resolve_path)]
 """A file path; relative paths resolve against the folder of the layout file."""
 
+Coordinate_m = Annotated[float, Field(ge=-2e7, le=2e7)]
+"""A coordinate in a local frame, m: within half the Earth's circumference."""
+Point3_m = tuple[Coordinate_m, Coordinate_m, Coordinate_m]
+"""A point (east, north, up or x, y, z), m."""
+GeodeticPoint = tuple[Annotated[float, Field(ge=-90.0, le=90.0)], Annotated[float, Field(ge=-180.0, le=360.0)],
+                      Annotated[float, Field(ge=-1e4, le=1e5)]]
+"""Latitude (deg, ±90), longitude (deg) and ellipsoidal height (m, −10 km to 100 km)."""
+
+
+UNIT_BOUNDS: tuple[tuple[str, float, str], ...] = (
+    ("_hz", 1e5, "Hz, above any body-worn sensor's rate"),
+    ("_s", 6.048e5, "s, a week"),
+    ("_m", 2e7, "m, half the Earth's circumference"),
+    ("_m2", 4e14, "m², the square of that"),
+    ("_mps", 1e3, "m/s"),
+    ("_mps2", 1e4, "m/s², about 1,000 g"),
+    ("_radps", 1e3, "rad/s"),
+    ("_deg", 720.0, "°, two turns"),
+    ("_uT", 1e4, "µT, 200 times the Earth's field"),
+    ("_ppm", 1e6, "ppm"),
+    ("_mrad", 1e4, "mrad"),
+    ("noise_density", 1e3, "per √Hz"),
+    ("random_walk", 1e3, "per √Hz"),
+    ("_decades", 20.0, "decades"),
+)
+"""The largest magnitude a number may have, by the unit its name ends with (the project names
+quantities with their unit): beyond it a value is no measurement of a person walking, and it
+would only exhaust the memory or the floating point range of a run."""
+
+
+def unit_bound(name: str) -> tuple[float, str] | None:
+    """(largest magnitude, what it is) of the field ``name`` by its unit suffix
+    (:data:`UNIT_BOUNDS`), or None when its name carries no unit."""
+    for suffix, bound, what in UNIT_BOUNDS:
+        if name.endswith(suffix):
+            return bound, what
+    return None
+
+
+def _numbers(value: Any) -> list[float]:
+    """The numbers in a field's value: a number, or the numbers of a tuple, list or dict of them."""
+    if isinstance(value, bool):
+        return []
+    if isinstance(value, (int, float)):
+        return [float(value)]
+    if isinstance(value, (tuple, list)):
+        return [x for v in value for x in _numbers(v)]
+    if isinstance(value, dict):
+        return [x for v in value.values() for x in _numbers(v)]
+    return []
+
 
 class StrictModel(BaseModel):
-    """Base of every layout section: unknown keys are errors, and so are NaN and infinite numbers;
-    a field set on a built model is validated like the file's (``layout.fuser.method = "bogus"``
-    raises :class:`pydantic.ValidationError`)."""
+    """Base of every layout section: unknown keys are errors, and so are NaN and infinite numbers
+    and numbers beyond physical sense for their unit (:data:`UNIT_BOUNDS`; a field whose name has
+    no unit declares its own bounds); a field set on a built model is validated like the file's
+    (``layout.fuser.method = "bogus"`` raises :class:`pydantic.ValidationError`)."""
 
     model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False, validate_assignment=True)
+
+    @model_validator(mode="after")
+    def _within_physical_sense(self) -> Any:
+        for name in type(self).model_fields:
+            bound = unit_bound(name)
+            if bound is None:
+                continue
+            for x in _numbers(getattr(self, name)):
+                if abs(x) > bound[0]:
+                    raise KeyedError(name, f"{x:g} is beyond {bound[0]:g} {bound[1]}: not a plausible value")
+        return self
 
 
 class TableSection(StrictModel):

@@ -18,7 +18,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.sections import DataPath, FiguresConfig, KeyedError, StrictModel, TableSection
+from bodyfusion.base.sections import DataPath, FiguresConfig, GeodeticPoint, KeyedError, StrictModel, TableSection
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.body import body_limit
 from bodyfusion.core.data_tables import bind_tables, require_data
@@ -117,7 +117,7 @@ class FuserConfig(StrictModel):
     method: Literal["none", "projection", "qp", "socp"] = "projection"
     """How the layout's constraints are enforced; ``none`` turns them off (said on the console)."""
     epochs: Literal["events", "interval", "sample"] = "events"
-    interval_s: float = Field(default=0.5, gt=0)
+    interval_s: float = Field(default=0.5, ge=1e-3)
     tolerance_m: float = Field(default=1e-6, gt=0)
     max_iterations: int = Field(default=20, ge=1, le=1000)
     cross_covariance: bool = False
@@ -225,9 +225,9 @@ class TruthConfig(PositionFrame, TableSection):
     score_systems: list[str] = Field(default_factory=list)
     """phone_log format: the systems scored at the log's surveyed points (POSI lines)."""
     time_column: str | None = None
-    time_scale: float = Field(default=1.0, gt=0)
+    time_scale: float = Field(default=1.0, gt=0, le=1e6)
     rate_hz: float | None = Field(default=None, gt=0)
-    skip_rows: int = Field(default=0, ge=0)
+    skip_rows: int = Field(default=0, ge=0, le=10_000_000)
     delimiter: str = ","
     sparse: bool = False
     loop: bool = False
@@ -260,7 +260,7 @@ class OutputConfig(StrictModel):
     dir: DataPath | None = None
     plots: bool = True
     figures: FiguresConfig = Field(default_factory=FiguresConfig)
-    decimate: int = Field(default=1, ge=1)
+    decimate: int = Field(default=1, ge=1, le=1_000_000)
 
 
 def _check_feasible(constraints: list[ConstraintConfig]) -> None:
@@ -308,7 +308,7 @@ class Layout(StrictModel):
     gravity_mps2: float | None = Field(default=None, gt=9.7, lt=9.9)
     latitude_deg: float = Field(default=45.0, ge=-90, le=90)
     height_m: float = 0.0
-    geodetic_origin: tuple[float, float, float] | None = None
+    geodetic_origin: GeodeticPoint | None = None
     """Latitude (deg), longitude (deg), height (m) of the ENU frame's origin, for GNSS,
     surveyed points and geo-referenced output; unset: the first GNSS fix."""
     systems: dict[str, SystemSection]

@@ -49,12 +49,12 @@ class ImuCsvConfig(TableSection):
     """Unit of the gyroscope columns: rad/s or deg/s."""
     time_column: str | None = None
     """Column of sample times, multiplied by time_scale to give seconds."""
-    time_scale: float = Field(default=1.0, gt=0)
+    time_scale: float = Field(default=1.0, gt=0, le=1e6)
     """Factor from the time column to seconds (e.g. 1/60 for a sample counter at 60 Hz)."""
     rate_hz: float | None = Field(default=None, gt=0)
     """Sample rate (Hz): the time base when the file has no time column; with one, the
     nominal rate the timestamps are checked against."""
-    skip_rows: int = Field(default=0, ge=0)
+    skip_rows: int = Field(default=0, ge=0, le=10_000_000)
     """Lines before the header line."""
     delimiter: str = ","
     """Field separator."""
@@ -63,7 +63,7 @@ class ImuCsvConfig(TableSection):
     axes: AxisMap = ("x", "y", "z")
     """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
     whose z points down at rest into one whose z points up."""
-    max_step_samples: float = Field(default=5.0, gt=1)
+    max_step_samples: float = Field(default=5.0, gt=1, le=1e6)
     """A time step longer than this many nominal sample periods is a gap (reported, and
     handled by the navigation system's gap policy)."""
     max_gap_s: float = Field(default=MAX_GAP_S, gt=0)

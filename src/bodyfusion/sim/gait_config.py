@@ -104,7 +104,7 @@ class GaitConfig(StrictModel):
 
     kind: GaitKind = "walk"
     stride_m: float = Field(default=1.4, gt=0)
-    cadence_steps_per_min: float = Field(default=108.0, gt=0)
+    cadence_steps_per_min: float = Field(default=108.0, gt=0, le=400.0)
     stance_fraction: float = Field(default=0.6, gt=0, lt=1)
     swing_s: float | None = Field(default=None, gt=0)
     stance_s: float | None = Field(default=None, gt=0)

@@ -57,12 +57,12 @@ from typing import Any
 
 import numpy as np
 import yaml
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.progress import ProgressCallback
-from bodyfusion.base.sections import StrictModel
+from bodyfusion.base.sections import GeodeticPoint, StrictModel
 from bodyfusion.core.layout import Layout
 from bodyfusion.core.layout_io import apply_overrides, read_yaml, validate_section
 from bodyfusion.sim.context import DEFAULT_GEODETIC_ORIGIN, SimContext, SystemKind, SystemOutput
@@ -100,16 +100,9 @@ class Scenario(StrictModel):
     path: dict[str, Any]
     gait: GaitConfig = Field(default_factory=GaitConfig)
     systems: dict[str, dict[str, Any]] = Field(min_length=1)
-    geodetic_origin: tuple[float, float, float] | None = None
+    geodetic_origin: GeodeticPoint | None = None
     """(lat deg, lon deg, h m) of the ENU frame; unset: :data:`DEFAULT_GEODETIC_ORIGIN`."""
     layout: dict[str, Any] = Field(default_factory=dict)
-
-    @field_validator("geodetic_origin")
-    @classmethod
-    def _origin_range(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
-        if v is not None and (abs(v[0]) > 90 or abs(v[1]) > 180):
-            raise ValueError("latitude must be within ±90 deg and longitude within ±180 deg")
-        return v
 
 
 @dataclass

@@ -92,6 +92,12 @@ class StudyOutages(StrictModel):
         return v
 
 
+MAX_SEEDS = 100_000
+"""Most seeds of a study (a count, or a list's length): 100,000 runs per grid point."""
+MAX_SEED = 2**32 - 1
+"""Largest seed (numpy's seed range of one 32-bit word)."""
+
+
 class StudySpec(StrictModel):
     """The study file (module docstring)."""
 
@@ -101,7 +107,7 @@ class StudySpec(StrictModel):
     outages: StudyOutages | None = None
     seeds: int | list[int]
     figures: FiguresConfig = Field(default_factory=FiguresConfig)
-    runs_per_task: int | None = Field(default=None, ge=1)
+    runs_per_task: int | None = Field(default=None, ge=1, le=1_000_000)
     run_outputs: bool = False
 
     @field_validator("parameters")
@@ -115,13 +121,16 @@ class StudySpec(StrictModel):
     @field_validator("seeds")
     @classmethod
     def _seeds(cls, v: int | list[int]) -> int | list[int]:
-        seeds = list(range(v)) if isinstance(v, int) else v
-        if not seeds:
-            raise ValueError("at least one seed is needed")
-        if any(s < 0 for s in seeds):
-            raise ValueError("seeds must be >= 0")
-        if len(set(seeds)) != len(seeds):
-            raise ValueError("seeds repeat")
+        """A count of seeds (1 … :data:`MAX_SEEDS`) or distinct seeds (0 … :data:`MAX_SEED`), checked
+        before any list of them is made."""
+        count = v if isinstance(v, int) else len(v)
+        if not 1 <= count <= MAX_SEEDS:
+            raise ValueError(f"{count} seeds: give 1 to {MAX_SEEDS}")
+        if isinstance(v, list):
+            if any(not 0 <= s <= MAX_SEED for s in v):
+                raise ValueError(f"a seed is 0 … {MAX_SEED}")
+            if len(set(v)) != len(v):
+                raise ValueError("seeds repeat")
         return v
 
     @property

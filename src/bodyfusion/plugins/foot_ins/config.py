@@ -83,10 +83,10 @@ class DetectorConfig(StrictModel):
     window: int | None = Field(default=None, ge=1, le=MAX_WINDOW)
     """Samples per test window, at most :data:`MAX_WINDOW` (shoe, magnitude, axes_band: 5;
     adaptive: 25 ms at the recording's rate)."""
-    threshold: float | None = Field(default=None, gt=0)
+    threshold: float | None = Field(default=None, gt=0, le=1e12)
     """shoe, adaptive: the SHOE γ below which a window is stance (3e4, OpenShoe's); magnitude:
     the largest | ‖f‖ − g |, m/s^2 (0.5)."""
-    motion_threshold: float | None = Field(default=None, gt=0)
+    motion_threshold: float | None = Field(default=None, gt=0, le=1e12)
     """adaptive: the SHOE statistic above which a sample is never stance (1e7: an RMS angular
     rate of ~5.5 rad/s at the default σ_ω)."""
     margin_decades: float | None = Field(default=None, gt=0)
@@ -94,13 +94,13 @@ class DetectorConfig(StrictModel):
     prominence_decades: float | None = Field(default=None, gt=0)
     """adaptive: how far (decades) a cycle's swing must rise above its floor for the cycle to
     be a gait (1.0; below it only ``threshold`` applies: standing, fidgeting)."""
-    sigma_acc: float | None = Field(default=None, gt=0)
+    sigma_acc: float | None = Field(default=None, gt=0, le=100.0)
     """shoe, adaptive: accelerometer noise σ_a, m/s^2 (0.01)."""
-    sigma_gyro: float | None = Field(default=None, gt=0)
+    sigma_gyro: float | None = Field(default=None, gt=0, le=100.0)
     """shoe, adaptive: gyroscope noise σ_ω, rad/s (0.1 °/s)."""
-    low: float | None = None
+    low: float | None = Field(default=None, ge=-1e4, le=1e4)
     """axes_band: the band's lower edge, m/s^2 (g − 1)."""
-    high: float | None = None
+    high: float | None = Field(default=None, ge=-1e4, le=1e4)
     """axes_band: the band's upper edge, m/s^2 (g + 1)."""
     min_stance_s: float = Field(default=0.0, ge=0)
     """Shortest stance kept, s (0: every one)."""
@@ -190,7 +190,7 @@ class PositionFixConfig(PositionFrame):
     """Header names of the three position columns."""
     time_column: str | None = None
     """Column of fix times, multiplied by time_scale to give seconds."""
-    time_scale: float = Field(default=1.0, gt=0)
+    time_scale: float = Field(default=1.0, gt=0, le=1e6)
     """Factor from the time column to seconds."""
     rate_hz: float | None = Field(default=None, gt=0)
     """Fixed fix rate (Hz) when the file has no time column."""

@@ -52,7 +52,7 @@ class StepConfig(StrictModel):
     min_interval_s: float = Field(default=0.35, gt=0)
     lowpass_hz: float = Field(default=3.0, gt=0)
     length: Literal["weinberg", "constant"] = "weinberg"
-    weinberg_k: float = Field(default=0.48, gt=0)
+    weinberg_k: float = Field(default=0.48, gt=0, le=10.0)
     constant_m: float = Field(default=0.7, gt=0)
 
 
@@ -99,10 +99,10 @@ class PdrFilterConfig(StrictModel):
 
     step_length_sd_m: float = Field(default=0.1, gt=0)
     heading_noise_density: float = Field(default=0.002, ge=0)
-    gyro_bias_sd: float | None = Field(default=None, ge=0)
+    gyro_bias_sd: float | None = Field(default=None, ge=0, le=100.0)
     correlation_time_s: float = Field(default=300.0, gt=0)
     height_noise_density: float = Field(default=0.05, ge=0)
-    accuracy_to_sigma: float = Field(default=0.66, gt=0)
+    accuracy_to_sigma: float = Field(default=0.66, gt=0, le=100.0)
     default_sigma_m: float = Field(default=5.0, gt=0)
     gnss_heading_sd_deg: float = Field(default=15.0, gt=0)
     min_speed_for_heading_mps: float = Field(default=0.8, ge=0)
@@ -112,10 +112,10 @@ class PdrFilterConfig(StrictModel):
     pose_window_s: float = Field(default=2.0, gt=0)
     max_speed_mps: float = Field(default=2.5, gt=0)
     gate_probability: float = Field(default=0.999, gt=0, lt=1)
-    reset_after_rejections: int = Field(default=10, ge=0)
+    reset_after_rejections: int = Field(default=10, ge=0, le=1_000_000)
     gnss_correlated_fraction: float = Field(default=0.8, ge=0, lt=1)
     gnss_bias_time_s: float = Field(default=60.0, gt=0)
-    step_scale_sd: float = Field(default=0.0, ge=0)
+    step_scale_sd: float = Field(default=0.0, ge=0, le=10.0)
     step_scale_random_walk: float = Field(default=1e-4, ge=0)
 
 

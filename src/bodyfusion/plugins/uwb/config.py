@@ -6,10 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from bodyfusion.base.sections import DataPath, KeyedError, StrictModel, TableSection
-
-Vector3 = tuple[float, float, float]
-
+from bodyfusion.base.sections import DataPath, KeyedError, Point3_m, StrictModel, TableSection
 
 class RangeFileConfig(TableSection):
     """Ranges recorded as CSV with a header line (or a table with those columns given in memory),
@@ -38,13 +35,13 @@ class UwbConfig(StrictModel):
 
     plugin: Literal["uwb"] = "uwb"
     host: str = Field(description="Name of the navigation system that carries the tag.")
-    lever_arm_m: Vector3 = Field(
+    lever_arm_m: Point3_m = Field(
         default=(0.0, 0.0, 0.0),
         description="Offset of the tag's antenna from the host's navigated point, ENU m (a constant offset in the "
                     "navigation frame, e.g. [0, 0, 0.1] for a tag 10 cm above a foot IMU).")
-    anchors: dict[str, Vector3] = Field(default_factory=dict,
+    anchors: dict[str, Point3_m] = Field(default_factory=dict,
                                         description="Fixed anchors: id → surveyed position (east, north, up), m.")
-    peers: dict[str, Vector3] = Field(
+    peers: dict[str, Point3_m] = Field(
         default_factory=dict,
         description="Tags on other navigation systems this tag ranges to: system name → that tag's lever arm, ENU m.")
     ranges: RangeFileConfig

@@ -37,7 +37,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.sections import KeyedError, StrictModel
+from bodyfusion.base.sections import KeyedError, Point3_m, StrictModel
 from bodyfusion.base.seeding import system_seed
 from bodyfusion.plugins.uwb.config import RangeFileConfig, UwbConfig
 from bodyfusion.sim.context import SimContext, SystemKind, SystemOutput, layout_section
@@ -48,9 +48,6 @@ __all__ = ["NlosConfig", "RANGE_COLUMNS", "SIMULATION_KINDS", "UwbTagSystem", "l
            "ranges_file", "simulate_uwb_tag"]
 
 RANGE_COLUMNS = ("t", "id", "range_m", "nlos")
-Vector3 = tuple[float, float, float]
-
-
 class NlosConfig(StrictModel):
     """NLOS bursts of one link (see the module docstring): ``fraction`` of the time in NLOS,
     bursts of mean length ``mean_duration_s``, bias per burst uniform in
@@ -78,9 +75,9 @@ class UwbTagSystem(StrictModel):
 
     kind: Literal["uwb_tag"]
     host: str
-    lever_arm_m: Vector3 = (0.0, 0.0, 0.0)
-    anchors: dict[str, Vector3] = Field(default_factory=dict)
-    peers: dict[str, Vector3] = Field(default_factory=dict)
+    lever_arm_m: Point3_m = (0.0, 0.0, 0.0)
+    anchors: dict[str, Point3_m] = Field(default_factory=dict)
+    peers: dict[str, Point3_m] = Field(default_factory=dict)
     rate_hz: float = Field(default=10.0, gt=0)
     sigma_m: float = Field(default=0.1, gt=0)
     nlos: NlosConfig = Field(default_factory=NlosConfig)
@@ -165,7 +162,7 @@ def simulate_uwb_tag(name: str, cfg: UwbTagSystem, ctx: SimContext) -> SystemOut
     idx = np.arange(0, ctx.t.size, int(round(step)))
     t = ctx.t[idx]
 
-    def antenna(system: str, lever: Vector3) -> np.ndarray:
+    def antenna(system: str, lever: Point3_m) -> np.ndarray:
         out = ctx.outputs[system]
         pos = np.column_stack([np.interp(t, out.truth_t, out.truth_pos[:, c]) for c in range(3)])
         return pos + np.asarray(lever, dtype=float)
