@@ -1,4 +1,5 @@
-"""The one Kalman measurement update: the Joseph form, its gate and NIS, its selection form."""
+"""The one Kalman measurement update: the Joseph form, its gate and NIS, its selection form, its
+form for noise correlated with the process noise (the coloured-noise ZUPT)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bodyfusion.nav.kalman import (NOT_TRACKED, gated_update, kalman_update, selection_moments, selection_update,
-                                   update_selected)
+from bodyfusion.nav.kalman import (NOT_TRACKED, correlated_update, gated_update, kalman_update, selection_moments,
+                                   selection_update, update_selected)
 
 
 def _spd(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -106,3 +107,32 @@ def test_a_gated_update_leaves_its_input_alone_and_says_its_verdict():
     assert not beyond.accepted and beyond.nis > 6.63 and beyond.dx is None and beyond.P is None
     indefinite = gated_update(np.zeros((6, 6)), H, -1.0, 0.1, gate=np.inf)
     assert np.isnan(indefinite.nis) and not indefinite.accepted
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), correlated=st.booleans())
+def test_the_correlated_form_is_the_textbook_update_and_the_general_one_without_correlation(seed, correlated):
+    """With θ = E[w vᵀ] the gain is (P Hᵀ + θ) S⁻¹, S = H P Hᵀ + R + H θ + θᵀ Hᵀ, and P⁺ the
+    Joseph form with the θ terms (Simon 2006, §7.1); with θ = 0 it is :func:`kalman_update`'s."""
+    n = 15
+    rng = np.random.default_rng(seed)
+    P0 = _spd(rng, n)
+    H = rng.normal(size=(3, n))
+    R = _spd(rng, 3)
+    theta = 0.1 * rng.normal(size=(n, 3)) if correlated else np.zeros((n, 3))
+    y = rng.normal(size=3)
+    S = H @ P0 @ H.T + R + H @ theta + theta.T @ H.T
+    K = (P0 @ H.T + theta) @ np.linalg.inv(S)
+    E = np.eye(n) - K @ H
+    expected = E @ P0 @ E.T + K @ R @ K.T - E @ theta @ K.T - K @ theta.T @ E.T
+    P, dx, phi = P0.copy(), np.zeros(n), np.eye(n)
+    nis = correlated_update(P, H, R, theta, y, 0.0, dx, phi)
+    assert nis == pytest.approx(y @ np.linalg.solve(S, y), rel=1e-9)
+    np.testing.assert_allclose(dx, K @ y, rtol=1e-9, atol=1e-9 * np.abs(K @ y).max())
+    np.testing.assert_allclose(P, 0.5 * (expected + expected.T), rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    np.testing.assert_allclose(phi, E, rtol=1e-9, atol=1e-9)
+    if not correlated:
+        P_general, dx_general = P0.copy(), np.zeros(n)
+        kalman_update(P_general, H, R, y, np.inf, dx_general, np.empty((0, 0)))
+        np.testing.assert_allclose(P, P_general, rtol=1e-9, atol=1e-9 * np.abs(P_general).max())
+        np.testing.assert_allclose(dx, dx_general, rtol=1e-9, atol=1e-12)

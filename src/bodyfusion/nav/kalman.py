@@ -147,6 +147,98 @@ def kalman_update(P: np.ndarray, H: np.ndarray, R: np.ndarray, y: np.ndarray, ga
 
 
 @numba.njit(cache=True)
+def correlated_update(P: np.ndarray, H: np.ndarray, R: np.ndarray, theta: np.ndarray, y: np.ndarray, gate: float,
+                      dx: np.ndarray, phi: np.ndarray) -> float:
+    """Gated Kalman update of P (n, n) by a 3-dimensional measurement whose noise (covariance R
+    (3, 3)) is correlated with the process noise of the step before it, θ = E[w vᵀ] (n, 3): the
+    form of :func:`kalman_update` for correlated noise (Simon, Optimal State Estimation, §7.1;
+    FilterPy's ``update_correlated``), which the coloured-noise ZUPT needs
+    (:mod:`bodyfusion.plugins.foot_ins.coloured`, [Xu2024] eqs. 11–14):
+
+        S = H P Hᵀ + R + H θ + θᵀ Hᵀ,   K = (P Hᵀ + θ) S⁻¹,   dx = K y,
+        P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ − (I − K H) θ Kᵀ − K θᵀ (I − K H)ᵀ  (symmetrised),
+
+    Φ ← (I − K H) Φ when ``phi`` is (n, n). Returns the NIS yᵀ S⁻¹ y; with ``gate`` > 0 and
+    NIS > gate nothing is changed. With θ = 0 it is :func:`kalman_update`'s update."""
+    n = P.shape[0]
+    # G = P Hᵀ + θ (n, 3); S = H G + R + θᵀ Hᵀ
+    G = np.empty((n, 3))
+    for r in range(n):
+        for c in range(3):
+            s = theta[r, c]
+            for k in range(n):
+                s += P[r, k] * H[c, k]
+            G[r, c] = s
+    S = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            s = R[r, c]
+            for k in range(n):
+                s += H[r, k] * G[k, c] + theta[k, r] * H[c, k]
+            S[r, c] = s
+    for r in range(3):
+        for c in range(r + 1, 3):
+            m = 0.5 * (S[r, c] + S[c, r])
+            S[r, c] = m
+            S[c, r] = m
+    Si = inv3_sym(S)
+    nis = 0.0
+    for r in range(3):
+        for c in range(3):
+            nis += y[r] * Si[r, c] * y[c]
+    if gate > 0.0 and nis > gate:
+        return nis
+    K = np.empty((n, 3))
+    for r in range(n):
+        for c in range(3):
+            K[r, c] = G[r, 0] * Si[0, c] + G[r, 1] * Si[1, c] + G[r, 2] * Si[2, c]
+    for r in range(n):
+        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
+    # E = I − K H
+    E = np.empty((n, n))
+    for r in range(n):
+        for c in range(n):
+            E[r, c] = (1.0 if r == c else 0.0) - (K[r, 0] * H[0, c] + K[r, 1] * H[1, c] + K[r, 2] * H[2, c])
+    if phi.shape[0] > 0:
+        old = phi.copy()
+        for r in range(n):
+            for c in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += E[r, k] * old[k, c]
+                phi[r, c] = s
+    # P⁺ = W Eᵀ − (E θ − K R) Kᵀ with W = E P − K θᵀ
+    W = np.empty((n, n))
+    for r in range(n):
+        for c in range(n):
+            s = -(K[r, 0] * theta[c, 0] + K[r, 1] * theta[c, 1] + K[r, 2] * theta[c, 2])
+            for k in range(n):
+                s += E[r, k] * P[k, c]
+            W[r, c] = s
+    V = np.empty((n, 3))
+    for r in range(n):
+        for c in range(3):
+            s = -(K[r, 0] * R[0, c] + K[r, 1] * R[1, c] + K[r, 2] * R[2, c])
+            for k in range(n):
+                s += E[r, k] * theta[k, c]
+            V[r, c] = s
+    for r in range(n):
+        for c in range(r, n):
+            s1 = 0.0
+            for k in range(n):
+                s1 += W[r, k] * E[c, k]
+            s2 = 0.0
+            for k in range(n):
+                s2 += W[c, k] * E[r, k]
+            a = s1 - (V[r, 0] * K[c, 0] + V[r, 1] * K[c, 1] + V[r, 2] * K[c, 2])
+            b = s2 - (V[c, 0] * K[r, 0] + V[c, 1] * K[r, 1] + V[c, 2] * K[r, 2])
+            v = 0.5 * (a + b)
+            P[r, c] = v
+            P[c, r] = v
+    return nis
+
+
+@numba.njit(cache=True)
 def inverse3(s00: float, s01: float, s02: float, s11: float, s12: float,
              s22: float) -> tuple[float, float, float, float, float, float]:
     """The upper triangle (i00, i01, i02, i11, i12, i22) of the inverse of the symmetric

@@ -35,7 +35,7 @@ import numba
 import numpy as np
 
 from bodyfusion.nav.error_state import inject, keep_yaw_unobservable
-from bodyfusion.nav.kalman import inv3_sym
+from bodyfusion.nav.kalman import correlated_update
 from bodyfusion.nav.zupt import unobservable_yaw_column
 from bodyfusion.plugins.foot_ins.records import FilterState, StepScratch
 
@@ -105,83 +105,12 @@ def coloured_zero_velocity_update(state: FilterState, v_prev: np.ndarray, step: 
                 s += T[r, k] * theta[k, c]
             Rb[r, c] = s
         Rb[r, r] += sigma_v * sigma_v
-    # G = P H̄ᵀ + θ (15, 3); S = H̄ G + R̄ + θᵀ H̄ᵀ (eq. 13)
-    G = np.empty((15, 3))
-    for r in range(15):
-        for c in range(3):
-            s = theta[r, c]
-            for k in range(15):
-                s += P[r, k] * Hb[c, k]
-            G[r, c] = s
-    S = np.empty((3, 3))
-    for r in range(3):
-        for c in range(3):
-            s = Rb[r, c]
-            for k in range(15):
-                s += Hb[r, k] * G[k, c] + theta[k, r] * Hb[c, k]
-            S[r, c] = s
-    for r in range(3):
-        for c in range(r + 1, 3):
-            m = 0.5 * (S[r, c] + S[c, r])
-            S[r, c] = m
-            S[c, r] = m
-    Si = inv3_sym(S)
     y = np.empty(3)
     for k in range(3):
         y[k] = alpha * v_prev[k] - x[3 + k]
-    nis = 0.0
-    for r in range(3):
-        for c in range(3):
-            nis += y[r] * Si[r, c] * y[c]
+    nis = correlated_update(P, Hb, Rb, theta, y, gate, dx, phi)
     if gate > 0.0 and nis > gate:
         return nis
-    K = np.empty((15, 3))
-    for r in range(15):
-        for c in range(3):
-            K[r, c] = G[r, 0] * Si[0, c] + G[r, 1] * Si[1, c] + G[r, 2] * Si[2, c]
-    for r in range(15):
-        dx[r] = K[r, 0] * y[0] + K[r, 1] * y[1] + K[r, 2] * y[2]
-    # E = I − K H̄
-    E = np.empty((15, 15))
-    for r in range(15):
-        for c in range(15):
-            E[r, c] = (1.0 if r == c else 0.0) - (K[r, 0] * Hb[0, c] + K[r, 1] * Hb[1, c] + K[r, 2] * Hb[2, c])
-    if phi.shape[0] > 0:
-        old = phi.copy()
-        for r in range(15):
-            for c in range(15):
-                s = 0.0
-                for k in range(15):
-                    s += E[r, k] * old[k, c]
-                phi[r, c] = s
-    # P⁺ = W Eᵀ − (E θ − K R̄) Kᵀ with W = E P − K θᵀ
-    W = np.empty((15, 15))
-    for r in range(15):
-        for c in range(15):
-            s = -(K[r, 0] * theta[c, 0] + K[r, 1] * theta[c, 1] + K[r, 2] * theta[c, 2])
-            for k in range(15):
-                s += E[r, k] * P[k, c]
-            W[r, c] = s
-    V = np.empty((15, 3))
-    for r in range(15):
-        for c in range(3):
-            s = -(K[r, 0] * Rb[0, c] + K[r, 1] * Rb[1, c] + K[r, 2] * Rb[2, c])
-            for k in range(15):
-                s += E[r, k] * theta[k, c]
-            V[r, c] = s
-    for r in range(15):
-        for c in range(r, 15):
-            s1 = 0.0
-            for k in range(15):
-                s1 += W[r, k] * E[c, k]
-            s2 = 0.0
-            for k in range(15):
-                s2 += W[c, k] * E[r, k]
-            a = s1 - (V[r, 0] * K[c, 0] + V[r, 1] * K[c, 1] + V[r, 2] * K[c, 2])
-            b = s2 - (V[c, 0] * K[r, 0] + V[c, 1] * K[r, 1] + V[c, 2] * K[r, 2])
-            v = 0.5 * (a + b)
-            P[r, c] = v
-            P[c, r] = v
     keep_yaw_unobservable(P, dx[3:6], phi)
     inject(x, dx)
     return nis
