@@ -33,6 +33,7 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogFormatter
 
+from bodyfusion.base.files import replaced_atomically
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import SystemScore, error_cdf, horizontal_sigma_m, score_systems
@@ -149,7 +150,8 @@ def _axes(ax: Axes | None, width_in: float = 8.0, height_in: float = 4.5) -> Axe
 def save_figure(fig: Figure, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = DPI) -> list[Path]:
     """Write ``fig`` once per format (:data:`FORMATS`) as ``path`` with that format's suffix
     (a ``.png``/``.pdf``/``.svg`` suffix of ``path`` is replaced); ``dpi`` in dots per inch.
-    Creates the folder; returns the files written."""
+    Creates the folder; each file replaces an earlier one in one step
+    (:func:`~bodyfusion.base.files.replaced_atomically`). Returns the files written."""
     path = Path(path)
     if path.suffix.lower().lstrip(".") in FORMATS:
         path = path.with_suffix("")
@@ -160,7 +162,8 @@ def save_figure(fig: Figure, path: str | Path, formats: Sequence[str] = ("png",)
     written = []
     for fmt in formats:
         out = path.with_name(f"{path.name}.{fmt}")
-        fig.savefig(out, dpi=dpi, format=fmt)
+        with replaced_atomically(out) as partial:
+            fig.savefig(partial, dpi=dpi, format=fmt)
         written.append(out)
     return written
 

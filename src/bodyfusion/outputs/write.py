@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.files import replaced_atomically, sole_writer
 from bodyfusion.base.forking import Forked
 from bodyfusion.outputs.trajectories import (
     ROWS,
@@ -132,12 +133,14 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
 
 
 def _write_tracks(result: RunResult, out_dir: Path) -> None:
-    """The TUM files and, for a geo-referenced run, track.geojson."""
+    """The TUM files (a folder written whole beside the old one, then put in its place) and, for
+    a geo-referenced run, track.geojson."""
     decimate = result.loaded.layout.output.decimate
-    write_tum(out_dir / "tum", result.trajectories, result.truths, decimate)
+    with replaced_atomically(out_dir / "tum") as tum:
+        write_tum(tum, result.trajectories, result.truths, decimate)
     if result.frame.geodetic_origin is not None:
-        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.frame.geodetic_origin,
-                      decimate)
+        with replaced_atomically(out_dir / "track.geojson") as path:
+            write_geojson(path, result.trajectories, result.truths, result.frame.geodetic_origin, decimate)
 
 
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
@@ -145,11 +148,24 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     """metrics.json, the trajectory files and (unless switched off) the PNG plots. With more
     than :data:`~bodyfusion.outputs.trajectories.ROWS` rows of tracks, the TUM files and track.geojson
     are written in a forked process (:class:`~bodyfusion.base.forking.Forked`) while this one
-    writes the rest; the plots by ``figure_process`` when given one."""
+    writes the rest; the plots by ``figure_process`` when given one. Each file replaces the
+    previous one in one step (:func:`~bodyfusion.base.files.replaced_atomically`), one run at a
+    time (:func:`~bodyfusion.base.files.sole_writer`); a write that fails (a full disk, a
+    read-only folder) is a :class:`FusionError` naming the folder, the previous files kept."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
+    try:
+        with sole_writer(out_dir):
+            _write_all(result, out_dir, config_label, total_wall_s, figure_process)
+    except OSError as err:
+        raise FusionError(f"{out_dir}: cannot write the outputs: {err.strerror or err} (the files of an earlier run "
+                          "there are kept whole)") from None
+
+
+def _write_all(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
+               figure_process: FigureProcess | None) -> None:
     output = result.loaded.layout.output
     if output.plots and figure_process is not None:
         log.info("plotting beside the other outputs")
@@ -157,12 +173,16 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     log.info("writing the outputs to %s", out_dir)
     long = sum(len(track.t) for track in result.trajectories.values()) // output.decimate > ROWS  # worth a fork
     beside = Forked(lambda: _write_tracks(result, out_dir), fork=long)  # at the same time as the two tables
-    write_trajectories_csv(out_dir / "trajectories.csv", result.trajectories, output.decimate)
-    write_strides_csv(out_dir / "strides.csv", result.systems)
-    write_trajectories_parquet(out_dir / "trajectories.parquet", result.trajectories, decimate=output.decimate,
-                               config_sha256=result.loaded.sha256, frame=result.frame)
+    with replaced_atomically(out_dir / "trajectories.csv") as path:
+        write_trajectories_csv(path, result.trajectories, output.decimate)
+    with replaced_atomically(out_dir / "strides.csv") as path:
+        write_strides_csv(path, result.systems)
+    with replaced_atomically(out_dir / "trajectories.parquet") as path:
+        write_trajectories_parquet(path, result.trajectories, decimate=output.decimate,
+                                   config_sha256=result.loaded.sha256, frame=result.frame)
     doc = metrics_document(result, config_label, total_wall_s)
-    (out_dir / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
+    with replaced_atomically(out_dir / "metrics.json") as path:
+        path.write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     beside.result()
     if output.plots and figure_process is not None:
         figure_process.written()

@@ -1,0 +1,88 @@
+"""Writing a run's outputs loses nothing: each file replaces the previous one in one step, a
+write that fails (a full disk) keeps the earlier run's files whole and says so in one line, and a
+second run cannot mix its files into a folder another run is writing."""
+
+from __future__ import annotations
+
+import errno
+import multiprocessing
+from pathlib import Path
+
+import pytest
+
+from bodyfusion.base.errors import FusionError
+from bodyfusion.base.files import replaced_atomically, sole_writer
+from bodyfusion.core.layout import load_layout
+from bodyfusion.outputs import write
+from bodyfusion.outputs.write import write_outputs
+from bodyfusion.runner import run_layout
+
+WALKER = {"systems": {"walker": {"plugin": "random_walk", "duration_s": 5.0}}, "output": {"plots": False}}
+
+
+@pytest.fixture()
+def result(write_yaml):
+    return run_layout(load_layout(write_yaml(WALKER)))
+
+
+def _no_partial_files(folder: Path) -> bool:
+    return not [p for p in folder.rglob("*") if ".partial" in p.name or p.name.endswith(".old")]
+
+
+def test_a_run_writes_its_files_whole_and_leaves_nothing_partial(result, tmp_path):
+    write_outputs(result, tmp_path, "walk", 1.0)
+    assert {p.name for p in tmp_path.iterdir()} >= {"metrics.json", "trajectories.csv", "trajectories.parquet", "tum"}
+    assert _no_partial_files(tmp_path)
+
+
+def test_a_full_disk_keeps_the_previous_runs_files_and_says_so_in_one_line(result, tmp_path, monkeypatch):
+    write_outputs(result, tmp_path, "walk", 1.0)
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+
+    def full_disk(path, *args, **kwargs):
+        Path(path).write_bytes(b"PAR1 half a file")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(write, "write_trajectories_parquet", full_disk)
+    with pytest.raises(FusionError) as err:
+        write_outputs(result, tmp_path, "walk", 1.0)
+    assert "No space left on device" in str(err.value) and "\n" not in str(err.value)
+    assert (tmp_path / "trajectories.parquet").read_bytes() == before[tmp_path / "trajectories.parquet"]
+    assert _no_partial_files(tmp_path)
+
+
+def _hold(folder: str, ready, release) -> None:
+    with sole_writer(Path(folder)):
+        ready.set()
+        release.wait(30)
+
+
+def test_a_second_run_into_a_folder_being_written_is_refused_not_mixed(result, tmp_path):
+    context = multiprocessing.get_context("fork")
+    ready, release = context.Event(), context.Event()
+    other = context.Process(target=_hold, args=(str(tmp_path), ready, release))
+    other.start()
+    try:
+        assert ready.wait(30)
+        with pytest.raises(FusionError, match="another run is writing into this folder"):
+            write_outputs(result, tmp_path, "walk", 1.0)
+        assert not (tmp_path / "metrics.json").exists()
+    finally:
+        release.set()
+        other.join()
+    write_outputs(result, tmp_path, "walk", 1.0)  # the folder is free again
+    assert (tmp_path / "metrics.json").is_file()
+
+
+def test_a_replaced_folder_is_the_new_one_whole(tmp_path):
+    (tmp_path / "tum").mkdir()
+    (tmp_path / "tum" / "old_system.txt").write_text("old")
+    with replaced_atomically(tmp_path / "tum") as new:
+        new.mkdir()
+        (new / "walker.txt").write_text("new")
+    assert [p.name for p in (tmp_path / "tum").iterdir()] == ["walker.txt"] and _no_partial_files(tmp_path)
+    with pytest.raises(RuntimeError), replaced_atomically(tmp_path / "tum") as new:
+        new.mkdir()
+        raise RuntimeError("a writer that fails half way")
+    assert [p.name for p in (tmp_path / "tum").iterdir()] == ["walker.txt"] and _no_partial_files(tmp_path)
+
