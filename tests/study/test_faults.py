@@ -96,3 +96,22 @@ def test_an_unwritable_output_folder_is_one_line_and_a_rerun_completes(tmp_path)
     (out / "parts").unlink()
     run_study(study, out, workers=1)
     assert_complete(study, out)
+
+
+def test_parts_of_runs_with_and_without_findings_concatenate_with_one_findings_type():
+    """A run with no finding and one with a whole-run finding (no times) and a timed one write
+    parts of the same schema: their cells alone would type as lists of null, or of structs whose
+    times are null, which do not concatenate."""
+    import pyarrow as pa
+
+    from bodyfusion.base.findings import Finding
+    from bodyfusion.study.results import FINDINGS_TYPE, _table
+
+    timed = Finding("nis_high", "warning", "foot", 0.0, 60.0, "m", "c", "a").to_dict()
+    whole = Finding("large_error", "warning", None, None, None, "m", "c", "a").to_dict()
+    parts = [_table([{"run_key": "a", "health.findings": []}]),
+             _table([{"run_key": "b", "health.findings": [whole]}]),
+             _table([{"run_key": "c", "health.findings": [timed, whole]}])]
+    assert all(p.schema.field("health.findings").type == FINDINGS_TYPE for p in parts)
+    joined = pa.concat_tables(parts)
+    assert [len(v) for v in joined.column("health.findings").to_pylist()] == [0, 1, 2]

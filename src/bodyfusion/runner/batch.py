@@ -23,6 +23,7 @@ from bodyfusion.core.smoothing import constrain_trajectories, plan_smoothing, sm
 from bodyfusion.core.system import AidingSource
 from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.figure_process import FigureProcess
+from bodyfusion.evaluation.consistency_findings import nees_findings, nis_findings
 from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings, truth_separation_findings
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
 from bodyfusion.outputs.write import write_outputs
@@ -112,6 +113,11 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
         findings += report.limits.findings()
         findings += truth_separation_findings(constraints, report.constraint_log, truths)
     findings += sensor_alone_findings(scores, alone)
+    spans = {name: (s.t_start, s.t_end) for name, s in systems.items()}
+    spans.update({name: (float(t[0]), float(t[-1])) if len(t := s.measurement_times()) else (0.0, 0.0)
+                  for name, s in aiding.items()})
+    findings += nis_findings({name: s.health().get("nis", {}) for name, s in {**systems, **aiding}.items()}, spans)
+    findings += nees_findings(nees)
     findings += large_error_findings(scores, findings)
     return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations,
                      navigation_frame(loaded, systems, origin), timings, aiding, smoothed_constraints, nees,

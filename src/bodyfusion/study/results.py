@@ -19,6 +19,7 @@ statistics of the outage errors and RMSEs per layout, parameter values and outag
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -32,6 +33,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.findings import Finding
 
 HEAD_COLUMNS: dict[str, pa.DataType] = {
     "run_key": pa.string(),
@@ -83,15 +85,28 @@ def cell(value: Any) -> Any:
     return value
 
 
+FINDINGS_TYPE = pa.list_(pa.struct([(f.name, pa.float64() if f.name in ("t_start", "t_end") else pa.string())
+                                     for f in dataclasses.fields(Finding)]))
+"""The type of every ``...health.findings`` column (:class:`~bodyfusion.base.findings.Finding`s):
+fixed, so that runs with and without findings (whose cells alone would type as lists of null)
+write parts that concatenate."""
+
+
+def _column_type(name: str) -> pa.DataType | None:
+    """A column's fixed type (head columns, findings), or None: inferred from its cells."""
+    return HEAD_COLUMNS.get(name) or (FINDINGS_TYPE if name.endswith("health.findings") else None)
+
+
 def _table(rows: list[dict[str, Any]]) -> pa.Table:
-    """Rows → a table: head columns with fixed types, the others inferred, missing cells null."""
+    """Rows → a table: head and findings columns with fixed types, the others inferred, missing
+    cells null."""
     names = list(HEAD_COLUMNS)
     for row in rows:
         names.extend(k for k in row if k not in names)
     arrays = []
     for name in names:
         cells = [row.get(name) for row in rows]
-        arrays.append(pa.array(cells, type=HEAD_COLUMNS.get(name)))
+        arrays.append(pa.array(cells, type=_column_type(name)))
     return pa.Table.from_arrays(arrays, names=names)
 
 
