@@ -110,6 +110,26 @@ def test_validate_warns_of_files_on_another_clock(tmp_path):
     assert "warning: systems.foot.data (0–" in proc.stderr and "and truth (5000–5100 s) do not overlap" in proc.stderr
 
 
+def test_validate_lists_every_file_and_column_problem_at_once(tmp_path):
+    """A column the IMU file lacks and one the truth lacks, then a missing file beside the truth's:
+    every problem, one line each naming the layout and the key, exit 2 — not the first of them."""
+    imu = tmp_path / "imu.csv"
+    imu.write_text(VICON_LEFT.read_text().replace("acc_y", "accel_y", 1))
+    truth = tmp_path / "truth.csv"
+    truth.write_text("t,x,y,z\n0,0,0,0\n1,1,0,0\n")
+    cfg = tmp_path / "broken.yaml"
+    cfg.write_text(layout_text(imu) + f"truth: {{path: {truth}, time_column: t, systems: {{foot: [x, y, height]}}}}\n")
+    proc = fusion("validate", cfg)
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert len(errors) == 2, proc.stderr
+    assert any("systems.foot.data: imu.csv has no column(s) acc_y" in e for e in errors)
+    assert any("truth: truth.csv has no column(s) height" in e for e in errors)
+    (tmp_path / "imu.csv").unlink()
+    errors = [line for line in fusion("validate", cfg).stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 2 and any("systems.foot.data.path" in e and "file not found" in e for e in errors)
+
+
 def test_validate_missing_config_file(tmp_path):
     assert_one_line_user_error(fusion("validate", tmp_path / "absent.yaml"), "absent.yaml")
 

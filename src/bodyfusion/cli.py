@@ -15,7 +15,6 @@ from typing import Annotated, Literal
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.base.files import file_problem
 from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -188,16 +187,18 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
 @app.command()
 def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], set_: SetOption = None) -> None:
     """Check a layout without reading its data: both stages (layout and each plugin's section),
-    finite numbers, a feasible constraint set, the files it names exist, and their time bases
-    overlap (read from each file's first and last lines)."""
+    finite and plausible numbers, a feasible constraint set; then every file it names is a file
+    with the columns the layout names (all problems listed, one line each), and their time
+    bases overlap (read from each file's first and last lines)."""
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.runner.layout_files import data_files, disjoint_time_bases
+    from bodyfusion.runner.layout_files import disjoint_time_bases, file_problems
 
     loaded = load_layout(config, set_ or [])
-    for key, path in data_files(loaded):
-        problem = file_problem(path)
-        if problem is not None:
-            raise ConfigError(key, f"{path}: {problem}", config)
+    problems = file_problems(loaded)
+    for key, problem in problems:  # every one at once, one line each
+        print(f"error: {ConfigError(key, problem, config)}", file=sys.stderr)
+    if problems:
+        sys.exit(2)
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         log.warning("fuser.method is none: the %d constraint(s) are not enforced", len(loaded.layout.constraints))
     for line in disjoint_time_bases(loaded):

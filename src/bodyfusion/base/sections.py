@@ -133,6 +133,18 @@ class TableSection(StrictModel):
         stand without one (a section that says how other data are read)."""
         return True
 
+    def required_columns(self) -> list[str]:
+        """The columns its file must have: every ``*_column`` and ``*_columns`` field set (a
+        section of another shape says its own); what ``fusion validate`` checks the header for."""
+        out: list[str] = []
+        for name in type(self).model_fields:
+            value = getattr(self, name)
+            if name.endswith("_column") and isinstance(value, str):
+                out.append(value)
+            elif name.endswith("_columns") and isinstance(value, (list, tuple)):
+                out.extend(v for v in value if isinstance(v, str))
+        return out
+
 
 class KeyedError(ValueError):
     """A cross-field error raised in a validator that knows the dotted key (relative to

@@ -238,6 +238,15 @@ class TruthConfig(PositionFrame, TableSection):
         """A truth section says how a truth table is read; without one the run has no truth."""
         return False
 
+    def required_columns(self) -> list[str]:
+        """``wide``: the time column and every system's position columns; ``long``: the columns
+        ``fusion simulate`` writes; ``phone_log``: none (a log, not a table)."""
+        if self.format == "long":
+            return ["system", "t", "east_m", "north_m", "up_m"]
+        if self.format == "phone_log":
+            return []
+        return [*super().required_columns(), *(c for columns in self.systems.values() for c in columns)]
+
     @model_validator(mode="after")
     def _time_source(self) -> "TruthConfig":
         if self.path is None or self.format == "long":

@@ -51,6 +51,24 @@ def split_line(line: str, delimiter: str) -> list[str]:
     return line.split(delimiter)
 
 
+def _head_lines(f: Any, skip_rows: int) -> list[str]:
+    """The non-blank lines of a file's first 64 kB after ``skip_rows``."""
+    return [line for line in f.read(1 << 16).decode("utf-8-sig", "replace").splitlines()[skip_rows:] if line.strip()]
+
+
+def file_header(path: str | Path, *, delimiter: str = ",", skip_rows: int = 0) -> list[str] | None:
+    """The column names of a delimited file's header line (after ``skip_rows``), read from its
+    first 64 kB only; None when the file or its header cannot be read."""
+    if file_problem(Path(path)) is not None:
+        return None
+    try:
+        with open(path, "rb") as f:
+            head = _head_lines(f, skip_rows)
+    except OSError:
+        return None
+    return [clean_cell(c) for c in split_line(head[0], delimiter)] if head else None
+
+
 def file_time_span(path: str | Path, time_column: str, *, time_scale: float = 1.0, delimiter: str = ",",
                    skip_rows: int = 0) -> tuple[float, float] | None:
     """(first, last) value of ``time_column`` × ``time_scale`` (s) in a delimited file, read from
@@ -60,8 +78,7 @@ def file_time_span(path: str | Path, time_column: str, *, time_scale: float = 1.
         return None
     try:
         with open(path, "rb") as f:
-            head = [line for line in f.read(1 << 16).decode("utf-8-sig", "replace").splitlines()[skip_rows:]
-                    if line.strip()]
+            head = _head_lines(f, skip_rows)
             f.seek(max(0, f.seek(0, 2) - (1 << 16)))
             tail = [line for line in f.read().decode("utf-8", "replace").splitlines() if line.strip()]
         header = [clean_cell(c) for c in split_line(head[0], delimiter)]

@@ -1,6 +1,7 @@
-"""The files a layout names, looked at without reading them: each file's dotted key and path
-(``fusion validate`` refuses a layout whose files are missing) and each timed file's first and
-last time, read from its ends only, so that files on different clocks are caught before a run."""
+"""The files a layout names, looked at without reading them: each file's dotted key and path,
+what a run could not read of them (missing files, special files, table columns the layout names
+and the header lacks: ``fusion validate`` lists them all) and each timed file's first and last
+time, read from its ends only, so that files on different clocks are caught before a run."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from bodyfusion.base.files import file_problem
+from bodyfusion.base.sections import TableSection
 from bodyfusion.core.layout import LoadedLayout, TruthConfig
-from bodyfusion.io.tables import file_time_span
+from bodyfusion.io.tables import file_header, file_time_span
 
 
 def layout_nodes(loaded: LoadedLayout) -> list[tuple[str, Any]]:
@@ -39,6 +42,33 @@ def data_files(loaded: LoadedLayout) -> list[tuple[str, Path]]:
     """(dotted key, path) of every file the layout names (its data, truth, fixes...), for a
     check that needs no reading: ``fusion validate`` refuses a layout whose files are missing."""
     return [(key, node) for key, node in layout_nodes(loaded) if isinstance(node, Path)]
+
+
+def file_problems(loaded: LoadedLayout) -> list[tuple[str, str]]:
+    """(dotted key, problem) of every file the layout names that a run could not read (missing,
+    a FIFO, a device, a folder: :func:`~bodyfusion.base.files.file_problem`), and of every table
+    file whose header lacks a column its section names
+    (:meth:`~bodyfusion.base.sections.TableSection.required_columns`): all of them, read from the
+    files' first lines only."""
+    problems = [(key, f"{path}: {problem}") for key, path in data_files(loaded)
+                if (problem := file_problem(path)) is not None]
+    bad = {key for key, _ in problems}
+    for key, node in layout_nodes(loaded):
+        path = getattr(node, "path", None)
+        if not isinstance(node, TableSection) or not isinstance(path, Path) or f"{key}.path" in bad:
+            continue
+        wanted = node.required_columns()
+        if not wanted:
+            continue
+        header = file_header(path, delimiter=getattr(node, "delimiter", ","), skip_rows=getattr(node, "skip_rows", 0))
+        if header is None:
+            problems.append((f"{key}.path", f"{path}: no header line to read"))
+            continue
+        missing = [c for c in dict.fromkeys(wanted) if c not in header]
+        if missing:
+            shown = ", ".join(header[:12]) + (", ..." if len(header) > 12 else "")
+            problems.append((key, f"{path.name} has no column(s) {', '.join(missing)} (it has {shown})"))
+    return problems
 
 
 def time_spans(loaded: LoadedLayout) -> dict[str, tuple[float, float]]:

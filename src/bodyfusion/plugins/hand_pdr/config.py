@@ -39,6 +39,10 @@ class GnssSourceConfig(TableSection):
         """A csv or nmea source reads its file or table; phone_log fixes come with the phone's log."""
         return self.format != "phone_log"
 
+    def required_columns(self) -> list[str]:
+        """A csv's named columns (NMEA sentences and the phone log have none)."""
+        return super().required_columns() if self.format == "csv" else []
+
 
 class StepConfig(StrictModel):
     """Step detection on the low-passed specific-force magnitude and step length.
