@@ -132,7 +132,7 @@ def test_a_corrupt_timestamp_drops_one_sample_not_the_rest():
     t = np.arange(300) * 0.01
     t[100] = 1e30
     assert timestamp_spikes(t).tolist() == [100]
-    kept, report = apply_timestamp_policy(t, "drop", "imu.csv")
+    kept, report, _ = apply_timestamp_policy(t, "drop", "imu.csv")
     assert kept.size == 299 and report.dropped_samples == 1 and len(report.warnings) == 1
     long_gap = np.concatenate([np.arange(100) * 0.01, 100 + np.arange(100) * 0.01])
     assert timestamp_spikes(long_gap).size == 0  # a gap is not a spike

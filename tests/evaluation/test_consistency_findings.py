@@ -57,3 +57,12 @@ def test_the_flagship_walk_is_consistent_and_says_nothing_about_it():
     assert not kinds & {"nees_overconfident", "nees_drift", "initial_state_mismatch", "nis_high"}
     assert all(1.0 / CONSISTENT_FACTOR < result.nees[n].summary()["mean"] / 2.0 < CONSISTENT_FACTOR
                for n in result.nees)
+
+
+def test_against_a_fitted_truth_frame_the_verdicts_are_info_and_read_no_initial_mismatch():
+    """The first metres fit the truth's frame to the estimate: the start of the NEES measures the
+    fit, not the initial state, and the whole NEES is approximate."""
+    start_high = NeesTrack(T, _chi2(np.where(T < 20.0, 200.0, 1.0)), alignment="first_3m")
+    assert [(f.kind, f.severity) for f in nees_findings({"foot": start_high})] == [("nees_overconfident", "info")]
+    drifting = NeesTrack(T, _chi2(np.exp(T / 12.0)), alignment="first_3m")
+    assert [(f.kind, f.severity) for f in nees_findings({"foot": drifting})] == [("nees_drift", "info")]

@@ -353,10 +353,10 @@ def test_policy_error_accepts_increasing(tmp_path):
 
 def test_apply_timestamp_policy_direct():
     t = np.array([0.0, 0.0, 1.0, 0.5, 2.0, 2.0, 3.0])
-    kept, rep = apply_timestamp_policy(t, "drop", "x.csv")
+    kept, rep, _ = apply_timestamp_policy(t, "drop", "x.csv")
     np.testing.assert_array_equal(kept, [0, 2, 4, 6])
     assert rep.dropped_samples == 3
-    kept, rep = apply_timestamp_policy(t, "sort", "x.csv")
+    kept, rep, _ = apply_timestamp_policy(t, "sort", "x.csv")
     np.testing.assert_array_equal(kept, [0, 3, 2, 4, 6])
     assert (rep.dropped_samples, rep.reordered_samples) == (2, 2)
     with pytest.raises(InputError) as ei:
@@ -367,7 +367,31 @@ def test_apply_timestamp_policy_direct():
     assert ei.value.line == 3
     with pytest.raises(InputError, match="unknown timestamp policy"):
         apply_timestamp_policy(t, "nope", "x.csv")
-    assert set(TIMESTAMP_POLICIES) == {"drop", "sort", "error"}
+    assert set(TIMESTAMP_POLICIES) == {"drop", "sort", "error", "unwrap"}
+
+
+def _reset_file(tmp_path: Path) -> Path:
+    """100 samples at 100 Hz, then the sample counter restarts at 0 for 100 more."""
+    rows = [f"{i * 0.01:.2f},{i},0,9.8,0,0,0,0" for i in range(100)]
+    rows += [f"{i * 0.01:.2f},{100 + i},0,9.8,0,0,0,0" for i in range(100)]
+    return _write(tmp_path, [HEADER] + rows)
+
+
+@pytest.mark.parametrize("policy, verb", [("drop", "drop them"), ("sort", "mix the two clocks")])
+def test_a_clock_that_restarts_is_refused_naming_its_line_not_half_dropped(tmp_path, policy, verb):
+    """A counter reset used to drop the whole second half silently under 'drop' (its times are
+    below the first half's) and interleave two clocks under 'sort'."""
+    err = _err(_reset_file(tmp_path), 102, "the clock restarts", "100 samples follow", verb, "unwrap",
+               timestamp_policy=policy)
+    assert err.line == 102
+
+
+def test_unwrap_joins_a_restarted_clock_one_step_on_and_says_so(tmp_path):
+    s = _read(_reset_file(tmp_path), timestamp_policy="unwrap")
+    np.testing.assert_allclose(s.t, np.arange(200) * 0.01, atol=1e-12)
+    np.testing.assert_array_equal(s.acc_b[:, 0], np.arange(200))  # every sample kept, in file order
+    assert s.report.dropped_samples == 0
+    assert any("the clock restarts 1 time(s) (the first at line 102" in w for w in s.report.warnings)
 
 
 # --------------------------------------------------------------------------- truth

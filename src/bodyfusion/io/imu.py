@@ -58,8 +58,9 @@ class ImuCsvConfig(TableSection):
     """Lines before the header line."""
     delimiter: str = ","
     """Field separator."""
-    timestamp_policy: Literal["drop", "sort", "error"] = "drop"
-    """Duplicate or backward timestamps: drop (counted), sort (counted) or error."""
+    timestamp_policy: Literal["drop", "sort", "error", "unwrap"] = "drop"
+    """Duplicate or backward timestamps: drop (counted), sort (counted), error, or unwrap (a clock
+    that restarts goes on where it was, then drop; :func:`~bodyfusion.io.timestamps.apply_timestamp_policy`)."""
     axes: AxisMap = ("x", "y", "z")
     """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
     whose z points down at rest into one whose z points up."""
@@ -149,7 +150,7 @@ def read_imu_csv(
         stance = s == 1.0
 
     t = sample_times(arrays, n, time_column, time_scale, rate_hz)
-    kept, report = apply_timestamp_policy(t, timestamp_policy, where, lines=line_no)
+    kept, report, t_kept = apply_timestamp_policy(t, timestamp_policy, where, lines=line_no)
     if kept.size < min_samples:
         raise InputError(
             where, f"only {kept.size} samples left after timestamp policy {timestamp_policy!r}; "
@@ -160,8 +161,8 @@ def read_imu_csv(
     for c in set(acc_cols) - {time_column, stance_column, *gyro_cols}:
         del arrays[c]  # each column goes once it is used: the file's numbers are held about once
     gyro = _body_frame(tuple(axes), [arrays[c] for c in gyro_cols], GYRO_UNITS[gyro_unit])
-    if kept.size < n or report.reordered_samples:  # the policy's samples in its order (usually all as read: no copy)
-        t, acc, gyro = t[kept], acc[kept], gyro[kept]
+    if kept.size < n or report.reordered_samples or t_kept is not t:  # the policy's samples (usually all: no copy)
+        t, acc, gyro = t_kept, acc[kept], gyro[kept]
         stance = None if stance is None else stance[kept]
     for what, x, limit, unit in (("accelerometer", acc, ACC_LIMIT_MPS2, "m/s^2"),
                                  ("gyroscope", gyro, GYRO_LIMIT_RADPS, "rad/s")):

@@ -70,7 +70,7 @@ def _triad(rows: list[list[float]], path: Path, name: str, report: InputReport) 
     a = np.array(rows, dtype=float)
     app, sensor = a[:, 0], a[:, 1]
     t = sensor + np.median(app - sensor)
-    keep, rep = apply_timestamp_policy(t, "drop", path)
+    keep, rep, _ = apply_timestamp_policy(t, "drop", path)
     plausible = np.all(np.abs(a[keep, 2:5]) <= TRIAD_LIMIT[name], axis=1)
     if not plausible.all():
         report.dropped_samples += int((~plausible).sum())

@@ -10,13 +10,52 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import InputReport
 
-TIMESTAMP_POLICIES = ("drop", "sort", "error")
+TIMESTAMP_POLICIES = ("drop", "sort", "error", "unwrap")
+RESET_STEPS = 20.0
+"""A backward step longer than this many median steps is a clock reset (a counter that wrapped
+or restarted, a second recording appended), not a sample out of order (a few steps)."""
+RESET_RUN = 10
+"""Samples after a reset that must go on forward for it to be a reset (not a corrupt stamp)."""
+
+
+def clock_resets(t: np.ndarray) -> np.ndarray:
+    """Indices i where the clock restarts: t[i] lies more than :data:`RESET_STEPS` median steps
+    before t[i − 1] and the :data:`RESET_RUN` samples from i on go forward."""
+    t = np.asarray(t, dtype=float)
+    dt = np.diff(t)
+    positive = dt[dt > 0]
+    if positive.size == 0 or t.size < RESET_RUN + 2:
+        return np.empty(0, dtype=np.int64)
+    back = np.flatnonzero(dt < -RESET_STEPS * float(np.median(positive))) + 1
+    return np.array([i for i in back if i + RESET_RUN <= t.size and np.all(np.diff(t[i:i + RESET_RUN]) > 0)],
+                    dtype=np.int64)
+
+
+def _unwrapped(t: np.ndarray, resets: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """``t`` with the samples from each reset on moved to continue one median step after the
+    sample ``before`` it (the last valid one)."""
+    t = np.array(t, dtype=float)
+    dt = np.diff(t)
+    step = float(np.median(dt[dt > 0]))
+    for i, j in zip(resets, before):
+        t[i:] += t[j] + step - t[i]
+    return t
+
+
+class PolicyResult(NamedTuple):
+    """What :func:`apply_timestamp_policy` keeps: indices ``kept`` into the input, in output
+    order, what it did (``report``) and the kept samples' times ``t`` (s, strictly increasing)."""
+
+    kept: np.ndarray
+    report: InputReport
+    t: np.ndarray
 
 
 def apply_timestamp_policy(
@@ -25,11 +64,12 @@ def apply_timestamp_policy(
     path: str | Path,
     *,
     lines: np.ndarray | None = None,
-) -> tuple[np.ndarray, InputReport]:
+) -> PolicyResult:
     """Make time strictly increasing by an explicit policy.
 
-    Returns ``(kept, report)``: ``kept`` are indices into ``t`` of the samples
-    to keep, in output order, so ``t[kept]`` is strictly increasing.
+    Returns :class:`PolicyResult` ``(kept, report, t)``: ``kept`` are indices into ``t`` of the
+    samples to keep, in output order; ``t`` their times, strictly increasing (``t[kept]`` of the
+    input but under ``"unwrap"``, whose restarted clock goes on).
 
     Except under ``"error"``, samples whose stamp leaps far from both neighbours
     (:func:`timestamp_spikes`: a corrupt stamp such as 1e30) are dropped first, counted and
@@ -42,6 +82,12 @@ def apply_timestamp_policy(
       in file order is kept) and counted as ``dropped_samples``.
     - ``"error"``: raise :class:`InputError` at the first sample whose time is not
       strictly greater than the previous one.
+    - ``"unwrap"``: a clock that restarts (:func:`clock_resets`: a counter that wrapped or was
+      reset) goes on from where it was, one median step after the last sample before each
+      restart; warned about and counted; then as ``"drop"``.
+
+    Under ``"drop"`` and ``"sort"`` a clock reset is refused naming its line: dropping what
+    follows it (half a recording) or sorting two clocks into one would be silently wrong.
 
     ``lines`` (optional): the file line number of each sample, for messages.
     """
@@ -62,7 +108,7 @@ def apply_timestamp_policy(
 
     report = InputReport()
     if n == 0:
-        return np.arange(0, dtype=np.int64), report
+        return PolicyResult(np.arange(0, dtype=np.int64), report, t)
 
     if policy == "error":
         bad = np.flatnonzero(np.diff(t) <= 0.0)
@@ -73,7 +119,7 @@ def apply_timestamp_policy(
             raise InputError(
                 path, f"{kind}{at}: t = {float(t[i])!r} s after t = {float(t[i - 1])!r} s (timestamp policy 'error')", where(i)
             )
-        return np.arange(n, dtype=np.int64), report
+        return PolicyResult(np.arange(n, dtype=np.int64), report, t)
 
     spikes = timestamp_spikes(t)
     if spikes.size:
@@ -84,6 +130,27 @@ def apply_timestamp_policy(
         report.dropped_samples += int(spikes.size)
     valid = np.ones(n, dtype=bool)
     valid[spikes] = False
+
+    ok = np.flatnonzero(valid)
+    at_reset = clock_resets(t[ok])  # among the valid samples: a corrupt stamp is no restart
+    resets, before = ok[at_reset], ok[at_reset - 1]
+    if resets.size and policy == "unwrap":
+        first, last = int(resets[0]), int(before[0])
+        at = f"line {where(first)}" if lines is not None else f"sample {first}"
+        report.warn(f"{Path(path).name}: the clock restarts {resets.size} time(s) (the first at {at}, t = "
+                    f"{float(t[last]):.6g} → {float(t[first]):.6g} s); joined on one clock (timestamp policy "
+                    "'unwrap')")
+        report.notes.append(f"unwrapped {resets.size} clock reset(s) (timestamp policy 'unwrap')")
+        t = _unwrapped(t, resets, before)
+        policy = "drop"
+    elif resets.size:
+        first, last = int(resets[0]), int(before[0])
+        at = "" if lines is not None else f" at sample {first}"
+        raise InputError(path, f"the clock restarts{at}: t = {float(t[first]):.6g} s after t = {float(t[last]):.6g} s, "
+                               f"and {t.size - first} samples follow (a counter that wrapped or was reset, or a second "
+                               f"recording appended); timestamp policy {policy!r} would "
+                               f"{'drop them' if policy == 'drop' else 'mix the two clocks'}: set timestamp_policy: "
+                               "unwrap to join them, or split the file there", where(first))
 
     if policy == "drop":
         # The max over kept samples before i equals the max over all samples before i.
@@ -96,7 +163,7 @@ def apply_timestamp_policy(
         report.dropped_samples += dropped
         if dropped:
             report.notes.append(f"dropped {dropped} samples with non-increasing time (timestamp policy 'drop')")
-        return kept, report
+        return PolicyResult(kept, report, t if kept.size == n else t[kept])  # nothing dropped: no copy
 
     # sort
     order = np.flatnonzero(valid)[np.argsort(t[valid], kind="stable")].astype(np.int64)
@@ -112,7 +179,7 @@ def apply_timestamp_policy(
         report.notes.append(f"reordered {moved} samples to restore time order (timestamp policy 'sort')")
     if dropped:
         report.notes.append(f"dropped {dropped} samples with duplicate time (timestamp policy 'sort')")
-    return kept, report
+    return PolicyResult(kept, report, t[kept])
 
 
 SPIKE_FACTOR = 1000.0

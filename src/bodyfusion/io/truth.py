@@ -65,7 +65,7 @@ def read_truth_csv(
                                          allow_missing=pos_cols)
     n = len(arrays[cols[0]])
     t = sample_times(arrays, n, time_column, time_scale, rate_hz)
-    kept, _ = apply_timestamp_policy(t, timestamp_policy, where, lines=line_no)
+    kept, _, t_kept = apply_timestamp_policy(t, timestamp_policy, where, lines=line_no)
 
     out: dict[str, TruthTrack] = {}
     for name, triplet in systems.items():
@@ -81,7 +81,7 @@ def read_truth_csv(
         if pos.shape[1] == 2:
             pos = np.column_stack([pos, np.full(len(pos), np.nan)])
         out[name] = TruthTrack(
-            t=np.ascontiguousarray(t[kept][ok]), pos_n=np.ascontiguousarray(pos[ok]), sparse=sparse
+            t=np.ascontiguousarray(t_kept[ok]), pos_n=np.ascontiguousarray(pos[ok]), sparse=sparse
         )
     return out
 
@@ -136,7 +136,7 @@ def read_truth_long_csv(source: str | Path | TableSection, *, sparse: bool = Fal
     out: dict[str, TruthTrack] = {}
     for u, name in enumerate(names):  # in the order of their first rows
         rows = np.flatnonzero(codes == u)
-        kept, _ = apply_timestamp_policy(columns["t"][rows], "error", where,
+        kept, _, _ = apply_timestamp_policy(columns["t"][rows], "error", where,
                                          lines=None if line_no is None else line_no[rows])
         rows = rows[kept]
         # a system's rows are usually one block of the file: slices, no index arrays

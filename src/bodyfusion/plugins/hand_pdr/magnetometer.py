@@ -132,7 +132,7 @@ def read_magnetometer_csv(d: ImuCsvConfig, columns: tuple[str, str, str], unit: 
     m = np.column_stack([arrays[c] for c in columns]) * MAG_UNITS[unit]
     present = np.all(np.isfinite(m), axis=1)
     t, m = t[present], m[present]
-    kept, _ = apply_timestamp_policy(t, d.timestamp_policy, where, lines=None if lines is None else lines[present])
+    kept, _, t_kept = apply_timestamp_policy(t, d.timestamp_policy, where, lines=None if lines is None else lines[present])
     if kept.size < 2:
         raise InputError(where, f"fewer than 2 magnetometer samples in columns {', '.join(columns)}")
-    return t[kept], m[kept]
+    return t_kept, m[kept]
