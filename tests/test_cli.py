@@ -22,6 +22,8 @@ XIO_CFG = "configs/xio_long_walk.yaml"
 VICON_CFG = "configs/dual_foot_vicon.yaml"
 VICON_LEFT = ROOT / "examples" / "data" / "dual_foot_vicon_hu2025" / "imuMeasLeft.csv"
 
+VICON_CFG_TEXT = (ROOT / VICON_CFG).read_text().replace("../examples/", str(ROOT / "examples") + "/")
+"""The Vicon layout with its data paths absolute, to edit into a broken copy."""
 CONTRACT_HEADER = ("system,t,east_m,north_m,up_m,sd_east_m,sd_north_m,sd_up_m,v_east_mps,v_north_mps,v_up_mps,"
                    "qw,qx,qy,qz,roll_deg,pitch_deg,yaw_deg,sd_v_east_mps,sd_v_north_mps,sd_v_up_mps,sd_qw,sd_qx,"
                    "sd_qy,sd_qz,sd_roll_deg,sd_pitch_deg,sd_yaw_deg")
@@ -128,6 +130,29 @@ def test_validate_lists_every_file_and_column_problem_at_once(tmp_path):
     (tmp_path / "imu.csv").unlink()
     errors = [line for line in fusion("validate", cfg).stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 2 and any("systems.foot.data.path" in e and "file not found" in e for e in errors)
+
+
+def test_validate_lists_every_schema_error_of_every_section_and_run_names_the_first(tmp_path):
+    """Errors in the layout's own sections and in two systems' plugin sections: validate gives
+    every one, one line each; run gives the first on its one line and says how many more."""
+    cfg = tmp_path / "four.yaml"
+    text = VICON_CFG_TEXT.replace("fuser: {method: projection, epochs: events, correct: positions}",
+                                  "fuser: {method: projection, epochs: events, correct: positions, interval_s: 1.0e-5}")
+    text = text.replace("    initial: {stationary_s: 1.0}\n  right_foot:",
+                        "    initial: {stationary_s: -1.0}\n  right_foot:")
+    text = text.replace("    detector: {kind: labels, min_stance_s: 0.05, min_swing_s: 0.05}   # drop 1–3 sample label "
+                        "flickers\n    initial: {stationary_s: 1.0}\n# A foot",
+                        "    detector: {kind: bogus}\n    initial: {stationary_s: 1.0}\n# A foot")
+    cfg.write_text(text + "body: {height_m: 50}\n")
+    proc = fusion("validate", cfg)
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    keys = ["body.height_m", "fuser.interval_s", "systems.left_foot.initial.stationary_s",
+            "systems.right_foot.detector.kind"]
+    assert [next(k for k in keys if f": {k}: " in e) for e in errors] == keys, errors
+    run = fusion("run", cfg, "--out", tmp_path / "out")
+    assert run.returncode == 2 and run.stderr.strip().count("\n") == 0
+    assert "body.height_m" in run.stderr and "(and 3 more: fusion validate lists every one)" in run.stderr
 
 
 def test_validate_missing_config_file(tmp_path):

@@ -193,7 +193,12 @@ def validate(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], 
     from bodyfusion.core.layout import load_layout
     from bodyfusion.runner.layout_files import disjoint_time_bases, file_problems
 
-    loaded = load_layout(config, set_ or [])
+    try:
+        loaded = load_layout(config, set_ or [])
+    except ConfigError as err:  # every error of every section, one line each
+        for each in err.every():
+            print(f"error: {each}", file=sys.stderr)
+        sys.exit(2)
     problems = file_problems(loaded)
     for key, problem in problems:  # every one at once, one line each
         print(f"error: {ConfigError(key, problem, config)}", file=sys.stderr)
@@ -292,7 +297,9 @@ def main() -> None:
     try:
         app(standalone_mode=False)
     except FusionError as err:
-        print(f"error: {err}", file=sys.stderr)
+        more = len(getattr(err, "others", ()))
+        print(f"error: {err}" + (f" (and {more} more: fusion validate lists every one)" if more else ""),
+              file=sys.stderr)
         sys.exit(2)
     except (typer.Abort, KeyboardInterrupt):
         print("aborted", file=sys.stderr)

@@ -21,14 +21,27 @@ class InputError(FusionError):
 
 
 class ConfigError(FusionError):
-    """Bad layout: ``file: dotted.key.path: reason``."""
+    """Bad layout: ``file: dotted.key.path: reason``. ``others``: the further errors found in the
+    same check (``fusion validate`` prints them all; the error itself is the first)."""
 
-    def __init__(self, key: str, reason: str, path: str | Path | None = None) -> None:
+    def __init__(self, key: str, reason: str, path: str | Path | None = None,
+                 others: tuple[ConfigError, ...] = ()) -> None:
         self.key = key
         self.path = None if path is None else str(path)
         self.reason = reason
+        self.others = tuple(others)
         parts = [p for p in (self.path, key) if p]
         super().__init__(": ".join([*parts, reason]))
+
+    @classmethod
+    def of(cls, errors: list[ConfigError]) -> ConfigError:
+        """The first of ``errors`` carrying the rest as its ``others``."""
+        first = errors[0]
+        return cls(first.key, first.reason, first.path, (*first.others, *errors[1:]))
+
+    def every(self) -> list[ConfigError]:
+        """This error and its others, in the order found."""
+        return [ConfigError(self.key, self.reason, self.path), *self.others]
 
 
 class MissingExtraError(FusionError):

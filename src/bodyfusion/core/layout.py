@@ -457,19 +457,34 @@ def validate_layout(raw: dict[str, Any], path: Path | None, base_dir: Path, regi
                     tables: dict[str, Any] | None = None) -> LoadedLayout:
     """Validate a raw layout dict (both stages); relative paths resolve against ``base_dir``;
     ``path``: the file it came from, named in errors (None: built in code); ``tables``: dotted key
-    of a table section → the in-memory table bound to it."""
-    layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
+    of a table section → the in-memory table bound to it. Every section is validated before an
+    error is raised: the error is the first found, its ``others`` the rest (``fusion validate``
+    lists them all)."""
+    errors: list[ConfigError] = []
+    try:
+        layout = validate_section(Layout, raw, key="", path=path, base_dir=base_dir)
+    except ConfigError as err:
+        layout, errors = None, err.every()
     registry = registry or plugin_registry.get_registry()
     system_configs: dict[str, BaseModel] = {}
-    for name, section in raw["systems"].items():
-        system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
-        system_configs[name] = validate_section(system_cls.Config, section, key=f"systems.{name}", path=path, base_dir=base_dir)
-        check_layout = getattr(system_cls, "check_layout", None)  # optional: refuse unsupported layout settings
-        if check_layout is not None:
-            try:
-                check_layout(name, system_configs[name], layout)
-            except KeyedError as err:
-                raise ConfigError(err.key, str(err), path) from None
+    sections = raw.get("systems") if isinstance(raw, dict) else None
+    for name, section in (sections.items() if isinstance(sections, dict) else ()):
+        try:
+            if not isinstance(section, dict) or "plugin" not in section:
+                continue  # the layout's own check said what is wrong with it
+            system_cls = registry.system_class(section["plugin"], key=f"systems.{name}.plugin", path=path)
+            system_configs[name] = validate_section(system_cls.Config, section, key=f"systems.{name}", path=path,
+                                                    base_dir=base_dir)
+            check_layout = getattr(system_cls, "check_layout", None)  # optional: refuse unsupported layout settings
+            if check_layout is not None and layout is not None:
+                try:
+                    check_layout(name, system_configs[name], layout)
+                except KeyedError as err:
+                    raise ConfigError(err.key, str(err), path) from None
+        except ConfigError as err:
+            errors += [e for e in err.every() if str(e) not in {str(x) for x in errors}]
+    if errors:
+        raise ConfigError.of(errors)
     _check_aiding_references(layout, system_configs, registry, path)
     bind_tables(layout, system_configs, tables or {}, path)
     return LoadedLayout(path, layout, system_configs, raw, base_dir, tables)

@@ -39,8 +39,12 @@ def _data_location(loc: tuple[Any, ...], data: Any) -> tuple[Any, ...]:
     return tuple(kept)
 
 
-def _first_error(err: ValidationError, prefix: str = "", data: Any = None) -> tuple[str, str]:
-    e = err.errors(include_url=False)[0]
+def _errors(err: ValidationError, prefix: str = "", data: Any = None) -> list[tuple[str, str]]:
+    """(dotted key, reason) of every error pydantic found."""
+    return [_keyed(e, prefix, data) for e in err.errors(include_url=False)]
+
+
+def _keyed(e: dict, prefix: str, data: Any) -> tuple[str, str]:
     loc = _dotted(_data_location(e["loc"], data) if data is not None else e["loc"])
     ctx_err = (e.get("ctx") or {}).get("error")
     if isinstance(ctx_err, KeyedError):  # its key is relative to the section that raised it
@@ -55,12 +59,12 @@ def _first_error(err: ValidationError, prefix: str = "", data: Any = None) -> tu
 
 
 def validate_section(model: type[BaseModel], data: Any, *, key: str, path: Path | None, base_dir: Path | None) -> Any:
-    """Validate ``data`` with ``model``; errors become one-line :class:`ConfigError` under ``key``."""
+    """Validate ``data`` with ``model``; errors become a one-line :class:`ConfigError` under ``key``
+    (the first; every other one in its ``others``)."""
     try:
         return model.model_validate(data, context={"base_dir": base_dir})
     except ValidationError as err:
-        k, msg = _first_error(err, key, data)
-        raise ConfigError(k, msg, path) from None
+        raise ConfigError.of([ConfigError(k, msg, path) for k, msg in _errors(err, key, data)]) from None
 
 
 def parse_override(item: str) -> tuple[str, Any]:

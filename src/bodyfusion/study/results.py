@@ -24,7 +24,6 @@ import json
 import math
 import os
 import time
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bodyfusion.base.errors import FusionError
+from bodyfusion.base.files import replaced_atomically
 from bodyfusion.base.findings import Finding
 
 HEAD_COLUMNS: dict[str, pa.DataType] = {
@@ -111,13 +111,12 @@ def _table(rows: list[dict[str, Any]]) -> pa.Table:
 
 
 def _write_atomic(table: pa.Table, path: Path) -> None:
-    """Write whole, fsync, then rename into place: a reader sees the old file or the new one."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    with tmp.open("wb") as fh:
+    """Write whole and fsync, then put in place in one step
+    (:func:`~bodyfusion.base.files.replaced_atomically`): a reader sees the old file or the new one."""
+    with replaced_atomically(path) as tmp, tmp.open("wb") as fh:
         pq.write_table(table, fh)
         fh.flush()
         os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 def by_system(table: pa.Table) -> pa.Table:
