@@ -111,6 +111,9 @@ class TableSection(StrictModel):
 
     path: DataPath | None = None
     """The file; unset when the table is given in memory."""
+    topic: str | None = None
+    """A topic of a ROS 1 or 2 bag or an MCAP file at ``path``: the table is its messages, the
+    columns their field paths (:mod:`bodyfusion.io.ros`)."""
     _table: Any = PrivateAttr(default=None)
     _label: str = PrivateAttr(default="")
 

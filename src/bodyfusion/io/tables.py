@@ -446,15 +446,22 @@ def read_source(source: str | Path | TableSection, columns: Sequence[str], *, sk
     if isinstance(source, TableSection):
         if source.table is not None:
             return table_columns(source.table, columns, where=where, allow_missing=allow_missing), None, where
+        if source.topic is not None:
+            from bodyfusion.io.ros import read_topic  # rosbags loads only for a recording that needs it
+
+            return read_topic(source.path, source.topic, columns), None, where
         source = source.path
     arrays, lines = read_table(source, columns, skip_rows=skip_rows, delimiter=delimiter, allow_missing=allow_missing)
     return arrays, lines, where
 
 
 def source_name(source: str | Path | TableSection) -> str:
-    """What errors about ``source`` name: a file's path, or an in-memory table's section key."""
+    """What errors about ``source`` name: a file's path (and topic), or an in-memory table's
+    section key."""
     if isinstance(source, TableSection):
-        return f"{source.label} (in-memory table)" if source.table is not None else str(source.path)
+        if source.table is not None:
+            return f"{source.label} (in-memory table)"
+        return str(source.path) if source.topic is None else f"{source.path} (topic {source.topic})"
     return str(source)
 
 

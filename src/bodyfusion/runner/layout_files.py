@@ -50,12 +50,16 @@ def file_problems(loaded: LoadedLayout) -> list[tuple[str, str]]:
     file whose header lacks a column its section names
     (:meth:`~bodyfusion.base.sections.TableSection.required_columns`): all of them, read from the
     files' first lines only."""
+    recordings = {f"{key}.path" for key, node in layout_nodes(loaded)  # a ROS 2 bag is a folder
+                  if isinstance(node, TableSection) and node.topic is not None}
     problems = [(key, f"{path}: {problem}") for key, path in data_files(loaded)
-                if (problem := file_problem(path)) is not None]
+                if (problem := "file not found" if key in recordings and not path.exists()
+                    else None if key in recordings else file_problem(path)) is not None]
     bad = {key for key, _ in problems}
     for key, node in layout_nodes(loaded):
         path = getattr(node, "path", None)
-        if not isinstance(node, TableSection) or not isinstance(path, Path) or f"{key}.path" in bad:
+        if not isinstance(node, TableSection) or not isinstance(path, Path) or f"{key}.path" in bad \
+                or node.topic is not None:  # a recording's fields are known once it is read
             continue
         wanted = node.required_columns()
         if not wanted:
