@@ -18,6 +18,7 @@ import pymap3d
 import pynmea2
 
 from bodyfusion.base.errors import InputError
+from bodyfusion.base.extras import import_optional
 from bodyfusion.base.sections import TableSection
 from bodyfusion.base.types import InputReport
 from bodyfusion.io.tables import read_source
@@ -177,6 +178,50 @@ def read_nmea(path: str | Path, *, user_range_error_m: float = 5.0) -> GnssFixes
     report.dropped_samples += skipped
     report.notes.append("NMEA: " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v))
     rows = [row + list(rmc.get(row[0], (np.nan, np.nan))) for row in gga]  # file order
+    return clean_fixes(np.array(rows, dtype=float).reshape(-1, 7), path, report)
+
+
+UBX_WEEK_S = 604800.0
+"""A GPS week (s): ``iTOW`` counts the time of week and starts again at each week."""
+
+
+def read_ubx(path: str | Path) -> GnssFixes:
+    """GNSS fixes from a u-blox UBX log: its ``NAV-PVT`` messages (read with pyubx2, the ``[ubx]``
+    extra), those with a valid fix (``gnssFixOk``, 2-D or 3-D). Time is the GPS time of week
+    (``iTOW``, s; a week is added where it starts again); height the ellipsoidal one (m);
+    accuracy the receiver's horizontal accuracy estimate ``hAcc`` (m); speed and course the
+    ground speed (m/s) and heading of motion (deg). Other messages are skipped and counted, as
+    are fixes without ``gnssFixOk``; a message that does not parse is refused naming the file."""
+    pyubx2 = import_optional("pyubx2", "ubx", "reading a u-blox UBX log")
+    path = Path(path)
+    report = InputReport()
+    rows: list[list[float]] = []
+    counts = {"no_fix": 0, "other_message": 0}
+    weeks, last = 0, None
+    try:
+        with path.open("rb") as stream:
+            reader = pyubx2.UBXReader(stream, protfilter=pyubx2.UBX_PROTOCOL, quitonerror=pyubx2.ERR_RAISE)
+            for _, message in reader:
+                if message is None:
+                    break
+                if message.identity != "NAV-PVT":
+                    counts["other_message"] += 1
+                    continue
+                if not message.gnssFixOk or message.fixType not in (2, 3):
+                    counts["no_fix"] += 1
+                    continue
+                tow = message.iTOW / 1000.0
+                if last is not None and tow < last - UBX_WEEK_S / 2:
+                    weeks += 1
+                last = tow
+                rows.append([weeks * UBX_WEEK_S + tow, float(message.lat), float(message.lon), message.height / 1000.0,
+                             message.hAcc / 1000.0, message.gSpeed / 1000.0, float(message.headMot)])
+    except OSError as err:
+        raise InputError(path, f"cannot read: {err.strerror}") from None
+    except (pyubx2.UBXParseError, pyubx2.UBXStreamError, pyubx2.UBXMessageError, pyubx2.UBXTypeError) as err:
+        raise InputError(path, f"not a UBX log: {err}") from None
+    report.dropped_samples += counts["no_fix"]
+    report.notes.append("UBX: " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v))
     return clean_fixes(np.array(rows, dtype=float).reshape(-1, 7), path, report)
 
 

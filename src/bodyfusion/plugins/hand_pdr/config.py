@@ -13,11 +13,12 @@ from bodyfusion.io.imu import ImuCsvConfig
 
 class GnssSourceConfig(TableSection):
     """Where the GNSS fixes come from: a CSV with named columns (or a table with those columns
-    given in memory), an NMEA 0183 log, or the GNSS lines of the phone log (``phone_log``: the
+    given in memory), an NMEA 0183 log, a u-blox UBX log (its NAV-PVT messages,
+    :func:`bodyfusion.io.gnss.read_ubx`), or the GNSS lines of the phone log (``phone_log``: the
     system's own ``phone_log`` file)."""
 
-    format: Literal["csv", "nmea", "phone_log"] = "csv"
-    """csv, nmea or phone_log."""
+    format: Literal["csv", "nmea", "ubx", "phone_log"] = "csv"
+    """csv, nmea, ubx or phone_log."""
     path: DataPath | None = None
     """File of fixes (csv, nmea); relative to the layout file (unset: the csv table given in memory)."""
     time_column: str = "t"

@@ -77,7 +77,7 @@ from bodyfusion.core.capabilities import AbsoluteFixes, HeadingAlignment, Transi
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.nav.filter_health import NisRecord, innovation_columns
 from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
-from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea
+from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea, read_ubx
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.nav.measurements import chi2_gate
@@ -152,7 +152,7 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
             if mag.enabled:
                 magn = read_magnetometer_csv(d, mag.columns, mag.unit)
         g = config.gnss
-        if g is not None and g.format == "nmea" and g.table is not None:
+        if g is not None and g.format in ("nmea", "ubx") and g.table is not None:
             raise ConfigError(f"{key}.gnss.format", "an in-memory GNSS table is read as format csv (its columns)")
         if g is not None and g.format == "csv":
             fixes = read_gnss_csv(g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
@@ -160,6 +160,8 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
                                   speed_column=g.speed_column, course_column=g.course_column)
         elif g is not None and g.format == "nmea":
             fixes = read_nmea(g.path)
+        elif g is not None and g.format == "ubx":
+            fixes = read_ubx(g.path)
         if fixes is not None and fixes.report is not report:  # a phone log's fixes share its report
             report = report.merge(fixes.report)
         self._report = report
