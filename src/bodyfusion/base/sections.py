@@ -114,6 +114,9 @@ class TableSection(StrictModel):
     topic: str | None = None
     """A topic of a ROS 1 or 2 bag or an MCAP file at ``path``: the table is its messages, the
     columns their field paths (:mod:`bodyfusion.io.ros`)."""
+    group: str | None = None
+    """A group (its one-dimensional datasets are the columns) or a compound dataset (its fields
+    are) of an HDF5 file at ``path`` (:mod:`bodyfusion.io.hdf5`)."""
     _table: Any = PrivateAttr(default=None)
     _label: str = PrivateAttr(default="")
 

@@ -450,6 +450,10 @@ def read_source(source: str | Path | TableSection, columns: Sequence[str], *, sk
             from bodyfusion.io.ros import read_topic  # rosbags loads only for a recording that needs it
 
             return read_topic(source.path, source.topic, columns), None, where
+        if source.group is not None:
+            from bodyfusion.io.hdf5 import read_group  # h5py likewise
+
+            return read_group(source.path, source.group, columns), None, where
         source = source.path
     arrays, lines = read_table(source, columns, skip_rows=skip_rows, delimiter=delimiter, allow_missing=allow_missing)
     return arrays, lines, where
@@ -461,7 +465,9 @@ def source_name(source: str | Path | TableSection) -> str:
     if isinstance(source, TableSection):
         if source.table is not None:
             return f"{source.label} (in-memory table)"
-        return str(source.path) if source.topic is None else f"{source.path} (topic {source.topic})"
+        if source.topic is not None:
+            return f"{source.path} (topic {source.topic})"
+        return str(source.path) if source.group is None else f"{source.path} (group {source.group})"
     return str(source)
 
 

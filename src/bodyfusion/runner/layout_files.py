@@ -59,7 +59,7 @@ def file_problems(loaded: LoadedLayout) -> list[tuple[str, str]]:
     for key, node in layout_nodes(loaded):
         path = getattr(node, "path", None)
         if not isinstance(node, TableSection) or not isinstance(path, Path) or f"{key}.path" in bad \
-                or node.topic is not None:  # a recording's fields are known once it is read
+                or node.topic is not None or node.group is not None:  # no header line: known once read
             continue
         wanted = node.required_columns()
         if not wanted:
