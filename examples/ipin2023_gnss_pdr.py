@@ -38,6 +38,8 @@ from bodyfusion.base.types import Trajectory
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "ipin2023_trial01.yaml"
 DATA = ROOT.parent / "shared" / "data" / "handheld_phone_ipin2023"
+TO_THE_END_S = 86_400.0
+"""An outage that lasts to the end of any log (a day; a layout's durations are at most a week)."""
 
 
 def stats(err: np.ndarray) -> str:
@@ -69,14 +71,19 @@ def main() -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="layout override of every run")
     args = parser.parse_args()
+    logs = sorted(DATA.glob("IPIN2023_T3_*.txt"))
+    if not logs:
+        raise SystemExit(f"ipin2023_gnss_pdr: no IPIN 2023 logs (IPIN2023_T3_*.txt) in {DATA}: this example reads the "
+                         "shared recordings beside the repository")
     table = Table(title="Horizontal error at the surveyed points, m: p50 / p75 (IPIN metric) / max")
     for col in ("trial", "GNSS alone", "PDR alone", "PDR+GNSS", "no magnetometer", "60 s outage", "heading"):
         table.add_column(col, justify="right")
-    for path in sorted(DATA.glob("IPIN2023_T3_*.txt")):
+    for path in logs:
         both = pdr_gnss_run(path, None, args.overrides)
         hand = both.systems["hand_phone"]
         resolved = hand.heading_resolved_s
-        pdr = "-" if resolved is None else stats(errors(pdr_gnss_run(path, (resolved + 0.5, 1e6), args.overrides)))
+        pdr = "-" if resolved is None else stats(errors(pdr_gnss_run(path, (resolved + 0.5, TO_THE_END_S),
+                                                                      args.overrides)))
         no_mag = pdr_gnss_run(path, None, [*args.overrides, "systems.hand_phone.magnetometer.enabled=false"])
         first_point = float(both.truths["hand_phone"].t[0])
         masked = pdr_gnss_run(path, (first_point, 60.0), args.overrides)

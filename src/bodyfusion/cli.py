@@ -88,6 +88,7 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
     from bodyfusion.evaluation.figure_process import FigureProcess
 
     figure_process = FigureProcess.start()  # first: matplotlib loads there while this process runs
+    earlier = out is not None and (out / "metrics.json").is_file()  # an earlier run's outputs, replaced
     try:
         from rich.console import Console
         from rich.table import Table
@@ -102,7 +103,8 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
     if CONSOLE.quiet:
         return
     console = Console(stderr=False)
-    table = Table(title=f"{result.loaded.name} → {out_dir}")
+    replaced = " (the earlier run's outputs there replaced)" if earlier else ""
+    table = Table(title=f"{result.loaded.name} → {out_dir}{replaced}")
     for col in ("system", "samples", "distance m", "h-RMSE m", "h-max m", "% dist", "loop m"):
         table.add_column(col, justify="right")
     import json
