@@ -482,7 +482,8 @@ def validate_layout(raw: dict[str, Any], path: Path | None, base_dir: Path, regi
                 except KeyedError as err:
                     raise ConfigError(err.key, str(err), path) from None
         except ConfigError as err:
-            errors += [e for e in err.every() if str(e) not in {str(x) for x in errors}]
+            seen = {str(x) for x in errors}  # a system's error the layout's own check found too
+            errors += [e for e in err.every() if str(e) not in seen]
     if errors:
         raise ConfigError.of(errors)
     _check_aiding_references(layout, system_configs, registry, path)

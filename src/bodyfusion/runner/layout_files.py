@@ -50,11 +50,15 @@ def file_problems(loaded: LoadedLayout) -> list[tuple[str, str]]:
     file whose header lacks a column its section names
     (:meth:`~bodyfusion.base.sections.TableSection.required_columns`): all of them, read from the
     files' first lines only."""
-    recordings = {f"{key}.path" for key, node in layout_nodes(loaded)  # a ROS 2 bag is a folder
+    recordings = {f"{key}.path" for key, node in layout_nodes(loaded)
                   if isinstance(node, TableSection) and node.topic is not None}
-    problems = [(key, f"{path}: {problem}") for key, path in data_files(loaded)
-                if (problem := "file not found" if key in recordings and not path.exists()
-                    else None if key in recordings else file_problem(path)) is not None]
+
+    def problem(key: str, path: Path) -> str | None:
+        if key in recordings:  # a ROS 2 bag is a folder
+            return None if path.exists() else "file not found"
+        return file_problem(path)
+
+    problems = [(key, f"{path}: {why}") for key, path in data_files(loaded) if (why := problem(key, path)) is not None]
     bad = {key for key, _ in problems}
     for key, node in layout_nodes(loaded):
         path = getattr(node, "path", None)
