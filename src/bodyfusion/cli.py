@@ -1,4 +1,5 @@
-"""Command-line interface (docs/contract.md): ``fusion run | simulate | study | validate | report | example | plugins``.
+"""Command-line interface (docs/contract.md): ``fusion run | live | simulate | study | validate | report | example |
+plugins``.
 
 Each command imports what it needs when it runs (the compiled kernels, matplotlib, Dask are
 heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
@@ -6,6 +7,8 @@ heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
 from __future__ import annotations
 
 import logging
+import os
+import signal
 import sys
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -124,6 +127,84 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
     rt = doc["runtime"]
     console.print(f"{rt['samples']} samples, navigation {rt['navigation_s']:.2f} s "
                   f"({rt['samples_per_s']:,.0f} samples/s), total {rt['wall_s']:.2f} s")
+
+
+@app.command()
+def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
+         source: Annotated[str, typer.Option(
+             "--source", help="replay (the layout's recordings), tcp://HOST:PORT or udp://HOST:PORT (JSON lines).")
+         ] = "replay",
+         speed: Annotated[str, typer.Option("--speed", help="Replay pace: a factor of real time, or max.")] = "1",
+         sink: Annotated[list[str] | None, typer.Option(
+             "--sink", help="Where states go: - (JSON lines on stdout), tcp://HOST:PORT, or a .jsonl, .csv, "
+                            ".parquet or .mcap file; repeatable.")] = None,
+         out: Annotated[Path | None, typer.Option("--out", help="Also write the finished run's outputs here.")] = None,
+         interval: Annotated[float, typer.Option("--interval", help="Seconds of data between states.")] = 0.1,
+         lookahead: Annotated[float, typer.Option("--lookahead", help="Seconds behind the newest sample at "
+                                                                      "which decisions are final.")] = 2.0,
+         warmup: Annotated[float, typer.Option("--warmup", help="Seconds of data before the run starts.")] = 10.0,
+         set_: SetOption = None,
+         seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
+    """Fuse a layout live: replay its recordings at a pace or take a line stream, and emit states as they are made."""
+    import time
+
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.live.engine import LiveRun
+    from bodyfusion.live.sinks import EverySink, open_sink
+    from bodyfusion.live.sources import line_rows, replay, replay_rows
+
+    pace = None if speed == "max" else _positive(speed, "--speed")
+    for value, key in ((interval, "--interval"), (lookahead, "--lookahead"), (warmup, "--warmup")):
+        _positive(str(value), key)
+    loaded = load_layout(config, set_ or [])
+    sinks = []
+    try:
+        for target in sink or ["-"]:
+            sinks.append(open_sink(target))
+    except FusionError:
+        for opened in sinks:
+            opened.close()
+        raise
+    run = LiveRun(loaded, [EverySink(sinks)], lookahead_s=lookahead, warmup_s=warmup, output_interval_s=interval, seed=seed)
+    wall0 = time.perf_counter()
+
+    def status(r: LiveRun, t: float) -> None:
+        if CONSOLE.quiet:
+            return
+        lag = "" if r.fusion is None else f", {t - r.fusion.fuser.schedule.horizon:.1f} s behind the data"
+        h = r.output.totals
+        print(f"live: {time.perf_counter() - wall0:.0f} s, {r.emitted} states{lag}; constraint active "
+              f"{h['constraint_active']}/{h['constraint_epochs']}, rejected {h['measurements_rejected']}, "
+              f"fights {h['fights']}", file=sys.stderr)
+
+    try:
+        rows = replay_rows(run) if source == "replay" else line_rows(run, source)
+        replay(run, rows, pace if source == "replay" else None, status=status)
+        result = run.close()
+    except BaseException:
+        run.output.close()  # every sink's file complete
+        raise
+    if out is not None:
+        from bodyfusion.outputs.write import write_outputs
+
+        write_outputs(result, out, str(config), total_wall_s=time.perf_counter() - wall0)
+    if not CONSOLE.quiet:
+        revised = {n: s.revised_decisions for n, s in result.systems.items() if getattr(s, "revised_decisions", 0)}
+        print(f"live: {run.emitted} states in {time.perf_counter() - wall0:.1f} s"
+              + (f"; decisions a later pass revised: {revised}" if revised else ""), file=sys.stderr)
+        for finding in result.findings:
+            print(finding.line(), file=sys.stderr)
+
+
+def _positive(text: str, key: str) -> float:
+    """``text`` as a positive number, else a ConfigError naming ``key``."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise ConfigError(key, f"{text!r}: give a positive number" + (" or max" if key == "--speed" else ""))
+    return value
 
 
 COUNTED = ("dropped", "reordered", "rejected", "gated", "skipped", "not_converged", "fallbacks", "resets", "warnings")
@@ -292,12 +373,49 @@ class _LevelFormatter(logging.Formatter):
         return f"{record.levelname.lower()}: {super().format(record)}"
 
 
+class Terminated(Exception):
+    """SIGTERM, raised where the process is, so that every ``finally`` runs (files closed whole)."""
+
+
+_MAIN_PID: list[int] = []
+"""The process whose SIGTERM raises :class:`Terminated` (a forked child ends at once)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    if os.getpid() not in _MAIN_PID:  # a copy forked before it set its own handlers: end as by default
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+    raise Terminated
+
+
 def main() -> None:
-    """Entry point: user errors print one line on stderr and exit 2, never a traceback."""
+    """Entry point: user errors print one line on stderr and exit 2, never a traceback; Ctrl-C
+    (SIGINT) exits 130 and SIGTERM 143, each after every open file is closed whole. Both are
+    taken even where the shell started the command with them ignored (a background job)."""
     CONSOLE.verbosity = 0  # until the global options say otherwise
     configure_logging()
+    _MAIN_PID[:] = [os.getpid()]
+    previous = {signum: signal.signal(signum, handler) for signum, handler in
+                ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, _terminate))}
     try:
-        app(standalone_mode=False)
+        _dispatch()
+    finally:  # as they were (a caller that runs main in its own process)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
+
+
+def _dispatch() -> None:
+    """The command, its outcome turned into the exit status (:func:`main`)."""
+    try:
+        code = app(standalone_mode=False)  # typer hands back Ctrl-C as exit code 130 here
+        if code == 130:
+            raise KeyboardInterrupt
+        if isinstance(code, int) and code:
+            sys.exit(code)
+    except Terminated:
+        print("terminated", file=sys.stderr)
+        sys.exit(143)
     except FusionError as err:
         more = len(getattr(err, "others", ()))
         print(f"error: {err}" + (f" (and {more} more: fusion validate lists every one)" if more else ""),

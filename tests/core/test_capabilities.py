@@ -35,7 +35,7 @@ def test_an_aiding_source_needs_at_most_ten_members():
 
 
 @pytest.mark.parametrize("cls, offered", [
-    (FootIns, {"HeadingAlignment", "BodyPlacement", "TransitionTracking", "Smoothing"}),
+    (FootIns, {"HeadingAlignment", "BodyPlacement", "TransitionTracking", "Smoothing", "Streaming"}),
     (HandPdr, {"HeadingAlignment", "TransitionTracking", "AbsoluteFixes"}),
     (RandomWalk, {"TransitionTracking"}),
 ])

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import sys
 import threading
 import traceback
@@ -25,6 +26,14 @@ Outcome = tuple[str, Any]
 def fork_is_safe() -> bool:
     """Whether this process may fork: on Linux, with no thread but this one."""
     return sys.platform == "linux" and threading.active_count() == 1
+
+
+def child_signals() -> None:
+    """In a forked copy: SIGTERM ends it at once and SIGINT is left to the parent (Ctrl-C reaches
+    the whole process group; the parent ends its children), whatever handlers the parent had
+    installed to close its own files first (:func:`bodyfusion.cli.main`)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def outcome(job: Callable[[], Any]) -> Outcome:
@@ -65,6 +74,7 @@ class Forked:
         pid = os.fork()
         if pid == 0:  # the copy: the outcome down the pipe, then gone without this process's exit handlers
             try:
+                child_signals()
                 os.close(read_fd)
                 result = outcome(job)
                 with os.fdopen(write_fd, "wb") as pipe:

@@ -15,6 +15,8 @@ trajectory. A system offers more by deriving from one of these classes as well; 
 - :class:`Smoothing`: it smooths its own run once the fuser is done (the layout's ``smoother``).
 - :class:`AbsoluteFixes`: it carries an absolute position sensor (a phone's GNSS): its fixes
   alone are what the fused track is scored beside, and what a geographic frame is fitted to.
+- :class:`Streaming`: it runs live (:mod:`bodyfusion.live`): its data table grows while it
+  runs, and it decides its samples some look-ahead behind the newest.
 """
 
 from __future__ import annotations
@@ -131,3 +133,24 @@ class AbsoluteFixes(ABC):
     def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The sensor alone: fix times (K,) s and ENU positions (K, 3) m, every fix its user would
         have (outages masked); None when the run has none."""
+
+
+class Streaming(ABC):
+    """A system that runs live: built on the first part of its recording (its data section's
+    in-memory table, :mod:`bodyfusion.live`), it takes each longer part as it arrives. What it
+    decided about a sample (stance, a gap's increment) is final once the data reach the
+    look-ahead beyond it; :meth:`~bodyfusion.core.system.SensorSystem.decided_until` says up to
+    when that is, and the fuser takes no event after it."""
+
+    @abstractmethod
+    def start_streaming(self, lookahead_s: float) -> None:
+        """From now on the recording grows: decide samples ``lookahead_s`` (s) behind the newest."""
+
+    @abstractmethod
+    def extend(self) -> None:
+        """The data section's table has grown (a longer first part of the recording, every earlier
+        row unchanged): read it and decide what the look-ahead allows."""
+
+    @abstractmethod
+    def close_stream(self) -> None:
+        """The recording is complete: read it whole and decide every sample."""

@@ -23,9 +23,10 @@ class ConstraintLog:
     ``p_after``, (epochs, 3n), ENU m) are kept; the separations are computed from them when
     asked (``before_m``, ``after_m``). ``solve_us`` (epochs,): the solver's wall time (µs);
     :attr:`active_multipliers`: the multipliers of the active constraints, epoch by epoch in the
-    order the solver made them active."""
+    order the solver made them active. Rows for more epochs are added by :meth:`reserve` (a live
+    run learns its epochs as it goes)."""
 
-    def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int) -> None:
+    def __init__(self, constraints: list[ConstraintConfig], order: list[str], epochs: int = 0) -> None:
         self.constraints = constraints
         k = len(constraints)
         self._i = np.array([order.index(c.between[0]) for c in constraints], dtype=np.int64)
@@ -45,6 +46,25 @@ class ConstraintLog:
         self._lam_active = np.empty(epochs * k)
         self._n_active = 0
         self.n = 0
+
+    _ROWS = ("t", "p_before", "p_after", "multiplier", "limit", "active", "tail_truncated", "solve_us")
+
+    def reserve(self, epochs: int) -> None:
+        """Room for ``epochs`` more epochs beyond those recorded (the arrays at least double when
+        they grow, so that a live run's many small slices cost as one)."""
+        need = self.n + epochs
+        have = self.t.shape[0]
+        if need <= have:
+            return
+        size = max(need, 2 * have)
+        for name in self._ROWS:
+            old = getattr(self, name)
+            new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
+            new[:self.n] = old[:self.n]
+            setattr(self, name, new)
+        lam = np.empty(size * len(self.constraints))
+        lam[:self._n_active] = self._lam_active[:self._n_active]
+        self._lam_active = lam
 
     def separations(self, p: np.ndarray) -> np.ndarray:
         """(..., K) separation (m) of every constraint at stacked positions p (..., 3n)."""

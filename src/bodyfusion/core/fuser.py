@@ -36,6 +36,7 @@ systems' blocks alone and the correlation it creates is dropped, as for constrai
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Set
 from dataclasses import dataclass, field
@@ -53,6 +54,8 @@ from bodyfusion.core.constraints import ConstraintSolution
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.constraint_log import ConstraintLog
+from bodyfusion.core.epoch_state import EpochOutput
+from bodyfusion.core.schedule import CONSTRAINT, MEASUREMENT, TIE, EventSchedule
 from bodyfusion.core.system import AidingSource, SensorSystem
 
 LIMIT_STEP_M = 0.05
@@ -81,6 +84,10 @@ class FuserReport:
     not_converged: int = 0
     max_violation_before_m: float = 0.0
     max_violation_after_m: float = 0.0
+    measurements_rejected: int = 0
+    """Aiding measurements beyond their gate."""
+    ties_rejected: int = 0
+    """Relative-heading measurements beyond their gate."""
     wall_s: float = 0.0
     constraint_log: ConstraintLog | None = None
     """Every constraint at every sync epoch (:class:`~bodyfusion.core.constraint_log.ConstraintLog`)."""
@@ -98,20 +105,6 @@ class FuserReport:
     def solve_times_us(self) -> np.ndarray:
         """The solver's wall time (µs) at every epoch (empty without constraints)."""
         return np.empty(0) if self.constraint_log is None else self.constraint_log.solve_us[:self.constraint_log.n]
-
-
-def epoch_times(systems: list[SensorSystem], config: FuserConfig) -> np.ndarray:
-    """Sync epochs (s) inside the span all constrained systems cover."""
-    t0 = max(s.t_start for s in systems)
-    t1 = min(s.t_end for s in systems)
-    if config.epochs == "events":
-        times = np.concatenate([s.sync_times() for s in systems])
-    elif config.epochs == "interval":
-        times = np.arange(t0 + config.interval_s, t1, config.interval_s)
-    else:
-        times = np.concatenate([s.sample_times() for s in systems])
-    times = np.unique(times)
-    return times[(times > t0) & (times <= t1)]
 
 
 def spread_correction(P: np.ndarray, pos: np.ndarray, solution: ConstraintSolution,
@@ -211,7 +204,7 @@ class JointState:
 class Fuser:
     """Runs the layout's systems to the end of their data, enforcing the constraints and
     applying the aiding sources' measurements, in time order (at one time: measurements
-    first, then the constraints).
+    first, then the heading ties, the constraints, and an output epoch last).
 
     Parameters: ``systems`` (name → system, initialised and heading-aligned),
     ``config`` (the layout's ``fuser`` section), ``constraints`` (the layout's list, every limit
@@ -219,14 +212,22 @@ class Fuser:
     follow the feet's strides, ``body``: the wearer, :class:`~bodyfusion.core.limits.LimitGuard`),
     ``aiding`` (name → aiding source), ``ties`` (the relative headings kept through the run,
     :class:`~bodyfusion.core.heading.HeadingTie`: measured at both systems' sync epochs, after
-    the measurements and before the constraints of one time). Result: ``report``
-    (:class:`FuserReport`).
+    the measurements and before the constraints of one time), ``output`` (an
+    :class:`~bodyfusion.core.epoch_state.EpochOutput`: states emitted every ``interval_s`` of
+    data, to its sinks; None: none). Result: ``report`` (:class:`FuserReport`).
+
+    It is a clock (:class:`~bodyfusion.core.schedule.EventSchedule`): :meth:`advance` takes
+    every event up to the time all systems' data are decided
+    (:meth:`~bodyfusion.core.system.SensorSystem.decided_until`), :meth:`finish` the rest and
+    the systems' last samples. :meth:`run` is both: a batch run is a live run whose data were
+    all in hand at its start, and takes the same events in the same order.
     """
 
     def __init__(self, systems: Mapping[str, SensorSystem], config: FuserConfig,
                  constraints: list[ConstraintConfig] | None = None,
                  aiding: Mapping[str, AidingSource] | None = None, ties: list[HeadingTie] | None = None,
-                 follows_gait: list[bool] | None = None, body: BodyConfig | None = None) -> None:
+                 follows_gait: list[bool] | None = None, body: BodyConfig | None = None,
+                 output: EpochOutput | None = None) -> None:
         self.systems = systems
         self.config = config
         self.constraints = constraints or []
@@ -234,56 +235,80 @@ class Fuser:
         self.body = body or BodyConfig()
         self.aiding = dict(aiding or {})
         self.ties = list(ties or [])
+        self.output = output
         self.report = FuserReport(method=config.method, heading_ties=self.ties)
-
-    def run(self) -> FuserReport:
-        t_begin = time.perf_counter()
+        self._wall_s = 0.0
         constrained = self.config.method != "none" and bool(self.constraints)
         order = list(dict.fromkeys(name for c in self.constraints for name in c.between)) if constrained else []
         n_constrained = len(order)
-        sources = list(self.aiding.values())
-        for src in sources:
+        self._sources = list(self.aiding.values())
+        for src in self._sources:
             pairs = {src.measured_systems(k) for k in range(len(src.measurement_times()))}
             order += [name for pair in pairs if len(pair) > 1 for name in pair if name not in order]
         order += [name for tie in self.ties for name in (tie.reference, tie.system) if name not in order]
         self.joint = JointState([self.systems[name] for name in order], self.config.cross_covariance) if order else None
         self._index = {name: k for k, name in enumerate(order)}
-        events: list[tuple[float, int, int, int]] = []
+        members: list[SensorSystem] = []
         if constrained:
             members = self.joint.systems[:n_constrained]
             self._order = order[:n_constrained]
             self._solvers: dict[tuple[float, ...], tuple] = {}
             parts = [s.body_part for s in members]
             self.report.limits = LimitGuard(self.constraints, self.follows_gait, self._order, parts,
-                                            {i: s.sync_times() for i, s in enumerate(members) if parts[i] == "foot"},
+                                            {i: np.empty(0) for i in range(n_constrained) if parts[i] == "foot"},
                                             self.body, self.config.relax_fights)
-            epochs = epoch_times(members, self.config)
-            events += [(float(t), 2, 0, 0) for t in epochs]
-            self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained], len(epochs))
+            self.report.constraint_log = ConstraintLog(self.constraints, order[:n_constrained])
             self._pos = self.joint.pos[:3 * n_constrained].astype(np.int64)
             n_joint = self.joint.cross.shape[0]  # Σ = P[pos][:, pos] by flat indices: a quarter of np.ix_'s cost
             self._sigma_index = (self._pos[:, None] * n_joint + self._pos[None, :]).ravel()
             self._corrected = list(range(len(order) if self.joint.track else n_constrained))
             self._positions = [s.position_n for s in members]  # bound once: called at every epoch
             self._truncating = self.config.inequality == "truncation"
-        for i, src in enumerate(sources):
-            events += [(float(t), 0, i, k) for k, t in enumerate(src.measurement_times())]
+        tied = [self.systems[n] for n in dict.fromkeys(m for tie in self.ties for m in (tie.reference, tie.system))]
         if self.ties:
-            events += [(float(t), 1, 0, 0) for t in epoch_times(
-                [self.systems[n] for n in dict.fromkeys(m for tie in self.ties for m in (tie.reference, tie.system))],
-                FuserConfig(epochs="events"))]
             self._tie_gate = chi2_gate(TIE_GATE_PROBABILITY, 1)
-        for t, kind, i, k in sorted(events):
-            if kind == 0:
-                self._measurement(sources[i], k, t)
-            elif kind == 1:
+        self.schedule = EventSchedule(members, self._sources, tied, config, list(self.systems.values()),
+                                      output.interval_s if output is not None else None,
+                                      self.report.limits.add_sync_times if constrained else None)
+
+    def decided_until(self) -> float:
+        """The time (s) up to which every system's and aiding source's data are decided (∞: all)."""
+        return min((p.decided_until() for p in (*self.systems.values(), *self._sources)), default=math.inf)
+
+    def advance(self, until: float = math.inf) -> float:
+        """Take every event up to ``until`` (s) and the data's decided time; returns the schedule's
+        horizon (s) after it."""
+        t_begin = time.perf_counter()
+        horizon = min(until, self.decided_until())
+        events = self.schedule.until(horizon)
+        log = self.report.constraint_log
+        if log is not None:
+            log.reserve(sum(kind == CONSTRAINT for _, kind, _, _ in events))
+        for t, kind, i, k in events:
+            if kind == MEASUREMENT:
+                self._measurement(self._sources[i], k, t)
+            elif kind == TIE:
                 self._tie_epoch(t)
-            else:
+            elif kind == CONSTRAINT:
                 self._constraint_epoch(t)
+            else:
+                self.output.emit(t, self.systems, self.report)
+        self._wall_s += time.perf_counter() - t_begin
+        return self.schedule.horizon
+
+    def finish(self) -> FuserReport:
+        """Every remaining event, then every system to its last sample."""
+        self.advance(math.inf)
+        t_begin = time.perf_counter()
         for system in self.systems.values():
             system.advance(system.t_end)
-        self.report.wall_s = time.perf_counter() - t_begin
+        self._wall_s += time.perf_counter() - t_begin
+        self.report.wall_s = self._wall_s
         return self.report
+
+    def run(self) -> FuserReport:
+        """The whole run: :meth:`finish` from the start."""
+        return self.finish()
 
     def _measurement(self, src: AidingSource, k: int, t: float) -> None:
         """Gated scalar update with measurement k of ``src`` at time t."""
@@ -309,6 +334,7 @@ class Fuser:
         nis, accepted, dx, P_new = gated_update(P, H, m.r_var, m.z - m.predicted, src.gate_nis)
         src.record(k, nis, accepted)
         if not accepted:
+            self.report.measurements_rejected += 1
             return
         if joint:
             # a measurement of one system is its own; one between systems (or spread to the
@@ -336,6 +362,7 @@ class Fuser:
             H[joint.blocks[a]] -= ref.yaw_error_row()
             nis, accepted, dx, P_new = gated_update(P, H, r_var, z, self._tie_gate)
             tie.log.append((t, z, float(np.sqrt(r_var)), nis, accepted))
+            self.report.ties_rejected += int(not accepted)
             if accepted:
                 joint.correct(dx, P_new, list(range(len(joint.systems))) if joint.track else [a, b])
             tie.restart_at(ref.position_n(), sys.position_n())

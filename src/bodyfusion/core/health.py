@@ -17,6 +17,7 @@ factorisation cannot certify above the smallest eigenvalue seen).
 from __future__ import annotations
 
 import inspect
+import math
 
 import numpy as np
 
@@ -45,9 +46,12 @@ class CovarianceMonitor:
 
     def __init__(self, system: SensorSystem, stride_s: float = STRIDE_S) -> None:
         self.monitored = system
-        self._stride_t = stride_times(system.sync_times(), stride_s).tolist()
-        self._t_end = system.t_end  # s; the fuser asks at every epoch
+        self._stride_s = stride_s
+        self._stride_t: list[float] = []
+        self._known = -math.inf  # the stride times up to here are known (s)
+        self._t_end = math.inf  # s, once the system's data are all decided; the fuser asks at every epoch
         self._next = 0  # index of the first stride time after the system's time
+        self._learn()
         self._t = np.empty(BATCH)  # the buffered checks' times (s) ...
         self._covs: np.ndarray | None = None  # ... and covariances (BATCH, n, n), from the first check
         self._n = 0  # checks buffered
@@ -58,9 +62,26 @@ class CovarianceMonitor:
             self.__dict__[name] = value
         return value
 
+    def _learn(self) -> None:
+        """The stride times among the sync times the system decided since the last call (all of
+        them at once for a system whose data are in hand), and its end once known."""
+        decided = self.monitored.decided_until()
+        if decided <= self._known:
+            return
+        times = np.asarray(self.monitored.sync_times(), dtype=float)
+        new = times[(times > self._known) & (times <= decided)]
+        if self._stride_t:
+            new = new[new >= self._stride_t[-1] + self._stride_s]
+        self._stride_t += stride_times(new, self._stride_s).tolist()
+        self._known = decided
+        if not math.isfinite(decided):
+            self._t_end = self.monitored.t_end
+
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split and checked at the stride times up to t, and checked
         at t when t is one of them or the system's end."""
+        if t > self._known:
+            self._learn()
         s, stride = self.monitored, self._stride_t
         at_stride = False
         while self._next < len(stride) and stride[self._next] <= t:

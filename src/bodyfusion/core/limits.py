@@ -71,8 +71,8 @@ class LimitGuard:
 
     ``constraints``: the resolved constraints (numeric limits); ``follows``: which follow the
     gait; ``parts``: body part of each stacked system (the fuser's order); ``feet_sync``: each
-    stacked foot's own sync times (s); ``body``; ``relax``: relax fighting limits (else only
-    report them)."""
+    stacked foot's own sync times (s) known so far (more by :meth:`add_sync_times`, as a live run
+    decides them); ``body``; ``relax``: relax fighting limits (else only report them)."""
 
     constraints: list[ConstraintConfig]
     follows: list[bool]
@@ -94,6 +94,11 @@ class LimitGuard:
         self.relaxation = np.zeros(len(self.constraints))
         self._history = [[] for _ in self.constraints]
         self._next_sync = {i: 0 for i in self.feet_sync}
+
+    def add_sync_times(self, i: int, times: np.ndarray) -> None:
+        """Sync times (s) of stacked system i decided after those known (ignored unless i is a foot)."""
+        if i in self.feet_sync and times.size:
+            self.feet_sync[i] = np.concatenate([self.feet_sync[i], times]) if self.feet_sync[i].size else times
 
     def stride_m(self) -> float | None:
         """The gait's stride (m): the smaller of the feet's medians of their last strides."""

@@ -15,6 +15,7 @@ the same interface.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -155,6 +156,13 @@ class Plugin(ABC):
     @abstractmethod
     def input_report(self) -> InputReport:
         """What the readers dropped or reordered."""
+
+    def decided_until(self) -> float:
+        """The time (s) up to which the plugin's samples, sync events and measurements are final:
+        the fuser takes no event after it. A plugin that read its whole recording has decided
+        everything (∞, the default); a live one decides its data some look-ahead behind the newest
+        sample (:mod:`bodyfusion.live`)."""
+        return math.inf
 
     def diagnostics(self) -> dict:
         """Plugin-specific figures for metrics.json (stance fraction, updates, rejections...)."""

@@ -18,7 +18,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import NamedTuple
 
-from bodyfusion.base.forking import Forked, fork_is_safe, outcome, raised_or_value
+from bodyfusion.base.forking import Forked, child_signals, fork_is_safe, outcome, raised_or_value
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.evaluation.scored_run import ScoredRun, ScoredTracks
 
@@ -60,6 +60,7 @@ def _ready() -> None:
 def _serve(conn: Connection) -> None:
     """The figure process: ready the figure code (:func:`_ready`), then draw the one job it is
     sent (none if the caller closes its end first)."""
+    child_signals()
     _ready()
     try:
         job = conn.recv()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from bodyfusion.base.progress import ProgressCallback
@@ -13,6 +14,7 @@ from bodyfusion.base.types import LOG
 from bodyfusion.core.capabilities import AbsoluteFixes, offers
 from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
+from bodyfusion.core.epoch_state import EpochOutput
 from bodyfusion.core.fuser import Fuser
 from bodyfusion.core.heading import align_headings, heading_ties
 from bodyfusion.core.health import CovarianceMonitor
@@ -20,7 +22,7 @@ from bodyfusion.core.layout import LoadedLayout, load_layout
 from bodyfusion.core.limits import resolve_constraints
 from bodyfusion.core.progress import FusionProgress
 from bodyfusion.core.smoothing import constrain_trajectories, plan_smoothing, smooth_systems
-from bodyfusion.core.system import AidingSource
+from bodyfusion.core.system import AidingSource, Plugin, SensorSystem
 from bodyfusion.evaluation.consistency import horizontal_nees
 from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.consistency_findings import nees_findings, nis_findings
@@ -31,16 +33,42 @@ from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth, navigation_frame
 from bodyfusion.runner.truth import check_truth_overlap
 
-__all__ = ["run", "run_layout"]
+__all__ = ["Fusion", "finish_fusion", "prepare_fusion", "run", "run_layout"]
 
 log = logging.getLogger(__name__)
 
 
-def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None) -> RunResult:
-    """Run a validated layout in-process (no files written). The layout is validated again as a
-    whole first (:meth:`~bodyfusion.core.layout.LoadedLayout.checked`: fields set on its models
-    since it was loaded pass every cross-field and plugin check). ``progress(done, total)`` is told
-    the seconds of data fused (:class:`~bodyfusion.core.progress.FusionProgress`)."""
+@dataclass
+class Fusion:
+    """A layout's systems built, aligned and handed to the fuser (:func:`prepare_fusion`), for
+    :func:`finish_fusion` to run to the end (a live run advances ``fuser`` as its data arrive
+    first: :mod:`bodyfusion.live`)."""
+
+    loaded: LoadedLayout
+    built: dict[str, Plugin]
+    systems: dict[str, SensorSystem]
+    aiding: dict[str, AidingSource]
+    monitors: dict[str, CovarianceMonitor]
+    fuser: Fuser
+    constraints: list
+    rotations: dict
+    origin: tuple[float, float, float] | None
+    truths: dict
+    tracker: FusionProgress | None
+    timings: dict[str, float] = field(default_factory=dict)
+    t_fusing: float = 0.0
+    """When the navigation began (s, :func:`time.perf_counter`)."""
+
+
+def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None,
+                   output: EpochOutput | None = None, lookahead_s: float | None = None) -> Fusion:
+    """Build a validated layout's systems (the layout validated again as a whole first:
+    :meth:`~bodyfusion.core.layout.LoadedLayout.checked`), read its truth, align the systems'
+    headings and hand them to a :class:`~bodyfusion.core.fuser.Fuser` (emitting ``output`` epochs
+    when given one). ``progress(done, total)`` is told the seconds of data fused
+    (:class:`~bodyfusion.core.progress.FusionProgress`). ``lookahead_s``: the recordings are the
+    first part of a live run's (:mod:`bodyfusion.live`): once aligned, every system decides its
+    samples that far behind its newest (:meth:`~bodyfusion.core.capabilities.Streaming.start_streaming`)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
@@ -58,11 +86,14 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
     timings["load_s"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
+    t_fusing = time.perf_counter()
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         LOG.warning("%s: fuser.method is none: the %d constraint(s) of the layout are not enforced",
                     loaded.path.name if loaded.path else loaded.name, len(loaded.layout.constraints))
     rotations = align_headings(systems, loaded.layout.heading_alignment)
+    if lookahead_s is not None:
+        for s in systems.values():
+            s.start_streaming(lookahead_s)
     tracker = FusionProgress(systems, progress) if progress is not None else None
     monitors = {name: CovarianceMonitor(tracker.track(s) if tracker else s) for name, s in systems.items()}
     log.info("fusing %d system(s) and %d aiding source(s): fuser.method %s, %d constraint(s)", len(systems),
@@ -70,12 +101,29 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     ties = heading_ties(systems, loaded.layout.heading_alignment)
     constraints, follows = resolve_constraints(loaded.layout.constraints,
                                                {name: s.body_part for name, s in built.items()}, loaded.layout.body)
-    report = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body).run()
-    for monitor in monitors.values():
+    fuser = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body, output)
+    return Fusion(loaded, built, systems, aiding, monitors, fuser, constraints, rotations, origin, truths, tracker,
+                  timings, t_fusing)
+
+
+def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None) -> RunResult:
+    """Run a validated layout in-process (no files written): :func:`prepare_fusion`, then
+    :func:`finish_fusion`."""
+    return finish_fusion(prepare_fusion(loaded, seed, progress))
+
+
+def finish_fusion(fusion: Fusion) -> RunResult:
+    """Fuse to the end of the data (:meth:`~bodyfusion.core.fuser.Fuser.finish`), smooth, score
+    against the truth and gather the health findings."""
+    loaded, systems, aiding, constraints, truths = (fusion.loaded, fusion.systems, fusion.aiding, fusion.constraints,
+                                                   fusion.truths)
+    timings = fusion.timings
+    report = fusion.fuser.finish()
+    for monitor in fusion.monitors.values():
         monitor.flush()
-    if tracker is not None:
-        tracker.finish()
-    timings["navigation_s"] = time.perf_counter() - t0
+    if fusion.tracker is not None:
+        fusion.tracker.finish()
+    timings["navigation_s"] = time.perf_counter() - fusion.t_fusing
     log.debug("fused in %.2f s: %d constraint epoch(s), %d active", timings["navigation_s"], report.epochs,
               report.activations)
 
@@ -119,8 +167,8 @@ def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback |
     findings += nis_findings({name: s.health().get("nis", {}) for name, s in {**systems, **aiding}.items()}, spans)
     findings += nees_findings(nees)
     findings += large_error_findings(scores, findings)
-    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, rotations,
-                     navigation_frame(loaded, systems, origin), timings, aiding, smoothed_constraints, nees,
+    return RunResult(loaded, systems, trajectories, truths, transform, scores, report, fusion.rotations,
+                     navigation_frame(loaded, systems, fusion.origin), timings, aiding, smoothed_constraints, nees,
                      sensor_alone=alone, findings=tuple(findings))
 
 

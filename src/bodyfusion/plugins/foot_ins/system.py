@@ -14,7 +14,7 @@ from bodyfusion.base.sections import KeyedError
 from bodyfusion.core.layout import Layout, SmootherConfig
 from bodyfusion.core.capabilities import BodyPlacement, HeadingAlignment, Smoothing, TransitionTracking
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
-from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.base.types import ImuStream, InputReport, Trajectory
 from bodyfusion.nav.filter_health import NisRecord, NisTally, innovation_columns, nis, quaternion_norm_deviation
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.truth import read_truth_csv
@@ -38,6 +38,7 @@ from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, 
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
+from bodyfusion.plugins.foot_ins.streaming import StreamingFootIns
 
 MIN_RATE_HZ = 40.0
 """Below this sample rate (Hz) a foot INS's run gets a ``low_rate`` finding: a swing of about
@@ -52,7 +53,8 @@ RECOVERY_LEVEL_SD_RAD = 0.05
 log = logging.getLogger(__name__)
 
 
-class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, TransitionTracking, Smoothing):
+class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, BodyPlacement, TransitionTracking,
+              Smoothing):
     """Foot-mounted IMU navigated by strapdown + ZUPT, closed loop.
 
     Error state (15): δp, δv, δθ (nav frame), δb_a, δb_g; see :mod:`bodyfusion.nav.error_state`.
@@ -81,19 +83,11 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
 
     def __init__(self, name: str, config: FootInsConfig, context: LayoutContext) -> None:
         super().__init__(name, config, context)
-        self.stream = read_imu(config.data)
-        self.clipping = repair_saturation(self.stream, name)
-        self._rate_hz = float(1.0 / np.median(np.diff(self.stream.t)))
-        self.stance_detection = detect_stance(self.stream, config.detector, context.gravity_mps2,
-                                              f"systems.{name}.detector")
-        self.stance = self.stance_detection.stance
+        self._prepare(read_imu(config.data))
         log.info("%s: %d samples at %.0f Hz; stance (detector %s) in %.0f %% of them", name, len(self.stance),
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
-        self._input_increments = covariance_increments(self.stream, context.gravity_mps2, self.clipping)
-        self._stance_runs = detectors.stance_events(self.stance)
-        self._t_nav = navigation_clock(self.stream)
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
         self._fix_sigma = fx.sigma_m if fx is not None else 0.0
@@ -105,6 +99,20 @@ class FootIns(InitialState, SensorSystem, HeadingAlignment, BodyPlacement, Trans
         self._x0, self._P0 = self._initial_state()
         self._forward_record = ForwardRecord()  # what the filter records for the whole-run RTS
         self.restart()
+
+    def _prepare(self, stream: ImuStream) -> None:
+        """Take ``stream`` (read and checked) and what the filter derives from it whole: its
+        saturated runs rebuilt, its rate, the stance, the gap and saturation policies' covariance
+        increments, the stance runs, the navigation clock."""
+        self.stream = stream
+        self.clipping = repair_saturation(stream, self.name)
+        self._rate_hz = float(1.0 / np.median(np.diff(stream.t)))
+        self.stance_detection = detect_stance(stream, self.config.detector, self.context.gravity_mps2,
+                                              f"systems.{self.name}.detector")
+        self.stance = self.stance_detection.stance
+        self._input_increments = covariance_increments(stream, self.context.gravity_mps2, self.clipping)
+        self._stance_runs = detectors.stance_events(self.stance)
+        self._t_nav = navigation_clock(stream)
 
     @classmethod
     def check_layout(cls, name: str, config: FootInsConfig, layout: Layout) -> None:

@@ -1,0 +1,73 @@
+"""Latency and speed of a live run (:mod:`bodyfusion.live`): the dual-foot Vicon walk replayed.
+
+The vendored walk (both feet, 60 Hz, 120 s, the body's maximum-separation constraint with
+projection, heading ties) is replayed through :class:`~bodyfusion.live.engine.LiveRun` with its
+defaults (look-ahead 2 s, a pass every 0.5 s of data, a state every 0.1 s):
+
+* at ×max (rows pushed as fast as the run takes them): the replay speed as a ratio to real time,
+  the highest speed it sustains (every pass done before the next is due, by construction);
+* at ×``--speed`` (default 1, real time; ``--seconds`` of the walk, default all of it): the
+  latency of every pass, from the arrival of the row that made it due to its last state emitted
+  (p50, p99, max), and whether any pass took longer than the data it covers (a backlog).
+
+The layout has no hand system: the phone's PDR does not run live yet (the hand plugin offers no
+:class:`~bodyfusion.core.capabilities.Streaming`); the figure is dual foot.
+
+Last line: ``p99_ms=… max_ms=… max_speedup=…`` (p99 and max at the paced speed).
+
+Run: python benchmarks/latency.py [--speed 1] [--seconds 120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bodyfusion.core.layout import load_layout
+from bodyfusion.live.engine import REPLAN_S, LiveRun
+from bodyfusion.live.sources import replay, replay_rows
+
+LAYOUT = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml"
+
+
+def live_replay(speed: float | None, seconds: float | None) -> tuple[LiveRun, float, float]:
+    """Replay ``seconds`` of the walk (None: all) at ``speed`` (None: ×max); the run, the data's
+    span (s) and the wall time (s) of the replay and the run's close."""
+    run = LiveRun(load_layout(LAYOUT))
+    rows = list(replay_rows(run))
+    if seconds is not None:
+        rows = list(itertools.takewhile(lambda r: r[0] <= rows[0][0] + seconds, rows))
+    wall0 = time.perf_counter()
+    replay(run, iter(rows), speed)
+    run.close()
+    return run, rows[-1][0] - rows[0][0], time.perf_counter() - wall0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--speed", type=float, default=1.0, help="the paced replay's speed (× real time)")
+    parser.add_argument("--seconds", type=float, default=None, help="seconds of the walk to pace (default all)")
+    args = parser.parse_args(argv)
+    run, span, wall = live_replay(None, None)
+    max_speedup = span / wall
+    fast = np.array(run.latency_s) * 1e3
+    print(f"x max: {span:.0f} s of data in {wall:.2f} s: {max_speedup:.1f}x real time, {run.emitted} states, "
+          f"{len(fast)} passes; pass p50 {np.percentile(fast, 50):.1f} ms, max {fast.max():.1f} ms")
+    run, span, wall = live_replay(args.speed, args.seconds)
+    lat = np.array(run.latency_s) * 1e3
+    budget_ms = REPLAN_S / args.speed * 1e3
+    backlog = int(np.count_nonzero(lat > budget_ms))
+    p50, p99, worst = np.percentile(lat, 50), np.percentile(lat, 99), lat.max()
+    print(f"x {args.speed:g}: {span:.0f} s of data in {wall:.1f} s, {run.emitted} states, {len(lat)} passes; "
+          f"latency p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {worst:.1f} ms; passes longer than the "
+          f"{budget_ms:.0f} ms of data they cover: {backlog}")
+    print(f"p99_ms={p99:.2f} max_ms={worst:.2f} max_speedup={max_speedup:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

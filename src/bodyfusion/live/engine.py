@@ -1,0 +1,189 @@
+"""A layout fused live: rows pushed as they arrive, states emitted as the data decide them.
+
+:class:`LiveRun` takes each system's rows as its data section names their columns (the file's
+own columns and units: ``time_column``, ``acc_columns``...; one schema per sensor type, the
+layout's), by :meth:`LiveRun.push`. It runs the batch run's path on a growing recording
+(:mod:`bodyfusion.runner.batch`): once every system holds ``warmup_s`` of data, the systems are
+built on that first part (bound as in-memory tables), levelled and heading-aligned as a batch
+run does, and handed to the fuser (:func:`~bodyfusion.runner.batch.prepare_fusion`); then every
+``replan_s`` of new data each system takes its longer table
+(:meth:`~bodyfusion.core.capabilities.Streaming.extend`) and the fuser advances to the time
+all of them have decided (:meth:`~bodyfusion.core.fuser.Fuser.advance`), emitting an
+:class:`~bodyfusion.core.epoch_state.EpochState` every ``output_interval_s`` of data to the
+sinks. A start that fails on the data so far (no system has walked far enough to align its
+heading) is tried again after each further ``warmup_s``. :meth:`LiveRun.close` completes the recording and finishes the run as a batch run does
+(:func:`~bodyfusion.runner.batch.finish_fusion`): the same :class:`~bodyfusion.results.run_result.RunResult`.
+
+Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
+next replan has run. Each system must offer :class:`~bodyfusion.core.capabilities.Streaming`
+(the foot INS does); aiding sources and smoothers do not run live yet and are refused.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.sections import TableSection
+from bodyfusion.core.capabilities import Streaming
+from bodyfusion.core.epoch_state import EpochOutput, EpochSink
+from bodyfusion.core.layout import LoadedLayout
+from bodyfusion.core.registry import get_registry
+from bodyfusion.results.run_result import RunResult
+from bodyfusion.runner.batch import Fusion, finish_fusion, prepare_fusion
+
+LOOKAHEAD_S = 2.0
+"""Default look-ahead (s) behind the newest sample at which a system's decisions are final: a
+foot INS's stance decisions need at most about 1 s on every shared foot recording
+(``benchmarks/stance_lookahead.py``)."""
+WARMUP_S = 10.0
+"""Data (s) every system holds before the run starts: its levelling rest and first metres."""
+REPLAN_S = 0.5
+"""Data (s) between two passes over the growing recordings."""
+OUTPUT_INTERVAL_S = 0.1
+"""Spacing (s) of the output epochs."""
+
+
+class RowBuffer:
+    """One system's rows as they arrive: the columns its data section reads, in growing arrays
+    (capacity doubling), and each row's time (s) as the section defines it."""
+
+    def __init__(self, section: TableSection, key: str) -> None:
+        self.section, self.key = section, key
+        self.columns = section.required_columns()
+        self._time_column = getattr(section, "time_column", None)
+        self._time_scale = float(getattr(section, "time_scale", 1.0))
+        self._rate_hz = getattr(section, "rate_hz", None)
+        self._data = np.empty((1024, len(self.columns)))
+        self.rows = 0
+        self.t = np.empty(1024)
+
+    def add(self, row: Mapping[str, float]) -> None:
+        """Append ``row`` (column → value; every column the section reads)."""
+        missing = [c for c in self.columns if c not in row]
+        if missing:
+            raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
+        if self.rows == self._data.shape[0]:
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+            self.t = np.concatenate([self.t, np.empty_like(self.t)])
+        self._data[self.rows] = [float(row[c]) for c in self.columns]
+        self.t[self.rows] = (float(row[self._time_column]) * self._time_scale if self._time_column is not None
+                             else self.rows / float(self._rate_hz))
+        self.rows += 1
+
+    @property
+    def span_s(self) -> float:
+        """Time (s) from the first row to the newest."""
+        return float(self.t[self.rows - 1] - self.t[0]) if self.rows else 0.0
+
+    @property
+    def newest_t(self) -> float:
+        return float(self.t[self.rows - 1]) if self.rows else -math.inf
+
+    def table(self) -> dict[str, np.ndarray]:
+        """The rows so far as an in-memory table (column → array)."""
+        return {c: self._data[:self.rows, k] for k, c in enumerate(self.columns)}
+
+
+class LiveRun:
+    """``loaded`` fused live (module docstring). ``sinks``: where the output epochs go;
+    ``lookahead_s``, ``warmup_s``, ``replan_s``, ``output_interval_s`` (s); ``seed`` as a batch
+    run's. Results: ``fusion`` (None until started), ``emitted`` epochs, ``latency_s``: for every
+    pass, the wall time (s) from the arrival of the row that made it due to its last epoch
+    emitted (the data's own delay, the look-ahead and the replan interval, comes on top)."""
+
+    def __init__(self, loaded: LoadedLayout, sinks: Sequence[EpochSink] = (), *, lookahead_s: float = LOOKAHEAD_S,
+                 warmup_s: float = WARMUP_S, replan_s: float = REPLAN_S, output_interval_s: float = OUTPUT_INTERVAL_S,
+                 seed: int = 0) -> None:
+        self.loaded = loaded.checked()
+        layout = self.loaded.layout
+        if layout.smoother.kind != "none":
+            raise ConfigError("smoother.kind", f"{layout.smoother.kind}: a live run does not smooth yet; use none",
+                              loaded.path)
+        self.buffers: dict[str, RowBuffer] = {}
+        for name, cfg in self.loaded.system_configs.items():
+            cls = get_registry().system_class(cfg.plugin, key=f"systems.{name}.plugin", path=loaded.path)
+            if not issubclass(cls, Streaming) or cls.data_section is None:
+                raise ConfigError(f"systems.{name}.plugin", f"{cfg.plugin} does not run live (it cannot take a "
+                                                            "growing recording)", loaded.path)
+            section = getattr(cfg, cls.data_section)
+            self.buffers[name] = RowBuffer(section, f"systems.{name}.{cls.data_section}")
+        self.output = EpochOutput(output_interval_s, sinks)
+        self.lookahead_s, self.warmup_s, self.replan_s, self.seed = lookahead_s, warmup_s, replan_s, seed
+        self.fusion: Fusion | None = None
+        self.latency_s: list[float] = []
+        self._planned_t = -math.inf
+        self._start_after_s = warmup_s
+        self.not_started: FusionError | None = None
+        """Why the run could not start on the data so far (it tries again after each further warm-up)."""
+
+    @property
+    def emitted(self) -> int:
+        return self.output.emitted
+
+    def push(self, system: str, row: Mapping[str, float]) -> None:
+        """A row of ``system``'s data (column → value, as its data section names them), then a pass
+        when one is due (:meth:`pump`)."""
+        buffer = self.buffers.get(system)
+        if buffer is None:
+            raise ConfigError("system", f"{system!r} is no system of this layout ({', '.join(self.buffers)})")
+        arrived = time.perf_counter()
+        buffer.add(row)
+        if self.pump():
+            self.latency_s.append(time.perf_counter() - arrived)
+
+    def pump(self) -> bool:
+        """Start once every system holds the warm-up; afterwards a pass every ``replan_s`` of data.
+        True when it made a pass."""
+        newest = min(b.newest_t for b in self.buffers.values())
+        if self.fusion is None:
+            if all(b.span_s >= self._start_after_s for b in self.buffers.values()):
+                self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
+                try:
+                    self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
+                                                 lookahead_s=self.lookahead_s)
+                except FusionError as err:  # not enough of the walk yet (no system travelled far enough to align)
+                    self.not_started = err
+                    self._start_after_s += self.warmup_s
+                    return False
+                self._advance(newest)
+                return True
+            return False
+        if newest >= self._planned_t + self.replan_s:
+            self._read_tables(lambda s: s.extend())
+            self._advance(newest)
+            return True
+        return False
+
+    def _read_tables(self, read) -> None:
+        """Bind each buffer's rows to its system's data section (the section the built system reads)
+        and let the system ``read`` it."""
+        for name, b in self.buffers.items():
+            system = self.fusion.systems[name]
+            section = getattr(system.config, b.key.rpartition(".")[2])
+            section.bind(b.table(), b.key)
+            read(system)
+
+    def _advance(self, newest: float) -> None:
+        self._planned_t = newest
+        self.fusion.fuser.advance()
+
+    def close(self) -> RunResult:
+        """The recordings are complete: every system reads its whole table, the run finishes as a
+        batch run (:func:`~bodyfusion.runner.batch.finish_fusion`, every remaining epoch emitted)
+        and the sinks are closed. A run that never reached its warm-up is refused."""
+        try:
+            if self.fusion is None:
+                if self.not_started is not None:
+                    raise self.not_started
+                short = {n: round(b.span_s, 3) for n, b in self.buffers.items()}
+                raise ConfigError("--warmup", f"the data never reached the {self.warmup_s:g} s warm-up "
+                                              f"(seconds per system: {short})")
+            self._read_tables(lambda s: s.close_stream())
+            return finish_fusion(self.fusion)
+        finally:
+            self.output.close()

@@ -1,0 +1,122 @@
+"""Where a live run's rows come from: a replay of the layout's own recordings, or a line stream.
+
+* Replay (:func:`replay_rows`, :func:`replay`): every system's recording read as its data
+  section reads it (the same columns and units), merged in time order and pushed at the
+  recording's pace × ``speed`` (None: as fast as the run takes them).
+* Line stream (:func:`line_rows`): JSON lines over TCP (the run listens; one client) or UDP
+  (one or more lines per datagram). Each line is one row: ``{"system": NAME, COLUMN: VALUE,
+  ...}``, the columns those the system's data section names (a foot INS: its ``time_column``,
+  ``acc_columns``, ``gyro_columns`` and ``stance_column``, in the section's units). A line that
+  is not such an object is refused with its number. The stream ends when the client closes
+  (TCP) or an ``{"end": true}`` line arrives.
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import socket
+import time
+from collections.abc import Callable, Iterator
+
+from bodyfusion.base.errors import InputError
+from bodyfusion.io.tables import read_source
+from bodyfusion.live.engine import LiveRun
+
+Row = tuple[float, str, dict[str, float]]
+"""(t s, system, column → value)."""
+
+
+def replay_rows(run: LiveRun) -> Iterator[Row]:
+    """Every system's recording, row by row in time order (ties: the layout's system order).
+    Reads the files before any row is pushed (the run binds its tables to the same sections)."""
+    streams = []
+    for order, (name, buffer) in enumerate(run.buffers.items()):
+        arrays, _, _ = read_source(buffer.section, buffer.columns)
+        n = len(arrays[buffer.columns[0]])
+        probe = type(buffer)(buffer.section, buffer.key)
+        rows = []
+        for i in range(n):
+            row = {c: float(arrays[c][i]) for c in buffer.columns}
+            probe.add(row)
+            rows.append((float(probe.t[i]), order, name, row))
+        streams.append(rows)
+    for t, _, name, row in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
+        yield t, name, row
+
+
+def replay(run: LiveRun, rows: Iterator[Row], speed: float | None = None,
+           every_s: float = 5.0, status: Callable[[LiveRun, float], None] | None = None) -> None:
+    """Push ``rows`` into ``run`` at the recording's pace × ``speed`` (None: at once), telling
+    ``status(run, t)`` every ``every_s`` of wall time."""
+    wall0 = time.perf_counter()
+    t0 = None
+    last_status = wall0
+    for t, name, row in rows:
+        if t0 is None:
+            t0 = t
+        if speed is not None:
+            wait = wall0 + (t - t0) / speed - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+        run.push(name, row)
+        if status is not None and time.perf_counter() - last_status >= every_s:
+            last_status = time.perf_counter()
+            status(run, t)
+
+
+def _parse(line: str, number: int, where: str) -> dict | None:
+    line = line.strip()
+    if not line:
+        return None
+    try:
+        obj = json.loads(line)
+    except json.JSONDecodeError as err:
+        raise InputError(f"{where}: line {number}", f"not JSON ({err.msg})") from None
+    if not isinstance(obj, dict):
+        raise InputError(f"{where}: line {number}", "not a JSON object")
+    return obj
+
+
+def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterator[Row]:
+    """Rows from a line stream at ``tcp://HOST:PORT`` or ``udp://HOST:PORT`` (module docstring);
+    ``timeout_s``: the longest wait for a client or a datagram."""
+    scheme, _, rest = address.partition("://")
+    host, _, port = rest.rpartition(":")
+    kind = {"tcp": socket.SOCK_STREAM, "udp": socket.SOCK_DGRAM}.get(scheme)
+    if kind is None or not port.isdigit():
+        raise InputError(address, "give tcp://HOST:PORT or udp://HOST:PORT")
+    server = socket.socket(socket.AF_INET, kind)
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    server.settimeout(timeout_s)
+    server.bind((host or "127.0.0.1", int(port)))
+    try:
+        if scheme == "tcp":
+            server.listen(1)
+            connection, _ = server.accept()
+            connection.settimeout(timeout_s)
+            lines = (line for line in connection.makefile("r", encoding="utf-8"))
+        else:
+            lines = (line for packet in iter(lambda: server.recv(65536), b"")
+                     for line in packet.decode("utf-8").splitlines())
+        for number, line in enumerate(lines, start=1):
+            obj = _parse(line, number, address)
+            if obj is None:
+                continue
+            if obj.get("end") is True:
+                return
+            name = obj.pop("system", None)
+            if name not in run.buffers:
+                raise InputError(f"{address}: line {number}", f"system {name!r} is none of this layout's "
+                                                              f"({', '.join(run.buffers)})")
+            buffer = run.buffers[name]
+            try:
+                row = {c: float(obj[c]) for c in buffer.columns}
+            except (KeyError, TypeError, ValueError):
+                raise InputError(f"{address}: line {number}", f"{name} needs numbers in columns "
+                                                              f"{', '.join(buffer.columns)}") from None
+            yield float("nan"), name, row
+    except socket.timeout:
+        raise InputError(address, f"nothing arrived for {timeout_s:g} s") from None
+    finally:
+        server.close()

@@ -1,0 +1,108 @@
+"""A live run (bodyfusion.live) is the batch run on a growing recording: the same states, bit for bit."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+
+import numpy as np
+import pytest
+
+from bodyfusion.base.errors import ConfigError
+from bodyfusion.core.layout import load_layout
+from bodyfusion.live.engine import LiveRun
+from bodyfusion.live.sinks import JsonLinesSink
+from bodyfusion.live.sources import line_rows, replay, replay_rows
+from bodyfusion.runner.batch import run_layout
+from tests.paths import CONFIGS
+
+VICON = CONFIGS / "dual_foot_vicon.yaml"
+
+
+@pytest.fixture(scope="module")
+def batch():
+    return run_layout(load_layout(VICON))
+
+
+def _same_tracks(live, batch) -> None:
+    for name, expected in batch.trajectories.items():
+        got = live.trajectories[name]
+        np.testing.assert_array_equal(got.t, expected.t)
+        np.testing.assert_array_equal(got.pos_n, expected.pos_n)
+        np.testing.assert_array_equal(got.pos_sd, expected.pos_sd)
+    assert live.fuser.epochs == batch.fuser.epochs and live.fuser.activations == batch.fuser.activations
+
+
+def test_a_live_replay_of_the_vicon_walk_is_the_batch_run_bit_for_bit(batch, tmp_path):
+    lines = []
+
+    class Collect:
+        def write(self, state):
+            lines.append(state)
+
+        def close(self):
+            pass
+
+    run = LiveRun(load_layout(VICON), [Collect()])
+    replay(run, replay_rows(run))
+    live = run.close()
+    _same_tracks(live, batch)
+    assert all(s.revised_decisions == 0 for s in live.systems.values())
+    t = np.array([s.t for s in lines])
+    assert t.size == run.emitted == 1200 and np.all(np.diff(t) > 0)  # every 0.1 s of the 120 s walk
+    # each emitted state is the batch track at its system's own time
+    left = batch.trajectories["left_foot"]
+    for state in lines[::97]:
+        s = state.systems["left_foot"]
+        k = int(np.searchsorted(left.t, s.t))
+        np.testing.assert_array_equal(s.position_n, left.pos_n[k])
+    # states are emitted behind the newest data by the look-ahead, not at the end
+    assert len(run.latency_s) > 100
+
+
+def test_a_line_stream_over_tcp_gives_the_same_run(batch):
+    run = LiveRun(load_layout(VICON), [])
+    rows = list(replay_rows(run))
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+
+    def send():
+        for _ in range(100):
+            try:
+                client = socket.create_connection(("127.0.0.1", port))
+                break
+            except OSError:
+                threading.Event().wait(0.05)
+        with client, client.makefile("w") as f:
+            for _, name, row in rows:
+                f.write(json.dumps({"system": name, **row}) + "\n")
+
+    sender = threading.Thread(target=send)
+    sender.start()
+    replay(run, line_rows(run, f"tcp://127.0.0.1:{port}", timeout_s=30))
+    sender.join()
+    _same_tracks(run.close(), batch)
+
+
+def test_a_run_that_never_warms_up_is_refused_and_its_sinks_closed(tmp_path):
+    path = tmp_path / "states.jsonl"
+    run = LiveRun(load_layout(VICON), [JsonLinesSink(open(path, "w"))], warmup_s=1000.0)
+    replay(run, replay_rows(run))
+    with pytest.raises(ConfigError, match="warm-up"):
+        run.close()
+    assert path.read_text() == ""
+
+
+def test_a_layout_with_a_smoother_is_refused_live():
+    with pytest.raises(ConfigError, match="smoother.kind"):
+        LiveRun(load_layout(VICON, ["smoother.kind=rts"]))
+
+
+def test_a_row_without_the_sections_columns_is_refused():
+    run = LiveRun(load_layout(VICON))
+    with pytest.raises(ConfigError, match="without column"):
+        run.push("left_foot", {"time_index": 0.0})
+    with pytest.raises(ConfigError, match="no system"):
+        run.push("nose", {})
