@@ -189,9 +189,12 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
 
         write_outputs(result, out, str(config), total_wall_s=time.perf_counter() - wall0)
     if not CONSOLE.quiet:
-        revised = {n: s.revised_decisions for n, s in result.systems.items() if getattr(s, "revised_decisions", 0)}
+        revised = {n: s.revised_inputs for n, s in result.systems.items() if getattr(s, "revised_inputs", 0)}
+        dropped = {n: b.dropped for n, b in run.buffers.items() if b.dropped}
         print(f"live: {run.emitted} states in {time.perf_counter() - wall0:.1f} s"
-              + (f"; decisions a later pass revised: {revised}" if revised else ""), file=sys.stderr)
+              + (f"; rows dropped for a time not after the newest: {dropped}" if dropped else "")
+              + (f"; samples whose inputs the whole recording would have made otherwise: {revised}" if revised
+                 else ""), file=sys.stderr)
         for finding in result.findings:
             print(finding.line(), file=sys.stderr)
 

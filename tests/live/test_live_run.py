@@ -48,7 +48,7 @@ def test_a_live_replay_of_the_vicon_walk_is_the_batch_run_bit_for_bit(batch, tmp
     replay(run, replay_rows(run))
     live = run.close()
     _same_tracks(live, batch)
-    assert all(s.revised_decisions == 0 for s in live.systems.values())
+    assert all(s.revised_inputs == 0 for s in live.systems.values())
     t = np.array([s.t for s in lines])
     assert t.size == run.emitted == 1200 and np.all(np.diff(t) > 0)  # every 0.1 s of the 120 s walk
     # each emitted state is the batch track at its system's own time
@@ -86,13 +86,27 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
     _same_tracks(run.close(), batch)
 
 
-def test_a_run_that_never_warms_up_is_refused_and_its_sinks_closed(tmp_path):
+def test_a_run_never_ready_starts_at_the_close_on_the_whole_recording(batch, tmp_path):
     path = tmp_path / "states.jsonl"
     run = LiveRun(load_layout(VICON), [JsonLinesSink(open(path, "w"))], warmup_s=1000.0)
     replay(run, replay_rows(run))
-    with pytest.raises(ConfigError, match="warm-up"):
-        run.close()
-    assert path.read_text() == ""
+    assert run.fusion is None and path.read_text() == ""
+    _same_tracks(run.close(), batch)
+    assert len(path.read_text().splitlines()) == 1200
+
+
+def test_no_rows_at_all_is_refused_in_one_line():
+    with pytest.raises(ConfigError, match="no rows arrived for left_foot, right_foot"):
+        LiveRun(load_layout(VICON)).close()
+
+
+def test_rows_out_of_time_order_are_dropped_and_counted(batch):
+    run = LiveRun(load_layout(VICON))
+    rows = list(replay_rows(run))
+    for t, name, row in rows[:5000] + rows[4990:5000] + rows[5000:]:  # ten rows again, late
+        run.push(name, row)
+    _same_tracks(run.close(), batch)
+    assert sum(b.dropped for b in run.buffers.values()) == 10
 
 
 def test_a_layout_with_a_smoother_is_refused_live():

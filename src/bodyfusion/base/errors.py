@@ -9,6 +9,10 @@ class FusionError(Exception):
     """An error caused by the user's input; the CLI prints ``str(err)`` and exits non-zero."""
 
 
+class NotReady(FusionError):
+    """A live run's recording is too short yet for a system to start (no rest to level on)."""
+
+
 class InputError(FusionError):
     """Bad data file: ``path:line: reason`` (line is 1-based, as an editor shows it)."""
 

@@ -25,6 +25,21 @@ class GrowingArray:
         self._data[self._n] = row
         self._n += 1
 
+    def extend(self, rows: np.ndarray) -> None:
+        """Add the rows of ``rows`` (k, *shape) (the capacity at least doubles when it grows)."""
+        rows = np.asarray(rows)
+        k = rows.shape[0]
+        if self._n + k > len(self._data):
+            grown = np.empty((max(self._n + k, 2 * len(self._data)), *self._data.shape[1:]), dtype=self._data.dtype)
+            grown[:self._n] = self._data[:self._n]
+            self._data = grown
+        self._data[self._n:self._n + k] = rows
+        self._n += k
+
+    def keep(self, n: int) -> None:
+        """Drop every row from n on."""
+        self._n = min(self._n, max(int(n), 0))
+
     def pop(self) -> None:
         """Drop the last row."""
         if self._n == 0:

@@ -121,6 +121,9 @@ class LayoutContext:
     geodetic_origin: tuple[float, float, float] | None = None
     outages: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
     compiling_ahead: dict[str, Any] | None = None
+    growing: bool = False
+    """The recordings are the first part of a live run's (:mod:`bodyfusion.live`): a system may
+    refuse to start on them yet (:class:`~bodyfusion.base.errors.NotReady`)."""
 
 
 class Plugin(ABC):

@@ -10,8 +10,9 @@ run does, and handed to the fuser (:func:`~bodyfusion.runner.batch.prepare_fusio
 (:meth:`~bodyfusion.core.capabilities.Streaming.extend`) and the fuser advances to the time
 all of them have decided (:meth:`~bodyfusion.core.fuser.Fuser.advance`), emitting an
 :class:`~bodyfusion.core.epoch_state.EpochState` every ``output_interval_s`` of data to the
-sinks. A start that fails on the data so far (no system has walked far enough to align its
-heading) is tried again after each further ``warmup_s``. :meth:`LiveRun.close` completes the recording and finishes the run as a batch run does
+sinks. A start that fails on the data so far (a foot has not ended its first rest, no system
+has walked far enough to align its heading) is tried again every :data:`RETRY_S` of data, and
+at the close on the whole recording. :meth:`LiveRun.close` completes the recording and finishes the run as a batch run does
 (:func:`~bodyfusion.runner.batch.finish_fusion`): the same :class:`~bodyfusion.results.run_result.RunResult`.
 
 Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
@@ -44,6 +45,8 @@ WARMUP_S = 10.0
 """Data (s) every system holds before the run starts: its levelling rest and first metres."""
 REPLAN_S = 0.5
 """Data (s) between two passes over the growing recordings."""
+RETRY_S = 2.0
+"""Data (s) between two tries to start on a recording not ready yet."""
 OUTPUT_INTERVAL_S = 0.1
 """Spacing (s) of the output epochs."""
 
@@ -61,19 +64,35 @@ class RowBuffer:
         self._data = np.empty((1024, len(self.columns)))
         self.rows = 0
         self.t = np.empty(1024)
+        self.dropped = 0
+        """Rows dropped for a time not after the newest."""
 
-    def add(self, row: Mapping[str, float]) -> None:
-        """Append ``row`` (column → value; every column the section reads)."""
+    def add(self, row: Mapping[str, float]) -> bool:
+        """Append ``row`` (column → value; every column the section reads); a row whose time is not
+        after the newest is dropped and counted (``dropped``): the rows of a live recording come
+        in time order, so that row k is sample k for good. True when it was kept."""
         missing = [c for c in self.columns if c not in row]
         if missing:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
+        t = float(self.times({c: np.array([row[c]]) for c in self.columns}, self.rows)[0])
+        if not t > self.newest_t:
+            self.dropped += 1
+            return False
         if self.rows == self._data.shape[0]:
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
             self.t = np.concatenate([self.t, np.empty_like(self.t)])
         self._data[self.rows] = [float(row[c]) for c in self.columns]
-        self.t[self.rows] = (float(row[self._time_column]) * self._time_scale if self._time_column is not None
-                             else self.rows / float(self._rate_hz))
+        self.t[self.rows] = t
         self.rows += 1
+        return True
+
+    def times(self, columns: Mapping[str, np.ndarray], first: int = 0) -> np.ndarray:
+        """Times (s) of rows ``columns`` (column → array), the first of them row ``first``, as the
+        section defines them: its time column × ``time_scale``, or the row number / ``rate_hz``."""
+        if self._time_column is not None:
+            return np.asarray(columns[self._time_column], dtype=float) * self._time_scale
+        n = len(next(iter(columns.values())))
+        return (first + np.arange(n)) / float(self._rate_hz)
 
     @property
     def span_s(self) -> float:
@@ -146,9 +165,9 @@ class LiveRun:
                 try:
                     self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
                                                  lookahead_s=self.lookahead_s)
-                except FusionError as err:  # not enough of the walk yet (no system travelled far enough to align)
+                except FusionError as err:  # not enough yet: no rest ended, no system travelled far enough to align
                     self.not_started = err
-                    self._start_after_s += self.warmup_s
+                    self._start_after_s += RETRY_S
                     return False
                 self._advance(newest)
                 return True
@@ -177,12 +196,13 @@ class LiveRun:
         batch run (:func:`~bodyfusion.runner.batch.finish_fusion`, every remaining epoch emitted)
         and the sinks are closed. A run that never reached its warm-up is refused."""
         try:
-            if self.fusion is None:
-                if self.not_started is not None:
-                    raise self.not_started
-                short = {n: round(b.span_s, 3) for n, b in self.buffers.items()}
-                raise ConfigError("--warmup", f"the data never reached the {self.warmup_s:g} s warm-up "
-                                              f"(seconds per system: {short})")
+            if self.fusion is None:  # never ready: the whole recording is in hand now
+                if not all(b.rows for b in self.buffers.values()):
+                    raise ConfigError("--source", "no rows arrived for " + ", ".join(
+                        n for n, b in self.buffers.items() if not b.rows))
+                self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
+                self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
+                                             lookahead_s=self.lookahead_s, complete=True)
             self._read_tables(lambda s: s.close_stream())
             return finish_fusion(self.fusion)
         finally:

@@ -33,14 +33,9 @@ def replay_rows(run: LiveRun) -> Iterator[Row]:
     streams = []
     for order, (name, buffer) in enumerate(run.buffers.items()):
         arrays, _, _ = read_source(buffer.section, buffer.columns)
-        n = len(arrays[buffer.columns[0]])
-        probe = type(buffer)(buffer.section, buffer.key)
-        rows = []
-        for i in range(n):
-            row = {c: float(arrays[c][i]) for c in buffer.columns}
-            probe.add(row)
-            rows.append((float(probe.t[i]), order, name, row))
-        streams.append(rows)
+        times = buffer.times(arrays)
+        streams.append([(float(times[i]), order, name, {c: float(arrays[c][i]) for c in buffer.columns})
+                        for i in range(len(times))])
     for t, _, name, row in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
         yield t, name, row
 

@@ -15,10 +15,11 @@ from bodyfusion.nav.earth import normal_gravity
 from bodyfusion.runner.truth import read_truth
 
 
-def layout_context(loaded: LoadedLayout, seed: int = 0,
-                   compiling_ahead: dict[str, Forked] | None = None) -> LayoutContext:
+def layout_context(loaded: LoadedLayout, seed: int = 0, compiling_ahead: dict[str, Forked] | None = None,
+                   growing: bool = False) -> LayoutContext:
     """The run's :class:`~bodyfusion.core.system.LayoutContext` (``compiling_ahead``: on a first
-    run, the processes compiling ahead so far, for the systems to add theirs to)."""
+    run, the processes compiling ahead so far, for the systems to add theirs to; ``growing``: the
+    recordings are a live run's first part)."""
     lay = loaded.layout
     g = lay.gravity_mps2 if lay.gravity_mps2 is not None else normal_gravity(lay.latitude_deg, lay.height_m)
     outages: dict[str, tuple[tuple[float, float], ...]] = {}
@@ -26,7 +27,7 @@ def layout_context(loaded: LoadedLayout, seed: int = 0,
         outages[o.system] = (*outages.get(o.system, ()), (o.start_s, o.duration_s))
     return LayoutContext(gravity_mps2=g, latitude_deg=lay.latitude_deg, base_dir=loaded.base_dir,
                          seed=seed, geodetic_origin=lay.geodetic_origin, outages=outages,
-                         compiling_ahead=compiling_ahead)
+                         compiling_ahead=compiling_ahead, growing=growing)
 
 
 def build_systems(loaded: LoadedLayout, context: LayoutContext) -> dict[str, SensorSystem | AidingSource]:

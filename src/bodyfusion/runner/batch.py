@@ -61,20 +61,23 @@ class Fusion:
 
 
 def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None,
-                   output: EpochOutput | None = None, lookahead_s: float | None = None) -> Fusion:
+                   output: EpochOutput | None = None, lookahead_s: float | None = None,
+                   complete: bool = False) -> Fusion:
     """Build a validated layout's systems (the layout validated again as a whole first:
     :meth:`~bodyfusion.core.layout.LoadedLayout.checked`), read its truth, align the systems'
     headings and hand them to a :class:`~bodyfusion.core.fuser.Fuser` (emitting ``output`` epochs
     when given one). ``progress(done, total)`` is told the seconds of data fused
     (:class:`~bodyfusion.core.progress.FusionProgress`). ``lookahead_s``: the recordings are the
     first part of a live run's (:mod:`bodyfusion.live`): once aligned, every system decides its
-    samples that far behind its newest (:meth:`~bodyfusion.core.capabilities.Streaming.start_streaming`)."""
+    samples that far behind its newest (:meth:`~bodyfusion.core.capabilities.Streaming.start_streaming`);
+    ``complete``: the live run's recordings are whole already (a system may not refuse them)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
     require_data(loaded.layout, loaded.system_configs, loaded.path)
     ahead = compile_fuser_ahead(loaded.layout)  # a first run: the fuser's kernels compiled beside the systems'
-    context = layout_context(loaded, seed, {"core.fuser": ahead} if ahead is not None else None)
+    context = layout_context(loaded, seed, {"core.fuser": ahead} if ahead is not None else None,
+                             growing=lookahead_s is not None and not complete)
     log.info("reading the data of %s", ", ".join(f"{n} ({c.plugin})" for n, c in loaded.system_configs.items()))
     built = build_systems(loaded, context)
     finish_compiling_ahead(context.compiling_ahead)  # before anything advances: the kernels are in the cache

@@ -65,18 +65,26 @@ def repair_saturation(stream: ImuStream, name: str) -> dict[str, Clipping]:
     return found
 
 
+def clock_lag(stream: ImuStream) -> np.ndarray:
+    """(N,) what the navigation clock drops at each sample (s): of a gap before it, what is
+    missing beyond the nominal period plus :data:`GAP_HOLD_S`; 0 elsewhere."""
+    lag = np.zeros(len(stream))
+    checks = stream.checks
+    if checks is not None and checks.gap_index.size:
+        lag[checks.gap_index] = np.maximum(checks.gap_missing_s - GAP_HOLD_S, 0.0)
+    return lag
+
+
 def navigation_clock(stream: ImuStream) -> np.ndarray:
     """The sample times the filter integrates over (s): the recording's, with every gap step
     cut to the nominal period plus :data:`GAP_HOLD_S` (the time after a gap moves back by what
-    is missing beyond that): a short gap is integrated with its sample held, as any step; of a
-    long one only what a held sample can describe, the rest is the covariance of
+    is missing beyond that, :func:`clock_lag`): a short gap is integrated with its sample held,
+    as any step; of a long one only what a held sample can describe, the rest is the covariance of
     :func:`covariance_increments`. Output times stay the recording's."""
     checks = stream.checks
     if checks is None or checks.gap_index.size == 0:
         return stream.t
-    beyond = np.zeros(len(stream))
-    beyond[checks.gap_index] = np.maximum(checks.gap_missing_s - GAP_HOLD_S, 0.0)
-    return stream.t - np.cumsum(beyond)
+    return stream.t - np.cumsum(clock_lag(stream))
 
 
 def covariance_increments(stream: ImuStream, gravity_mps2: float,

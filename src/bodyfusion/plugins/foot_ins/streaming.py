@@ -1,19 +1,26 @@
 """The foot INS live (:class:`~bodyfusion.core.capabilities.Streaming`): its recording grows while
 it runs.
 
-Each time the data section's table grows, the whole recording so far is read and checked again
-(:func:`~bodyfusion.io.imu.read_imu`) and everything the filter derives from the stream whole is
-derived again (:meth:`FootIns._prepare`: saturation repair, stance detection and its watchdog,
-the gap policy's increments, the navigation clock). What was decided before is kept: the
-samples up to the look-ahead L behind the newest are final, and a later pass that would decide
-one of them otherwise is counted (``revised_decisions``), not applied. The filter's state and
-history carry on; its arrays grow. A stance decision about a sample needs at most
-about 1 s of data beyond it on every shared foot recording (``benchmarks/stance_lookahead.py``),
-so that with L = 2 s (the live engine's default) a live run makes the batch run's decisions there.
+Each pass (:meth:`StreamingFootIns.extend`) reads the recording's last :data:`CONTEXT_S` before
+its first undecided sample (the bound table's rows; the live engine keeps them in time order, so
+that row k is sample k) and derives from it what the batch run derives from the whole recording
+(:meth:`~bodyfusion.plugins.foot_ins.system.FootIns._derive`: saturation repair, stance detection
+and its watchdog, the gap policy's increments, the navigation clock's steps). The samples up to
+the look-ahead L behind the newest become final and are appended to the filter's inputs; the
+filter's state and history carry on. Every derivation is local in time — the SHOE statistic and
+its threshold over a stride, the stride period over 8 s windows every 1 s (the context starts on
+that grid) — so a pass makes the batch run's decisions about the samples it finalises wherever
+those depend on less than the context before them and the look-ahead after; a stance decision
+needs at most about 1 s after it on every shared foot recording
+(``benchmarks/stance_lookahead.py``). What is not local: a stretch of missed stances longer than
+the context, the stride period filled in where no gait repeats (the recording's median), the
+gap policy's RMS motion, a sensor's rails found from the whole recording.
+:meth:`StreamingFootIns.close_stream` derives the whole recording once more and counts every
+final input the batch run would have taken otherwise (``revised_inputs``): the places a live
+run departs from the batch run, and the only ones.
 
-Cost: each pass is linear in the recording so far (the detector's stride period and its
-watchdog look at the whole of it), so a pass every second costs O(N²) over a run: fine for
-minutes to an hour, not for a day.
+Cost: a pass is linear in the context, not the recording (the stance runs are recounted over the
+whole, a vectorised pass); the filter's history grows with the recording.
 """
 
 from __future__ import annotations
@@ -22,13 +29,58 @@ import math
 
 import numpy as np
 
-from bodyfusion.base.errors import FusionError
+from bodyfusion.base.errors import FusionError, NotReady
+from bodyfusion.base.findings import Finding
+from bodyfusion.base.records import GrowingArray
+from bodyfusion.base.types import LOG, ImuStream
 from bodyfusion.core.capabilities import Streaming
 from bodyfusion.io.imu import read_imu
 from bodyfusion.nav import detectors
+from bodyfusion.nav.gait import PERIOD_HOP_S
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
+from bodyfusion.plugins.foot_ins.input_policy import clock_lag
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE
 from bodyfusion.plugins.foot_ins.records import RECORDED_COVARIANCE
+
+CONTEXT_S = 30.0
+"""Recording (s) before the first undecided sample that each pass derives again: several stride
+periods' windows, a stretch of missed stances."""
+LEVELLING_WAIT_S = 60.0
+"""Longest a live foot INS waits for its first rest to end (s); then it levels on the quietest
+window so far, as a batch run does on a recording without rest."""
+
+
+class LiveInputs:
+    """The filter's inputs so far, in growing arrays: sample times (s), repaired specific force
+    (m/s^2) and rate (rad/s), stance, the navigation clock's accumulated lag (s) and the clock
+    itself (s: the sample time less the lag)."""
+
+    def __init__(self, stream: ImuStream, stance: np.ndarray, lag: np.ndarray) -> None:
+        n = len(stream)
+        self.t = GrowingArray((), capacity=2 * n)
+        self.acc = GrowingArray((3,), capacity=2 * n)
+        self.gyro = GrowingArray((3,), capacity=2 * n)
+        self.stance = GrowingArray((), np.bool_, capacity=2 * n)
+        self.lag = GrowingArray((), capacity=2 * n)
+        self.t_nav = GrowingArray((), capacity=2 * n)
+        self.arrays = (self.t, self.acc, self.gyro, self.stance, self.lag, self.t_nav)
+        self.append(stream.t, stream.acc_b, stream.gyro_b, stance, lag)
+
+    def append(self, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, stance: np.ndarray, lag: np.ndarray) -> None:
+        """Rows after the last, ``lag`` the clock's steps there (s): accumulated from the last row's
+        as :func:`numpy.cumsum` accumulates them over the whole recording."""
+        before = self.lag.view()[-1:] if len(self.lag) else np.zeros(1)
+        total = np.cumsum(np.concatenate([before, lag]))[1:]
+        for array, rows in zip(self.arrays, (t, acc, gyro, stance, total, t - total)):
+            array.extend(rows)
+
+    def keep(self, n: int) -> None:
+        """Drop every row from n on."""
+        for array in self.arrays:
+            array.keep(n)
+
+    def __len__(self) -> int:
+        return len(self.t)
 
 
 class StreamingFootIns(Streaming):
@@ -36,13 +88,55 @@ class StreamingFootIns(Streaming):
 
     _lookahead_s: float | None = None
     _decided = 0
-    revised_decisions = 0
-    """Stance decisions about final samples that a later pass would have made otherwise."""
+    _live: LiveInputs | None = None
+    _levelled_on: tuple[int, int] | None = None
+    """Where the whole recording would have levelled (first sample, end), once the stream closed."""
+    revised_inputs = 0
+    """Final samples whose inputs (stance, repaired IMU sample, navigation clock, a covariance
+    increment) the whole recording would have given otherwise (counted when the stream closes)."""
+
+    def _check_ready(self) -> None:
+        """On a live run's first part (:attr:`~bodyfusion.core.system.LayoutContext.growing`), refuse
+        to start (:class:`~bodyfusion.base.errors.NotReady`) before the first rest has ended, for up
+        to :data:`LEVELLING_WAIT_S`: the levelling takes the rest whole, as the batch run does."""
+        if not self.context.growing or self.stream.t[-1] - self.stream.t[0] >= LEVELLING_WAIT_S:
+            return
+        if not self.still.still or self.still.stop >= len(self.stream):
+            raise NotReady(f"systems.{self.name}: no rest of {self.config.initial.stationary_s:g} s has ended in the "
+                           f"first {self.stream.t[-1] - self.stream.t[0]:.1f} s yet")
+
+    def live_findings(self) -> list[Finding]:
+        """Where this live run departed from the batch run on the same recording: a levelling on
+        another rest, inputs the whole recording would have made otherwise."""
+        if self._levelled_on is None or self._lookahead_s is not None:  # not live, or not closed yet
+            return []
+        t = self.stream.t
+        out = []
+        (a, b), (c, d) = (self.still.start, self.still.stop), self._levelled_on
+        if (a, b) != (c, d):
+            out.append(Finding(
+                "live_levelling", "info", self.name, float(t[a]), float(t[b - 1]),
+                f"the live run levelled on t = {t[a]:.2f}–{t[b - 1]:.2f} s; the whole recording would have "
+                f"levelled on t = {t[c]:.2f}–{t[d - 1]:.2f} s (its stillest rest), so the track departs from a batch "
+                "run's from the start.",
+                "a live run levels on its first rest; a batch run on the first rest as still as the recording's "
+                "stillest.", "stand still for a second or two before walking, as still as at any rest later."))
+        if self.revised_inputs:
+            out.append(Finding(
+                "live_revisions", "info", self.name, float(t[0]), float(t[-1]),
+                f"{self.revised_inputs} samples were navigated with inputs (stance, a repaired sample, the clock, a "
+                "covariance increment) the whole recording would have made otherwise, so the track departs from a "
+                "batch run's there.",
+                f"those decisions needed more than the {CONTEXT_S:g} s before or the look-ahead after them (a long "
+                "stretch of missed stances, a gap, a rail seen only later).",
+                "raise the look-ahead (fusion live --lookahead) if the delay allows."))
+        return out
 
     def start_streaming(self, lookahead_s: float) -> None:
         if self.config.position_fixes is not None:
             raise FusionError(f"systems.{self.name}.position_fixes: a live foot INS takes no position-fix file")
         self._lookahead_s = lookahead_s
+        self._live = LiveInputs(self.stream, self.stance, clock_lag(self.stream))
         self._decide(float(self.stream.t[-1]) - lookahead_s)
 
     def decided_until(self) -> float:
@@ -52,52 +146,94 @@ class StreamingFootIns(Streaming):
         return float(self.stream.t[self._decided - 1]) if self._decided else -math.inf
 
     def extend(self) -> None:
-        self._grow(read_imu(self.config.data))
-        self._decide(float(self.stream.t[-1]) - self._lookahead_s)
+        live, n0 = self._live, self._decided
+        hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
+        a = max(0, n0 - int(CONTEXT_S * self._rate_hz))
+        a -= a % hop  # the stride period's windows on the whole recording's grid
+        section = self.config.data.model_copy()
+        section.bind({c: v[a:] for c, v in self.config.data.table.items()}, self.config.data.label)
+        LOG.disabled = True  # what the reader finds in the context it said on an earlier pass
+        try:
+            derived = self._derive(read_imu(section))
+        finally:
+            LOG.disabled = False
+        tail = derived.stream
+        known = len(live) - a  # rows read before, and kept: they must not have changed
+        if not np.array_equal(tail.t[:known], live.t.view()[a:]):
+            raise FusionError(f"systems.{self.name}: the live recording changed samples already read "
+                              "(live rows must come in time order)")
+        k = n0 - a
+        live.keep(n0)
+        live.append(tail.t[k:], tail.acc_b[k:], tail.gyro_b[k:], derived.detection.stance[k:], clock_lag(tail)[k:])
+        index, increments = derived.increments
+        later = index >= k
+        self._input_increments = self._merge_increments(self._input_increments, index[later] + a, increments[later], n0)
+        self._gap_index, self._gap_P = self._merge_increments((self._gap_index, self._gap_P), index[later] + a,
+                                                              increments[later], n0)
+        self._take_live()
+        self._decide(float(tail.t[-1]) - self._lookahead_s)
+
+    @staticmethod
+    def _merge_increments(old: tuple[np.ndarray, np.ndarray], index: np.ndarray, increments: np.ndarray,
+                          n0: int) -> tuple[np.ndarray, np.ndarray]:
+        """The increments before sample n0 kept, the new ones from n0 on."""
+        kept = old[0] < n0
+        return np.concatenate([old[0][kept], index]), np.concatenate([old[1][kept], increments])
+
+    def _take_live(self) -> None:
+        """The filter reads the growing inputs; its history rows reach the recording's length."""
+        live, data = self._live, self.run_data
+        t = live.t.view()
+        self.stream = ImuStream(t, live.acc.view(), live.gyro.view(), None, self.stream.source, self.stream.report,
+                                self.stream.checks)
+        self.stance = self.stance_detection.stance = live.stance.view()
+        self._t_nav = live.t_nav.view()
+        self._stance_runs = detectors.stance_events(self.stance)
+        data.t, data.acc_b, data.gyro_b, data.stance = self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance
+        n, m = len(t), data.hist_x.shape[0]
+        if n > m:
+            size = max(n, 2 * m)
+            for name, shape, fill in (("hist_x", (NOMINAL_SIZE,), np.nan), ("hist_cov", (RECORDED_COVARIANCE,), np.nan),
+                                      ("hist_nis", (), NO_STANCE)):
+                grown = np.full((size, *shape), fill)
+                grown[:m] = getattr(data, name)
+                setattr(data, name, grown)
 
     def close_stream(self) -> None:
-        self._grow(read_imu(self.config.data))
+        """Derive the whole recording once more (what the batch run derives), keep what was final
+        (counting where it differs: ``revised_inputs``) and decide every sample."""
+        live, n0 = self._live, self._decided
+        whole = self._derive(read_imu(self.config.data))
+        if len(whole.stream) < len(live) or not np.array_equal(whole.stream.t[:len(live)], live.t.view()):
+            raise FusionError(f"systems.{self.name}: the live recording changed samples already read "
+                              "(live rows must come in time order)")
+        s = whole.stream
+        t_nav = s.t - np.cumsum(clock_lag(s))
+        differ = ((whole.detection.stance[:n0] != live.stance.view()[:n0])
+                  | np.any(s.acc_b[:n0] != live.acc.view()[:n0], axis=1)
+                  | np.any(s.gyro_b[:n0] != live.gyro.view()[:n0], axis=1)
+                  | (t_nav[:n0] != live.t_nav.view()[:n0]))
+        index, increments = whole.increments
+        theirs = {int(i): P for i, P in zip(index, increments) if i < n0}
+        mine = {int(i): P for i, P in zip(*self._input_increments) if i < n0}
+        for i in set(theirs) | set(mine):
+            if i not in theirs or i not in mine or not np.array_equal(theirs[i], mine[i]):
+                differ[i] = True
+        self.revised_inputs = int(np.count_nonzero(differ))
+        live.keep(n0)
+        live.append(s.t[n0:], s.acc_b[n0:], s.gyro_b[n0:], whole.detection.stance[n0:], clock_lag(s)[n0:])
+        later = index >= n0
+        self._input_increments = self._merge_increments(self._input_increments, index[later], increments[later], n0)
+        self._gap_index, self._gap_P = self._merge_increments((self._gap_index, self._gap_P), index[later],
+                                                              increments[later], n0)
+        self._take_live()
+        self.clipping, self.stance_detection = whole.clipping, whole.detection  # the findings of the whole recording
+        self.stance_detection.stance = self.stance
+        self.stream.report, self.stream.checks = s.report, s.checks
+        whole_still = self._find_still_interval()  # the whole recording's: the findings compare the live one
+        self._levelled_on = (whole_still.start, whole_still.stop)
         self._decided = len(self.stream)
         self._lookahead_s = None
 
     def _decide(self, until_t: float) -> None:
         self._decided = max(self._decided, int(np.searchsorted(self.stream.t, until_t, side="right")))
-
-    def _grow(self, stream) -> None:
-        """Take the longer ``stream``: derive again, keep what was final, grow the filter's arrays."""
-        n0 = self._decided
-        t0 = self.stream.t[:n0]
-        old = (self.stance.copy(), self._t_nav[:n0].copy(), self.stream.acc_b[:n0].copy(),
-               self.stream.gyro_b[:n0].copy(), self._input_increments)
-        if len(stream) < n0 or not np.array_equal(stream.t[:n0], t0):
-            raise FusionError(f"systems.{self.name}: the live recording changed samples already decided "
-                              "(a timestamp policy that reorders, or rows replaced): live runs need rows in time order")
-        self._prepare(stream)
-        stance, t_nav, acc, gyro, (gap_idx, gap_P) = old
-        self.revised_decisions += int(np.count_nonzero(self.stance[:n0] != stance[:n0]))
-        self.stance = self.stance_detection.stance = np.concatenate([stance[:n0], self.stance[n0:]])
-        self._t_nav = np.concatenate([t_nav, self._t_nav[n0:]])
-        self.stream.acc_b = np.concatenate([acc, self.stream.acc_b[n0:]])
-        self.stream.gyro_b = np.concatenate([gyro, self.stream.gyro_b[n0:]])
-        self._stance_runs = detectors.stance_events(self.stance)
-        new_idx, new_P = self._input_increments
-        later = new_idx >= n0
-        kept = gap_idx < n0
-        self._input_increments = (np.concatenate([gap_idx[kept], new_idx[later]]),
-                                  np.concatenate([gap_P[kept], new_P[later]]))
-        running = self._gap_index < n0  # the filter's own list: the lockout recoveries it added stay
-        self._gap_index = np.concatenate([self._gap_index[running], new_idx[later]])
-        self._gap_P = np.concatenate([self._gap_P[running], new_P[later]])
-        self._grow_history()
-
-    def _grow_history(self) -> None:
-        """The filter's inputs are the new arrays; its history rows grow to the recording's length."""
-        data, n = self.run_data, len(self.stream)
-        data.t, data.acc_b, data.gyro_b, data.stance = self._t_nav, self.stream.acc_b, self.stream.gyro_b, self.stance
-        m = data.hist_x.shape[0]
-        if n > m:
-            for name, shape, fill in (("hist_x", (NOMINAL_SIZE,), np.nan), ("hist_cov", (RECORDED_COVARIANCE,), np.nan),
-                                      ("hist_nis", (), NO_STANCE)):
-                grown = np.full((n, *shape), fill)
-                grown[:m] = getattr(data, name)
-                setattr(data, name, grown)

@@ -5,6 +5,7 @@ coloured-noise zero-velocity update (``ckf``), or the ensemble filters (``enekf`
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -32,13 +33,27 @@ from bodyfusion.plugins.foot_ins.input_policy import (covariance_increments, nav
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED)
-from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, stance_findings
+from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, StanceDetection, detect_stance, stance_findings
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 from bodyfusion.plugins.foot_ins.streaming import StreamingFootIns
+
+@dataclass
+class DerivedInputs:
+    """What a foot INS derives from an IMU stream whole (:meth:`FootIns._derive`): the stream
+    (saturated runs rebuilt), each clipped sensor's :class:`~bodyfusion.nav.saturation.Clipping`,
+    the rate (Hz), the :class:`~bodyfusion.plugins.foot_ins.stance.StanceDetection`, and the
+    covariance increments (sample indices, (K, 15, 15))."""
+
+    stream: ImuStream
+    clipping: dict
+    rate_hz: float
+    detection: StanceDetection
+    increments: tuple[np.ndarray, np.ndarray]
+
 
 MIN_RATE_HZ = 40.0
 """Below this sample rate (Hz) a foot INS's run gets a ``low_rate`` finding: a swing of about
@@ -88,6 +103,7 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
+        self._check_ready()
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
         self._fix_sigma = fx.sigma_m if fx is not None else 0.0
@@ -101,18 +117,26 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         self.restart()
 
     def _prepare(self, stream: ImuStream) -> None:
-        """Take ``stream`` (read and checked) and what the filter derives from it whole: its
-        saturated runs rebuilt, its rate, the stance, the gap and saturation policies' covariance
-        increments, the stance runs, the navigation clock."""
-        self.stream = stream
-        self.clipping = repair_saturation(stream, self.name)
-        self._rate_hz = float(1.0 / np.median(np.diff(stream.t)))
-        self.stance_detection = detect_stance(stream, self.config.detector, self.context.gravity_mps2,
-                                              f"systems.{self.name}.detector")
-        self.stance = self.stance_detection.stance
-        self._input_increments = covariance_increments(stream, self.context.gravity_mps2, self.clipping)
+        """Take ``stream`` (read and checked) and what the filter derives from it whole
+        (:meth:`_derive`), with the stance runs and the navigation clock."""
+        derived = self._derive(stream)
+        self.stream = derived.stream
+        self.clipping = derived.clipping
+        self._rate_hz = derived.rate_hz
+        self.stance_detection = derived.detection
+        self.stance = derived.detection.stance
+        self._input_increments = derived.increments
         self._stance_runs = detectors.stance_events(self.stance)
-        self._t_nav = navigation_clock(stream)
+        self._t_nav = navigation_clock(self.stream)
+
+    def _derive(self, stream: ImuStream) -> DerivedInputs:
+        """What the filter derives from ``stream`` whole: its saturated runs rebuilt (in place), its
+        rate, the stance, the gap and saturation policies' covariance increments."""
+        clipping = repair_saturation(stream, self.name)
+        detection = detect_stance(stream, self.config.detector, self.context.gravity_mps2,
+                                  f"systems.{self.name}.detector")
+        return DerivedInputs(stream, clipping, float(1.0 / np.median(np.diff(stream.t))), detection,
+                             covariance_increments(stream, self.context.gravity_mps2, clipping))
 
     @classmethod
     def check_layout(cls, name: str, config: FootInsConfig, layout: Layout) -> None:
@@ -386,8 +410,7 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         return phi
 
     def sync_times(self) -> np.ndarray:
-        starts, _ = detectors.stance_events(self.stance)
-        return self.stream.t[starts]
+        return self.stream.t[self._stance_runs[0]]
 
     def sample_times(self) -> np.ndarray:
         return self.stream.t
@@ -550,6 +573,7 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         out = stance_findings(self.name, self.stance_detection, self.stream.t[:n], self.run_data.hist_nis[:n],
                               float(self._params.zupt_gate), self.zupt_recoveries)
         out += saturation_findings(self.name, self.clipping, self.stream.t)
+        out += self.live_findings()
         if self._rate_hz < MIN_RATE_HZ:
             t = self.stream.t
             out.append(Finding(
