@@ -4,8 +4,9 @@ The vendored walk (both feet, 60 Hz, 120 s, the body's maximum-separation constr
 projection, heading ties) is replayed through :class:`~bodyfusion.live.engine.LiveRun` with its
 defaults (look-ahead 2 s, a pass every 0.5 s of data, a state every 0.1 s):
 
-* at ×max (rows pushed as fast as the run takes them): the replay speed as a ratio to real time,
-  the highest speed it sustains (every pass done before the next is due, by construction);
+* at ×max (rows pushed as fast as the run takes them, a pass every 5 s of data as ``fusion live
+  --speed max`` makes them): the replay speed as a ratio to real time, the highest speed it
+  sustains (every pass done before the next is due, by construction);
 * at ×``--speed`` (default 1, real time; ``--seconds`` of the walk, default all of it): the
   latency of every pass, from the arrival of the row that made it due to its last state emitted
   (p50, p99, max), and whether any pass took longer than the data it covers (a backlog).
@@ -28,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.core.layout import load_layout
-from bodyfusion.live.engine import REPLAN_S, LiveRun
+from bodyfusion.live.engine import REPLAN_BATCH_S, REPLAN_S, LiveRun
 from bodyfusion.live.sources import replay, replay_rows
 
 LAYOUT = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml"
@@ -37,7 +38,7 @@ LAYOUT = Path(__file__).resolve().parents[1] / "configs" / "dual_foot_vicon.yaml
 def live_replay(speed: float | None, seconds: float | None) -> tuple[LiveRun, float, float]:
     """Replay ``seconds`` of the walk (None: all) at ``speed`` (None: ×max); the run, the data's
     span (s) and the wall time (s) of the replay and the run's close."""
-    run = LiveRun(load_layout(LAYOUT))
+    run = LiveRun(load_layout(LAYOUT), replan_s=REPLAN_S if speed is not None else REPLAN_BATCH_S)
     rows = list(replay_rows(run))
     if seconds is not None:
         rows = list(itertools.takewhile(lambda r: r[0] <= rows[0][0] + seconds, rows))

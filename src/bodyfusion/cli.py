@@ -149,7 +149,7 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
     import time
 
     from bodyfusion.core.layout import load_layout
-    from bodyfusion.live.engine import LiveRun
+    from bodyfusion.live.engine import REPLAN_BATCH_S, REPLAN_S, LiveRun
     from bodyfusion.live.sinks import EverySink, open_sink
     from bodyfusion.live.sources import line_rows, replay, replay_rows
 
@@ -165,7 +165,9 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         for opened in sinks:
             opened.close()
         raise
-    run = LiveRun(loaded, [EverySink(sinks)], lookahead_s=lookahead, warmup_s=warmup, output_interval_s=interval, seed=seed)
+    replan = REPLAN_BATCH_S if source == "replay" and pace is None else REPLAN_S
+    run = LiveRun(loaded, [EverySink(sinks)], lookahead_s=lookahead, warmup_s=warmup, replan_s=replan,
+                  output_interval_s=interval, seed=seed)
     wall0 = time.perf_counter()
 
     def status(r: LiveRun, t: float) -> None:

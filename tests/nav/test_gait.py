@@ -45,3 +45,21 @@ def test_noise_that_repeats_nothing_has_no_period():
     rng = np.random.default_rng(2)
     assert np.isnan(stride_period(np.abs(rng.normal(0, 2.0, 4000)), 200.0)).all()
     assert np.isnan(stride_period(np.zeros(4000), 200.0)).all()  # standing still
+
+
+def test_a_window_met_again_on_its_grid_gives_the_same_period_from_the_cache():
+    """A live pass derives the windows of its context again; on the recording's grid they are the
+    windows met before, answered from the cache with the same bits."""
+    from bodyfusion.nav import gait
+
+    rate = 100.0
+    x = swing_rate(1.1, rate, 60.0, np.random.default_rng(7))
+    whole = stride_period(x, rate)
+    hop = int(round(gait.PERIOD_HOP_S * rate))
+    hits = gait._best_lag_of.cache_info().hits
+    a = 20 * hop
+    tail = stride_period(x[a:], rate)
+    assert gait._best_lag_of.cache_info().hits > hits
+    width = int(gait.PERIOD_WINDOW_S * rate)
+    inside = slice(width, x.size - a - width)  # between the first and the last window's centres
+    np.testing.assert_array_equal(tail[inside], whole[a:][inside])

@@ -44,7 +44,10 @@ foot INS's stance decisions need at most about 1 s on every shared foot recordin
 WARMUP_S = 10.0
 """Data (s) every system holds before the run starts: its levelling rest and first metres."""
 REPLAN_S = 0.5
-"""Data (s) between two passes over the growing recordings."""
+"""Data (s) between two passes over the growing recordings, when they arrive at their pace."""
+REPLAN_BATCH_S = 5.0
+"""Data (s) between two passes of a replay as fast as it runs: fewer passes for the same data
+(a pass derives its context again whatever the data it adds)."""
 RETRY_S = 2.0
 """Data (s) between two tries to start on a recording not ready yet."""
 OUTPUT_INTERVAL_S = 0.1
@@ -74,7 +77,8 @@ class RowBuffer:
         missing = [c for c in self.columns if c not in row]
         if missing:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
-        t = float(self.times({c: np.array([row[c]]) for c in self.columns}, self.rows)[0])
+        t = (float(row[self._time_column]) * self._time_scale if self._time_column is not None
+             else self.rows / float(self._rate_hz))  # as times() makes them, one row
         if not t > self.newest_t:
             self.dropped += 1
             return False

@@ -16,6 +16,8 @@ motion): its period is NaN. Between window centres the period is interpolated.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 MIN_STRIDE_S = 0.45
@@ -28,6 +30,8 @@ PERIOD_HOP_S = 1.0
 """Spacing of the windows, s."""
 HARMONIC_RATIO = 0.85
 """A shorter lag whose autocorrelation peak reaches this share of the highest is the period."""
+WINDOWS_KEPT = 1024
+"""Windows whose stride lag :func:`_best_lag` keeps (about 4 MB at 100 Hz)."""
 MIN_PERIODICITY = 0.3
 """Normalised autocorrelation at the period below which a window holds no gait."""
 
@@ -35,7 +39,16 @@ MIN_PERIODICITY = 0.3
 def _best_lag(x: np.ndarray, lo: int, hi: int) -> tuple[int, float]:
     """The stride lag of ``x``: among the local maxima of its normalised autocorrelation (mean
     removed) at lags in [lo, hi], the shortest within :data:`HARMONIC_RATIO` of the highest
-    (the fundamental, not a multiple of it); and its value. (0, 0) when there is none."""
+    (the fundamental, not a multiple of it); and its value. (0, 0) when there is none. A window
+    met before (its samples bit for bit: a live run derives the same windows on each pass,
+    :mod:`bodyfusion.plugins.foot_ins.streaming`) is answered from :func:`_best_lag_of`'s cache."""
+    return _best_lag_of(np.ascontiguousarray(x, dtype=np.float64).tobytes(), lo, hi)
+
+
+@functools.lru_cache(maxsize=WINDOWS_KEPT)
+def _best_lag_of(samples: bytes, lo: int, hi: int) -> tuple[int, float]:
+    """:func:`_best_lag` of the window whose float64 samples are ``samples``."""
+    x = np.frombuffer(samples, dtype=np.float64)
     x = x - x.mean()
     n = x.size
     spectrum = np.fft.rfft(x, 2 * n)
