@@ -386,12 +386,23 @@ _MAIN_PID: list[int] = []
 """The process whose SIGTERM raises :class:`Terminated` (a forked child ends at once)."""
 
 
+_RECEIVED: set[int] = set()
+"""The signals this process took (an exception raised from a handler inside a C callback, say
+LLVM's as numba compiles, is printed and dropped there: the command's end still answers it)."""
+
+
 def _terminate(signum: int, frame: object) -> None:
     if os.getpid() not in _MAIN_PID:  # a copy forked before it set its own handlers: end as by default
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         os.kill(os.getpid(), signal.SIGTERM)
         return
+    _RECEIVED.add(signum)
     raise Terminated
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    _RECEIVED.add(signum)
+    raise KeyboardInterrupt
 
 
 def main() -> None:
@@ -401,8 +412,9 @@ def main() -> None:
     CONSOLE.verbosity = 0  # until the global options say otherwise
     configure_logging()
     _MAIN_PID[:] = [os.getpid()]
+    _RECEIVED.clear()
     previous = {signum: signal.signal(signum, handler) for signum, handler in
-                ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, _terminate))}
+                ((signal.SIGINT, _interrupt), (signal.SIGTERM, _terminate))}
     try:
         _dispatch()
     finally:  # as they were (a caller that runs main in its own process)
@@ -410,11 +422,25 @@ def main() -> None:
             signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
+def _interrupted(err: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is among the causes of ``err``."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
 def _dispatch() -> None:
     """The command, its outcome turned into the exit status (:func:`main`)."""
     try:
         code = app(standalone_mode=False)  # typer hands back Ctrl-C as exit code 130 here
-        if code == 130:
+        if signal.SIGTERM in _RECEIVED:
+            raise Terminated
+        if code == 130 or signal.SIGINT in _RECEIVED:
             raise KeyboardInterrupt
         if isinstance(code, int) and code:
             sys.exit(code)
@@ -430,6 +456,9 @@ def _dispatch() -> None:
         print("aborted", file=sys.stderr)
         sys.exit(130)
     except Exception as err:  # usage errors, from click or from typer's own copy of it
+        if _interrupted(err):  # Ctrl-C inside a library that wrapped it (pydantic building a model class)
+            print("aborted", file=sys.stderr)
+            sys.exit(130)
         import click
 
         if isinstance(err, (click.ClickException, typer.TyperException)) and hasattr(err, "show"):

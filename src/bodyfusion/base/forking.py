@@ -10,13 +10,15 @@ once, here, and :meth:`Forked.result` is the same either way.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 import pickle
 import signal
 import sys
 import threading
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 Outcome = tuple[str, Any]
@@ -28,12 +30,42 @@ def fork_is_safe() -> bool:
     return sys.platform == "linux" and threading.active_count() == 1
 
 
-def child_signals() -> None:
-    """In a forked copy: SIGTERM ends it at once and SIGINT is left to the parent (Ctrl-C reaches
-    the whole process group; the parent ends its children), whatever handlers the parent had
-    installed to close its own files first (:func:`bodyfusion.cli.main`)."""
+PR_SET_PDEATHSIG = 1
+"""prctl(2) option: the signal a process gets when its parent dies (Linux)."""
+
+
+def child_signals(parent: int) -> None:
+    """In a copy forked from process ``parent``: SIGTERM ends it at once and SIGINT is left to the
+    parent (Ctrl-C reaches the whole process group; the parent ends its children), whatever
+    handlers the parent had installed to close its own files first (:func:`bodyfusion.cli.main`);
+    and it dies with its parent, even one killed outright (SIGKILL: no handler runs there), by
+    the kernel's parent-death signal (prctl ``PR_SET_PDEATHSIG``)."""
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform == "linux":
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:  # the parent died before the request took
+            os._exit(0)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, HELD)
+
+
+HELD = {signal.SIGINT, signal.SIGTERM}
+"""Signals held back while a process forks (:func:`holding_signals`): the parent takes them once
+it has recorded the child, the child once it has its own handlers (:func:`child_signals`)."""
+
+
+@contextlib.contextmanager
+def holding_signals() -> Iterator[None]:
+    """In the parent, around a fork: SIGINT and SIGTERM wait until the child is recorded (none
+    lands between the fork and that record: a child no one would end); the child, forked inside,
+    keeps them held until :func:`child_signals`."""
+    parent = os.getpid()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, HELD)
+    try:
+        yield
+    finally:
+        if os.getpid() == parent:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def outcome(job: Callable[[], Any]) -> Outcome:
@@ -71,10 +103,12 @@ class Forked:
             self._outcome = outcome(job)
             return
         read_fd, write_fd = os.pipe()
-        pid = os.fork()
+        parent = os.getpid()
+        with holding_signals():
+            pid = os.fork()
         if pid == 0:  # the copy: the outcome down the pipe, then gone without this process's exit handlers
             try:
-                child_signals()
+                child_signals(parent)
                 os.close(read_fd)
                 result = outcome(job)
                 with os.fdopen(write_fd, "wb") as pipe:

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import io
 import multiprocessing
+import os
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import NamedTuple
 
-from bodyfusion.base.forking import Forked, child_signals, fork_is_safe, outcome, raised_or_value
+from bodyfusion.base.forking import Forked, child_signals, fork_is_safe, holding_signals, outcome, raised_or_value
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.evaluation.scored_run import ScoredRun, ScoredTracks
 
@@ -57,10 +58,10 @@ def _ready() -> None:
     plot_nees(ScoredTracks(nees={"ready": NeesTrack(t, 1.0 + t)})).savefig(io.BytesIO(), format="png")
 
 
-def _serve(conn: Connection) -> None:
+def _serve(conn: Connection, parent: int) -> None:
     """The figure process: ready the figure code (:func:`_ready`), then draw the one job it is
     sent (none if the caller closes its end first)."""
-    child_signals()
+    child_signals(parent)
     _ready()
     try:
         job = conn.recv()
@@ -77,8 +78,10 @@ class FigureProcess:
     def __init__(self) -> None:
         context = multiprocessing.get_context("fork")
         self._conn, theirs = context.Pipe()
-        self._process = context.Process(target=_serve, args=(theirs,), name="bodyfusion-figures", daemon=True)
-        self._process.start()
+        self._process = context.Process(target=_serve, args=(theirs, os.getpid()), name="bodyfusion-figures",
+                                        daemon=True)
+        with holding_signals():
+            self._process.start()
         theirs.close()
 
     @classmethod

@@ -1,0 +1,106 @@
+"""Signals: SIGINT and SIGTERM stop a command cleanly (130, 143) and leave earlier outputs as they
+were; a forked child (the figure process) dies with its parent, even a parent killed outright."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.paths import CONFIGS
+
+VICON = CONFIGS / "dual_foot_vicon.yaml"
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                out.append(int(entry.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _start_run(out: Path) -> tuple[subprocess.Popen, int]:
+    """``fusion run`` of the Vicon walk into ``out``, once its figure process is up: (process, child pid)."""
+    proc = subprocess.Popen([sys.executable, "-m", "bodyfusion.cli", "run", str(VICON), "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        children = _children(proc.pid)
+        if children:
+            time.sleep(0.3)  # past the start-up imports
+            return proc, children[0]
+        time.sleep(0.01)
+    proc.kill()
+    pytest.fail("no figure process appeared")
+
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and fork: Linux")
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_stops_a_run_with_its_status_and_leaves_the_earlier_outputs(tmp_path, signum, status):
+    out = tmp_path / "run"
+    subprocess.run([sys.executable, "-m", "bodyfusion.cli", "run", str(VICON), "--out", str(out)], check=True,
+                   capture_output=True)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    proc, child = _start_run(out)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == status, err
+    assert "Traceback" not in err
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == before
+    deadline = time.time() + 10
+    while _alive(child) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not _alive(child)
+
+
+def test_the_figure_process_dies_with_a_parent_killed_outright(tmp_path):
+    proc, child = _start_run(tmp_path / "run")
+    proc.kill()  # SIGKILL: no handler of the parent runs
+    proc.wait(timeout=30)
+    deadline = time.time() + 10
+    while _alive(child) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not _alive(child)
+    shutil.rmtree(tmp_path / "run", ignore_errors=True)
+
+
+def test_an_interrupt_a_library_swallowed_still_ends_the_command_with_130(monkeypatch, capsys):
+    """A KeyboardInterrupt raised inside a C callback (LLVM's, as numba compiles) is printed and
+    dropped there; the command runs on, and its end answers the signal it took."""
+    from bodyfusion import cli
+
+    def command(**_: object) -> None:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+        except KeyboardInterrupt:
+            pass  # what the callback does with it
+
+    monkeypatch.setattr(cli, "app", command)
+    with pytest.raises(SystemExit) as exit_:
+        cli.main()
+    assert exit_.value.code == 130 and "aborted" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the caller's handler back
