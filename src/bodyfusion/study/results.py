@@ -11,7 +11,8 @@ system's metrics under their own names (``horizontal_error_m.rmse``...), so that
 Finished rows go to ``parts/`` in small Parquet files, each written whole and
 renamed into place, and are compacted into ``results.parquet`` (deduplicated by run key)
 at the end: a study killed at any moment loses no saved row, duplicates none, and
-resumes. A failed run is saved too (``status`` ``failed``, ``error``) and, being
+resumes; a saved file found corrupt (every Parquet page carries its checksum) is moved aside with
+a warning and its runs run again. A failed run is saved too (``status`` ``failed``, ``error``) and, being
 deterministic, is not retried on resume. ``summary.csv`` (:func:`summarise`) gives the
 statistics of the outage errors and RMSEs per layout, parameter values and outage duration.
 """
@@ -34,6 +35,7 @@ import pyarrow.parquet as pq
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.files import replaced_atomically
 from bodyfusion.base.findings import Finding
+from bodyfusion.base.types import LOG
 
 HEAD_COLUMNS: dict[str, pa.DataType] = {
     "run_key": pa.string(),
@@ -112,11 +114,34 @@ def _table(rows: list[dict[str, Any]]) -> pa.Table:
 
 def _write_atomic(table: pa.Table, path: Path) -> None:
     """Write whole and fsync, then put in place in one step
-    (:func:`~bodyfusion.base.files.replaced_atomically`): a reader sees the old file or the new one."""
+    (:func:`~bodyfusion.base.files.replaced_atomically`): a reader sees the old file or the new one.
+    Every data page carries its CRC (Parquet's page checksum), which :func:`read_saved` checks."""
     with replaced_atomically(path) as tmp, tmp.open("wb") as fh:
-        pq.write_table(table, fh)
+        pq.write_table(table, fh, write_page_checksum=True)
         fh.flush()
         os.fsync(fh.fileno())
+
+
+def read_saved(path: Path, columns: list[str] | None = None) -> pa.Table | None:
+    """A saved results file (a part or results.parquet), every page's checksum verified; None
+    when it is corrupt (truncated, bytes flipped, not Parquet, no ``run_key``): it is then moved
+    aside to ``corrupt-<name>`` beside it, with a warning, and the runs it held are not saved
+    (a resumed study runs them again)."""
+    try:
+        table = pq.read_table(path, columns=columns, page_checksum_verification=True)
+        if "run_key" not in table.column_names:
+            raise ValueError("it has no run_key column")
+        return table
+    except (OSError, ValueError, pa.ArrowException) as err:
+        aside = path.with_name(f"corrupt-{path.name}")
+        path.replace(aside)
+        LOG.warning("%s is corrupt (%s); moved to %s, its runs will run again", path, _first_line(err), aside.name)
+        return None
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip() or type(err).__name__
+    return text.splitlines()[0][:200]
 
 
 def by_system(table: pa.Table) -> pa.Table:
@@ -169,8 +194,9 @@ class ResultStore:
         return ([self.results_path] if self.results_path.is_file() else []) + parts
 
     def keys(self) -> set[str]:
-        """Run keys already saved."""
-        return {k for f in self._files() for k in pq.read_table(f, columns=["run_key"]).column(0).to_pylist()}
+        """Run keys already saved (a corrupt file's not: :func:`read_saved`)."""
+        tables = [read_saved(f, ["run_key"]) for f in self._files()]
+        return {k for t in tables if t is not None for k in t.column(0).to_pylist()}
 
     def append(self, rows: list[dict[str, Any]]) -> None:
         """Save a batch of rows as one new part file."""
@@ -187,7 +213,11 @@ class ResultStore:
         files = self._files()
         if not files:
             return _table([])
-        table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="permissive")
+        tables = [t for f in files if (t := read_saved(f)) is not None]
+        files = [f for f in files if f.is_file()]
+        if not tables:
+            return _table([])
+        table = pa.concat_tables(tables, promote_options="permissive")
         keys = table.column("run_key").to_pylist()
         first: dict[str, int] = {}
         for i, k in enumerate(keys):
