@@ -4,7 +4,9 @@ exit code 2 and one line, or finishes with exit code 0, a trajectories.csv witho
 metrics.json that is strict JSON; never a traceback, never a hang (60 s per command).
 
 Examples per target: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35; 7 targets → 245 inputs).
-Hypothesis is derandomised: the same inputs every run, so a failure reproduces."""
+Hypothesis is derandomised: the same inputs every run, so a failure reproduces. With
+``BODYFUSION_FUZZ_TABLE`` set, every case's outcome is appended to that CSV (the long mode:
+``benchmarks/fuzz_long.py``)."""
 
 from __future__ import annotations
 
@@ -82,6 +84,38 @@ def _no_constant(name: str) -> float:
     raise ValueError(f"metrics.json holds {name}, not JSON")
 
 
+def recorded(target: str, edits: list) -> contextlib.AbstractContextManager:
+    """The case's outcome appended to the table at ``BODYFUSION_FUZZ_TABLE`` (CSV: target, classes,
+    outcome, detail, case) when that is set (the long mode, ``benchmarks/fuzz_long.py``):
+    ``refused`` (exit 2, one line), ``ran`` (exit 0, finite outputs) or ``defect`` (anything
+    else: the test fails as well)."""
+    table = os.environ.get("BODYFUSION_FUZZ_TABLE")
+    return _recording(Path(table), target, edits) if table else contextlib.nullcontext()
+
+
+@contextlib.contextmanager
+def _recording(table: Path, target: str, edits: list) -> Iterator[None]:
+    classes = "+".join(sorted({type(e).__name__ for e in edits})) or "none"
+    outcome, detail = "ran", ""
+    try:
+        yield
+        outcome = CASE_OUTCOME.pop("outcome", "ran")
+    except BaseException as err:
+        outcome, detail = "defect", f"{type(err).__name__}: {str(err).splitlines()[0][:160] if str(err) else ''}"
+        raise
+    finally:
+        new = not table.exists()
+        with table.open("a", newline="") as f:
+            writer = csv.writer(f)
+            if new:
+                writer.writerow(["target", "classes", "outcome", "detail", "case"])
+            writer.writerow([target, classes, outcome, detail, repr(edits)[:300]])
+
+
+CASE_OUTCOME: dict[str, str] = {}
+"""What :func:`check_outcome` found of the case it checked last (``refused`` or ``ran``)."""
+
+
 def check_outcome(layout: Path, out: Path) -> None:
     """validate then run: exit 0 or 2; a refusal says one ``error:`` line; a finished run wrote
     finite trajectories and strict JSON."""
@@ -92,6 +126,7 @@ def check_outcome(layout: Path, out: Path) -> None:
     if code == 2:
         errors = [line for line in err.splitlines() if line.startswith("error:")]
         assert len(errors) == 1 and "Traceback" not in err, err
+        CASE_OUTCOME["outcome"] = "refused"
         return
     json.loads((out / "metrics.json").read_text(), parse_constant=_no_constant)
     with (out / "trajectories.csv").open() as f:
@@ -137,7 +172,8 @@ def corrupt_and_run(recording: tuple[Path, dict[str, Path]], layout: str, target
             text = edit(text)
         (case_dir / target).unlink()
         write_text(case_dir / target, text)
-        check_outcome(case_dir / layouts[layout].name, case_dir / "out")
+        with recorded(target, edits):
+            check_outcome(case_dir / layouts[layout].name, case_dir / "out")
 
 
 TARGETS = [("csv", "left_foot_imu.csv"), ("csv", "truth.csv"), ("csv", "hand_phone_gnss.csv"),
@@ -177,4 +213,5 @@ def test_corrupted_layout_is_refused_or_run_finite(recording, edits):
         # the layout's data paths are relative to its folder: point them at the recording
         text = text.replace("path: ", "path: ../")
         layout.write_text(text)
-        check_outcome(layout, Path(case) / "out")
+        with recorded("layout.yaml", [*doc_edits, *text_edits_]):
+            check_outcome(layout, Path(case) / "out")
