@@ -72,3 +72,25 @@ def test_frame_and_the_older_axis_signs_are_one_declaration():
     with pytest.raises(ConfigError) as err:
         load_layout(VICON_CFG, ["truth.axis_signs=[1, -1, -1]"])
     assert err.value.key == "truth.axis_signs"
+
+
+def _signed_permutations() -> list[tuple[str, str, str]]:
+    import itertools
+
+    return [tuple(s + a for s, a in zip(signs, order)) for order in itertools.permutations("xyz")
+            for signs in itertools.product(("", "-"), repeat=3)]
+
+
+@pytest.mark.parametrize("axes", _signed_permutations(), ids=lambda a: ",".join(a))
+def test_an_imu_axis_map_that_mirrors_is_refused_and_one_that_rotates_is_taken(axes):
+    from bodyfusion.nav.frames import apply_axis_map, axis_map_determinant
+
+    matrix = apply_axis_map(axes, np.eye(3)).T  # the map as a matrix: body = M @ file
+    assert axis_map_determinant(axes) == round(np.linalg.det(matrix))
+    override = f"systems.left_foot.data.axes=[{', '.join(axes)}]"
+    if np.linalg.det(matrix) > 0:
+        assert load_layout(VICON_CFG, [override]).system_configs["left_foot"].data.axes == axes
+    else:
+        with pytest.raises(ConfigError, match="mirrors the sensor's frame") as err:
+            load_layout(VICON_CFG, [override])
+        assert err.value.key == "systems.left_foot.data.axes"

@@ -19,7 +19,7 @@ from bodyfusion.io.imu_checks import check_imu
 from bodyfusion.io.tables import check_columns, read_source, row_error, source_name
 from bodyfusion.io.timestamps import TIMESTAMP_POLICIES, apply_timestamp_policy, check_time_source, sample_times
 from bodyfusion.nav.earth import STANDARD_GRAVITY
-from bodyfusion.nav.frames import AxisMap
+from bodyfusion.nav.frames import SensorAxisMap
 
 ACC_UNITS: dict[str, float] = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 GYRO_UNITS: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
@@ -61,9 +61,10 @@ class ImuCsvConfig(TableSection):
     timestamp_policy: Literal["drop", "sort", "error", "unwrap"] = "drop"
     """Duplicate or backward timestamps: drop (counted), sort (counted), error, or unwrap (a clock
     that restarts goes on where it was, then drop; :func:`~bodyfusion.io.timestamps.apply_timestamp_policy`)."""
-    axes: AxisMap = ("x", "y", "z")
-    """The body frame in the file's axes, a signed axis map: ``[x, -y, -z]`` turns a sensor
-    whose z points down at rest into one whose z points up."""
+    axes: SensorAxisMap = ("x", "y", "z")
+    """The body frame in the file's axes, a signed axis map that rotates: ``[x, -y, -z]`` turns a
+    sensor whose z points down at rest into one whose z points up; one that mirrors (``[x, y,
+    -z]``) is refused (:data:`~bodyfusion.nav.frames.SensorAxisMap`)."""
     max_step_samples: float = Field(default=5.0, gt=1, le=1e6)
     """A time step longer than this many nominal sample periods is a gap (reported, and
     handled by the navigation system's gap policy)."""
@@ -106,7 +107,7 @@ def read_imu_csv(
     with ``time_scale=1/60``) or ``i / rate_hz``; exactly one must be given.
     Accelerometer units: ``ACC_UNITS`` (``"g"`` is 9.80665 m/s^2); gyroscope
     units: ``GYRO_UNITS``.  ``stance_column`` holds 0/1 labels (1 = stance).
-    ``axes`` (a signed axis map, :data:`bodyfusion.core.layout.AxisMap`) turns the file's
+    ``axes`` (a signed axis map that rotates, :data:`bodyfusion.nav.frames.SensorAxisMap`) turns the file's
     axes into the body frame.  Non-increasing timestamps are handled by
     ``timestamp_policy`` (see :func:`apply_timestamp_policy`); what was changed is
     in ``stream.report``.  The stream is then checked

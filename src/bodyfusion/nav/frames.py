@@ -48,6 +48,30 @@ the project's frame. ``[x, -y, -z]``: a frame with z down turned 180° about x; 
 north-east-down to east-north-up. Any signed permutation (a map that mirrors is allowed: the
 file's frame may be left-handed)."""
 
+def _sensor_axis_map(axes: tuple[str, str, str]) -> tuple[str, str, str]:
+    axes = _signed_axis_map(axes)
+    if axis_map_determinant(axes) < 0:
+        raise ValueError(f"{list(axes)} mirrors the sensor's frame (a left-handed map): a sensor's axes are "
+                         "right-handed, so a body frame reached from them by a rotation negates an even number "
+                         "of axes when it keeps their order ([x, -y, -z]: z down, 180° about x) or swaps two and "
+                         "negates one ([y, x, -z])")
+    return axes
+
+
+def axis_map_determinant(axes: tuple[str, str, str]) -> int:
+    """+1 for a signed axis map that rotates (right-handed to right-handed), −1 for one that
+    mirrors: the sign of the permutation times the product of the signs."""
+    order = [_AXIS_INDEX[a.lstrip("-")] for a in axes]
+    inversions = sum(order[i] > order[j] for i in range(3) for j in range(i + 1, 3))
+    negated = sum(a.startswith("-") for a in axes)
+    return -1 if (inversions + negated) % 2 else 1
+
+
+SensorAxisMap = Annotated[tuple[str, str, str], AfterValidator(_sensor_axis_map)]
+"""A signed axis map (:data:`AxisMap`) that rotates: a sensor's frame (an IMU's, a
+magnetometer's) is right-handed, so a map that mirrors it (``[x, y, -z]``) is refused: it would
+navigate a mirror image of the walk."""
+
 NAMED_FRAMES: dict[str, tuple[str, str, str]] = {"enu": ("x", "y", "z"), "ned": ("y", "x", "-z")}
 """Position frames by name, as axis maps into east, north, up."""
 
