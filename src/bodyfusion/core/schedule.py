@@ -112,6 +112,8 @@ class EventSchedule:
         step = self.output_interval_s
         lo = max(after, max(s.t_start for s in self.navigating))
         hi = min(until, min(s.t_end for s in self.navigating))
-        k0, k1 = int(math.floor(lo / step)) + 1, int(math.floor(hi / step))
+        if not hi > lo:
+            return np.empty(0)
+        k0, k1 = int(math.floor(lo / step)), int(math.floor(hi / step)) + 1  # a step to spare each side
         times = np.round(np.arange(k0, k1 + 1) * step, 9)  # 0.6, not 0.6000000000000001
-        return times[(times > lo) & (times <= hi)]
+        return times[(times > lo) & (times <= hi)]  # by the rounded times: every slicing gives each once
