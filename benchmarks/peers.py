@@ -26,7 +26,8 @@ each call timed as ``timeit`` times one: Python's garbage collector run before i
 during it (a collection the objects of one job call for would otherwise fall in another's). Printed: samples/s of each job, the
 distance each estimate walked against the truth's (a check that both did the work), and as
 the last line the ratio of the project's forward + RTS to gaitmap's RtsKalman,
-``rts_vs_gaitmap=<ratio>`` (``rts_vs_gaitmap=n/a`` when gaitmap is not installed).
+``rts_vs_gaitmap=<ratio> fbrts_vs_gaitmap=<ratio>`` (the project's forward + RTS and forward +
+FB-RTS to gaitmap's RtsKalman; ``n/a`` when gaitmap is not installed).
 
 With ``--cold`` the first call is timed too, each side in a fresh process on an empty numba
 cache (``NUMBA_CACHE_DIR`` a new folder), so that it compiles everything it runs: the project
@@ -238,11 +239,12 @@ def main() -> None:
         print(f"{name}: {rate[name]:,.0f} samples/s ({seconds * 1e3:.1f} ms), walked {walked_m(jobs[name]()):.1f} m")
     if "gaitmap RtsKalman.estimate" not in rate:
         print('gaitmap not installed (pip install -e ".[bench]" in its own environment): peer skipped')
-        print("rts_vs_gaitmap=n/a")
+        print("rts_vs_gaitmap=n/a fbrts_vs_gaitmap=n/a")
         return
     core = rate["forward+rts"] / rate["gaitmap core (no detector, no DataFrames)"]
     print(f"project forward+rts / gaitmap core: {core:.2f}")
-    print(f"rts_vs_gaitmap={rate['forward+rts'] / rate['gaitmap RtsKalman.estimate']:.2f}")
+    peer = rate["gaitmap RtsKalman.estimate"]
+    print(f"rts_vs_gaitmap={rate['forward+rts'] / peer:.2f} fbrts_vs_gaitmap={rate['forward+fb-rts'] / peer:.2f}")
 
 
 if __name__ == "__main__":
