@@ -6,6 +6,7 @@ signature per kernel, and nothing ahead once its kernels are loaded."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -146,3 +147,17 @@ def test_nothing_is_compiled_ahead_once_the_fusers_kernels_are_loaded():
 
     _all_finite(np.zeros(3), np.eye(3))  # this process has the kernel: a run here compiles nothing more of it
     assert compile_fuser_ahead(load_layout(ROOT / "configs" / "dual_foot_vicon.yaml").layout) is None
+
+
+def test_a_first_run_says_it_compiles_once_and_the_second_says_nothing(tmp_path):
+    """On an empty numba cache ``fusion -v run`` says, once, that it compiles the kernels and for
+    about how long (on a terminal too, without -v); the next run loads them and says nothing."""
+    from bodyfusion.core.compile_ahead import FIRST_RUN_NOTICE
+    from tests.paths import ROOT
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    runs = [subprocess.run([sys.executable, "-m", "bodyfusion.cli", "-v", "run", str(ROOT / "configs" / "dual_foot_vicon.yaml"),
+                            "--out", str(tmp_path / f"out{k}")], capture_output=True, text=True, env=env, check=True)
+            for k in range(2)]
+    assert runs[0].stderr.count(FIRST_RUN_NOTICE) == 1
+    assert FIRST_RUN_NOTICE not in runs[1].stderr

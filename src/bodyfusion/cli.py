@@ -80,6 +80,8 @@ def options(version: Annotated[bool, typer.Option("--version", callback=_print_v
         raise typer.BadParameter("-q and -v exclude each other", param_hint="-q/-v")
     CONSOLE.verbosity = -1 if quiet else min(verbose, 2)
     configure_logging(CONSOLE.verbosity)
+    # a first run's compile notice, where progress bars show too (a terminal, or -v)
+    logging.getLogger("bodyfusion.core.compile_ahead").setLevel(logging.INFO if CONSOLE.bars else logging.NOTSET)
 
 
 @app.command()

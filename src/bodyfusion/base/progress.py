@@ -22,19 +22,33 @@ REFRESH_S = 0.25
 @contextlib.contextmanager
 def progress_bar(description: str, unit: str = "") -> Iterator[ProgressCallback]:
     """A rich progress bar on stderr, redrawn at most four times a second, as a callback; it stays
-    on screen, complete, when the work ends (one line in a file or pipe)."""
+    on screen, complete, when the work ends (one line in a file or pipe). Its drawing thread runs
+    from the first report to the last (``done >= total``) only: before and after it the process
+    has one thread and may fork (:func:`~bodyfusion.base.forking.fork_is_safe`: a first run's
+    kernels compiled ahead, outputs written beside each other)."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     suffix = f" {unit}" if unit else ""
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[amount]}"),
-                  TimeElapsedColumn(), console=Console(stderr=True), refresh_per_second=4) as bar:
-        task = bar.add_task(description, total=None, amount="")
+    bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[amount]}"),
+                   TimeElapsedColumn(), console=Console(stderr=True), refresh_per_second=4)
+    task = bar.add_task(description, total=None, amount="")
+    drawing = [False]
 
-        def update(done: float, total: float) -> None:
-            bar.update(task, completed=done, total=total, amount=f"{done:.0f}/{total:.0f}{suffix}")
+    def update(done: float, total: float) -> None:
+        if not drawing[0]:
+            bar.start()
+            drawing[0] = True
+        bar.update(task, completed=done, total=total, amount=f"{done:.0f}/{total:.0f}{suffix}")
+        if done >= total:
+            bar.stop()
+            drawing[0] = False
 
+    try:
         yield update
+    finally:
+        if drawing[0]:
+            bar.stop()
 
 
 @contextlib.contextmanager

@@ -29,6 +29,10 @@ from bodyfusion.nav.filter_health import CovarianceHealth
 
 log = logging.getLogger(__name__)
 
+FIRST_RUN_NOTICE = "compiling the navigation kernels, once: about 10-20 s; later runs load them and start at once"
+"""What a first run says (at INFO on this module's logger, which the command line shows on a
+terminal or with ``-v``) while it compiles."""
+
 
 def compile_fuser_kernels(layout: Layout) -> None:
     """Call the kernels the fuser calls for ``layout``, with their argument types: its solver
@@ -69,13 +73,13 @@ def _compile_quietly(layout: Layout) -> str | None:
 def compile_fuser_ahead(layout: Layout) -> Forked | None:
     """On a first run (see the module docstring) the process compiling the fuser's kernels for
     ``layout``; None when there is nothing to compile ahead or forking is not safe."""
-    if _all_finite.signatures or not fork_is_safe():  # loaded in this process already, or no fork
+    if _all_finite.signatures:  # loaded in this process already
         return None
     _all_finite(np.zeros(3), np.eye(3))
     if not sum(_all_finite.stats.cache_misses.values()):  # loaded from the cache: so will the others be
         return None
-    log.debug("numba's cache is empty: compiling the fuser's kernels beside the run")
-    return Forked(lambda: _compile_quietly(layout))
+    log.info(FIRST_RUN_NOTICE)
+    return Forked(lambda: _compile_quietly(layout)) if fork_is_safe() else None
 
 
 def finish_compiling_ahead(compiling_ahead: dict[str, Forked] | None) -> None:
