@@ -86,3 +86,32 @@ def test_a_replaced_folder_is_the_new_one_whole(tmp_path):
         raise RuntimeError("a writer that fails half way")
     assert [p.name for p in (tmp_path / "tum").iterdir()] == ["walker.txt"] and _no_partial_files(tmp_path)
 
+
+
+def test_covariances_parquet_holds_every_entry_each_system_stores(tmp_path):
+    """covariances.parquet: per system and recorded epoch the entries its covariance history
+    holds, the same numbers; entries a system does not store are null, not columns of NaN."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.outputs.write import write_outputs
+    from bodyfusion.runner import run_layout
+    from tests.paths import ROOT
+
+    result = run_layout(load_layout(ROOT / "configs" / "dual_foot_vicon.yaml"))
+    write_outputs(result, tmp_path, "dual_foot_vicon.yaml", total_wall_s=0.0)
+    table = pq.read_table(tmp_path / "covariances.parquet")
+    stored = json.loads(table.schema.metadata[b"bodyfusion.stored"])
+    assert set(stored) == {"left_foot", "right_foot"}
+    import numpy as np
+    import pyarrow.compute as pc
+
+    left = table.filter(pc.equal(table.column("system").cast("string"), "left_foot"))
+    history = result.covariances("left_foot")
+    assert left.num_rows == len(history.t)
+    np.testing.assert_array_equal(left.column("var_v_up_mps").to_numpy(), history.matrix[:, 5, 5])
+    np.testing.assert_array_equal(left.column("cov_attitude_north_rad_attitude_up_rad").to_numpy(),
+                                  history.matrix[:, 7, 8])
+    assert "cov_east_m_up_m" not in table.column_names  # never stored: no column

@@ -39,13 +39,19 @@ def test_foot_states_are_the_trajectory_epochs_with_velocity_attitude_and_biases
     np.testing.assert_array_equal(frame.loc[frame.system == "left_foot", "v_north_mps"], states["v_north_mps"])
 
 
-def test_foot_covariance_history_holds_the_position_block_it_stores(vicon):
+def test_foot_covariance_history_holds_the_blocks_it_records(vicon):
+    """Position (variances and the east–north covariance), velocity variances and the attitude
+    block, after every sample; what is not recorded NaN."""
     cov = vicon.covariances("left_foot")
     traj = vicon.trajectories["left_foot"]
-    assert cov.states == ("east_m", "north_m", "up_m") and cov.matrix.shape == (len(traj.t), 3, 3)
-    np.testing.assert_allclose(np.sqrt(np.diagonal(cov.matrix, axis1=1, axis2=2)), traj.pos_sd)
+    assert cov.states[:3] == ("east_m", "north_m", "up_m") and cov.matrix.shape == (len(traj.t), 9, 9)
+    np.testing.assert_allclose(np.sqrt(np.diagonal(cov.matrix, axis1=1, axis2=2)[:, :3]), traj.pos_sd)
     np.testing.assert_array_equal(cov.matrix[:, 0, 1], traj.pos_cov_en)
-    assert np.isnan(cov.matrix[:, 0, 2]).all() and "east-north" in cov.stored
+    np.testing.assert_array_equal(np.diagonal(cov.matrix, axis1=1, axis2=2)[:, 3:6], traj.motion_cov[:, :3])
+    attitude = cov.matrix[:, 6:, 6:]
+    np.testing.assert_array_equal(attitude, np.swapaxes(attitude, 1, 2))
+    assert np.all(np.linalg.eigvalsh(attitude[::500]) > 0)  # a covariance: positive definite
+    assert np.isnan(cov.matrix[:, 0, 2]).all() and np.isnan(cov.matrix[:, 0, 3]).all() and "east-north" in cov.stored
     assert list(cov.to_frame().columns[:4]) == ["t", "var_east_m", "var_north_m", "var_up_m"]
     with pytest.raises(KeyError, match="no system 'nose'"):
         vicon.covariances("nose")

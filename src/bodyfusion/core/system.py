@@ -76,17 +76,21 @@ class CovarianceHistory:
         diag = np.diagonal(self.matrix, axis1=1, axis2=2)
         return {name: diag[:, k] for k, name in enumerate(self.states)}
 
-    def to_frame(self) -> pd.DataFrame:
-        """Columns ``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle)."""
-        import pandas as pd  # pandas loads when a table is asked for
-
+    def columns(self) -> dict[str, np.ndarray]:
+        """``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle), each (N,)."""
         cols: dict[str, np.ndarray] = {"t": self.t}
         for a, name in enumerate(self.states):
             cols[f"var_{name}"] = self.matrix[:, a, a]
         for a, name in enumerate(self.states):
             for b in range(a + 1, len(self.states)):
                 cols[f"cov_{name}_{self.states[b]}"] = self.matrix[:, a, b]
-        return pd.DataFrame(cols)
+        return cols
+
+    def to_frame(self) -> pd.DataFrame:
+        """:meth:`columns` as a DataFrame."""
+        import pandas as pd  # pandas loads when a table is asked for
+
+        return pd.DataFrame(self.columns())
 
 
 def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray | None, stored: str) -> CovarianceHistory:

@@ -13,6 +13,7 @@ import numpy as np
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.files import replaced_atomically, sole_writer
 from bodyfusion.base.forking import Forked
+from bodyfusion.outputs.covariances import write_covariances_parquet
 from bodyfusion.outputs.trajectories import (
     ROWS,
     write_geojson,
@@ -180,6 +181,8 @@ def _write_all(result: RunResult, out_dir: Path, config_label: str, total_wall_s
     with replaced_atomically(out_dir / "trajectories.parquet") as path:
         write_trajectories_parquet(path, result.trajectories, decimate=output.decimate,
                                    config_sha256=result.loaded.sha256, frame=result.frame)
+    with replaced_atomically(out_dir / "covariances.parquet") as path:
+        write_covariances_parquet(path, result.systems, decimate=output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
     with replaced_atomically(out_dir / "metrics.json") as path:
         path.write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")

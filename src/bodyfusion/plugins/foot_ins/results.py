@@ -6,12 +6,19 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bodyfusion.core.system import CovarianceHistory, position_covariance
+from bodyfusion.core.system import CovarianceHistory
 from bodyfusion.nav import detectors
 from bodyfusion.plugins.foot_ins.kernels import pack_covariance
+from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 
-STORED = "position variances east, north, up and the east-north covariance after each sample (m^2)"
-"""What :func:`covariance_history` holds: the filter's (or the smoother's) recorded position covariance."""
+STORED = ("after each sample: the position variances east, north, up and the east-north covariance (m^2), "
+          "the velocity variances (m^2/s^2) and the attitude error's covariance (rad^2); where smoothed, the "
+          "position block alone")
+"""What :func:`foot_covariance` holds: the filter's (or the smoother's) recorded covariance entries."""
+COVARIANCE_STATES = ("east_m", "north_m", "up_m", "v_east_mps", "v_north_mps", "v_up_mps", "attitude_east_rad",
+                     "attitude_north_rad", "attitude_up_rad")
+"""The error states whose recorded covariance entries :func:`foot_covariance` gives: δp (ENU, m),
+δv (ENU, m/s), δθ (navigation frame, rad)."""
 
 
 def attitude_columns(q_nb: np.ndarray) -> dict[str, np.ndarray]:
@@ -36,10 +43,23 @@ def foot_states(t: np.ndarray, x: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def foot_covariance(t: np.ndarray, pos_cov: np.ndarray) -> CovarianceHistory:
-    """The position block of the recorded covariances pos_cov (N, 4): variances east, north, up
-    and the east-north covariance (m²); the other entries are not stored."""
-    return position_covariance(t, pos_cov[:, :3], pos_cov[:, 3], STORED)
+def foot_covariance(t: np.ndarray, recorded: np.ndarray) -> CovarianceHistory:
+    """The recorded covariance entries (N, 13: :data:`~bodyfusion.plugins.foot_ins.records.RECORDED_COVARIANCE`;
+    N, 4 where smoothed: the position block) as (N, 9, 9) over :data:`COVARIANCE_STATES`: the
+    position variances and east–north covariance, the velocity variances, the attitude block;
+    every other entry (position–velocity, the velocity covariances...) NaN: not stored."""
+    n = len(t)
+    matrix = np.full((n, 9, 9), np.nan)
+    k = np.arange(3)
+    matrix[:, k, k] = recorded[:, :3]
+    matrix[:, 0, 1] = matrix[:, 1, 0] = recorded[:, 3]
+    if recorded.shape[1] >= RECORDED_COVARIANCE:
+        matrix[:, 3 + k, 3 + k] = recorded[:, VELOCITY_VARIANCE]
+        att = recorded[:, ATTITUDE_COVARIANCE]  # EE, NN, UU, EN, EU, NU
+        matrix[:, 6 + k, 6 + k] = att[:, :3]
+        for (a, b), column in zip(((0, 1), (0, 2), (1, 2)), (3, 4, 5)):
+            matrix[:, 6 + a, 6 + b] = matrix[:, 6 + b, 6 + a] = att[:, column]
+    return CovarianceHistory(np.asarray(t), COVARIANCE_STATES, matrix, STORED)
 
 
 def zupt_columns(t: np.ndarray, hist_nis: np.ndarray, gate: float) -> dict[str, np.ndarray]:

@@ -489,7 +489,8 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         return foot_states(self.stream.t[:self._i + 1], self._history()[0])
 
     def covariance_history(self) -> CovarianceHistory:
-        """The position covariance of every sample; the foot INS stores no other block."""
+        """Every sample's recorded covariance entries (:func:`~bodyfusion.plugins.foot_ins.results.foot_covariance`:
+        position, velocity variances, the attitude block; where smoothed the position block)."""
         return foot_covariance(self.stream.t[:self._i + 1], self._history()[1])
 
     def events(self) -> dict[str, np.ndarray]:
