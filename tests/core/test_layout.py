@@ -399,6 +399,8 @@ def test_heading_north_error_names_exactly_the_config_key():
     ("systems.left_foot.data.max_step_samples=1", "systems.left_foot.data.max_step_samples"),
     ("truth.frame=[y, x, w]", "truth.frame"),
     ("output.decimate=0", "output.decimate"),
+    ("systems.left_foot.plugin={x: 1}", "systems.left_foot.plugin"),
+    ("systems.left_foot.plugin=[foot_ins]", "systems.left_foot.plugin"),
 ])
 def test_out_of_range_values_are_refused_with_their_key(override, key):
     err = refused(VICON_CFG, [override])

@@ -87,6 +87,11 @@ class Registry:
         return kinds
 
     def system_class(self, name: str, *, key: str = "plugin", path: str | Path | None = None) -> Any:
+        """The class of plugin ``name`` (a layout's ``systems.<name>.plugin``); a ConfigError naming
+        ``key`` when no plugin has that name, or the value is no name at all (a mapping, a list)."""
+        if not isinstance(name, str):
+            raise ConfigError(key, f"must be a plugin name (installed: {', '.join(self.names) or 'none'}), "
+                                   f"got a {type(name).__name__}", path)
         try:
             return self._classes[name]
         except KeyError:

@@ -389,3 +389,26 @@ def test_a_phone_logs_policies_are_counted_once(tmp_path):
     report = run_layout(load_layout(layouts["phone_log"])).input_report
     assert report.dropped_samples == own.dropped_samples
     assert sorted(report.notes) == sorted(set(report.notes))
+
+
+def test_a_phone_that_finds_no_step_runs_on_its_fixes_and_says_so(walk, tmp_path):
+    """A phone whose accelerometer shows no step (lying still: its specific force gravity alone)
+    runs on its GNSS fixes, and its run says why its track never moved by dead reckoning."""
+    import csv
+
+    loaded = load_layout(walk, ["fuser.method=none"])
+    imu = loaded.system_configs["hand_phone"].imu.path
+    rows = list(csv.DictReader(open(imu)))
+    acc = [c for c in rows[0] if c.startswith("acc")]
+    for row in rows:
+        for c, value in zip(acc, (0.0, 0.0, 9.80665)):
+            row[c] = repr(value)
+    still = tmp_path / "still.csv"
+    with open(still, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    result = run_layout(load_layout(walk, ["fuser.method=none", f"systems.hand_phone.imu.path={still}"]))
+    assert result.systems["hand_phone"].step_index.size == 0
+    kinds = [f.kind for f in result.findings if f.system == "hand_phone"]
+    assert "no_steps" in kinds

@@ -70,6 +70,7 @@ from collections.abc import Callable
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
@@ -102,6 +103,8 @@ from bodyfusion.plugins.hand_pdr.pdr import (
 
 NOMINAL = [E, N, U, PSI, B, BE, BN, C]
 """Error-state indices of the nominal state's entries (E, N, U, ψ, b, βE, βN, c)."""
+NO_STEP_FINDING_S = 10.0
+"""A recording at least this long (s) without a detected step gets a ``no_steps`` finding."""
 N_ERR = 9
 """Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
 STEP, GNSS, MAGNETOMETER, STEADY = range(4)
@@ -170,6 +173,7 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
                         f"within the IMU's time span ({self.t[0]:.6g}–{self.t[-1]:.6g} s): GNSS unused; check the "
                         "two clocks")
         self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
+        self._acc_norm_median = float(np.median(np.linalg.norm(acc, axis=1)))
         self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
         up_b = up_in_body(self.t, acc)
         self._azimuth = azimuth_increments(self.t, gyro, up_b)
@@ -208,10 +212,29 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
+    def findings(self) -> list[Finding]:
+        """``no_steps``: the PDR found no step in a recording of :data:`NO_STEP_FINDING_S` or more
+        (it never moved: the track is the GNSS fixes', or the start point)."""
+        span = float(self.t[-1] - self.t[0])
+        if self.step_index.size or span < NO_STEP_FINDING_S:
+            return []
+        g = self.context.gravity_mps2
+        unit = (f" Its specific force has a median norm of {self._acc_norm_median:.3g} m/s^2 where gravity is {g:.3g}: "
+                "a unit or a scale is likely wrong.") if not 0.5 * g < self._acc_norm_median < 2.0 * g else ""
+        return [Finding(
+            "no_steps", "warning", self.name, float(self.t[0]), float(self.t[-1]),
+            f"the phone's PDR found no step in {span:.0f} s of data, so it never moved by dead reckoning: its track is "
+            f"its GNSS fixes' where it has them, else its start point.{unit}",
+            "the phone did not walk (on a table, in a bag), or its accelerometer is read in the wrong unit or axes, "
+            "or the step detector's thresholds (step.*) miss this walker's steps.",
+            "check the accelerometer's unit and axes in the phone's data section, and step.threshold_mps2.")]
+
     def walking(self, t: np.ndarray) -> np.ndarray:
         """(N,) True where the PDR says the phone walks at times ``t`` (s): a step detected in
         the last ``filter.walking_window_s``."""
         step_t = self.t[self.step_index]
+        if step_t.size == 0:  # no step detected: never walking
+            return np.zeros(np.shape(t), dtype=bool)
         k = np.searchsorted(step_t, t, side="right") - 1
         return (k >= 0) & (np.asarray(t) - step_t[np.maximum(k, 0)] < self.config.filter.walking_window_s)
 
