@@ -33,14 +33,17 @@ def progress_bar(description: str, unit: str = "") -> Iterator[ProgressCallback]
     bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[amount]}"),
                    TimeElapsedColumn(), console=Console(stderr=True), refresh_per_second=4)
     task = bar.add_task(description, total=None, amount="")
-    drawing = [False]
+    drawing, finished = [False], [False]
 
     def update(done: float, total: float) -> None:
+        if finished[0] and done >= total:  # told again that it is done: the bar stands complete already
+            return
         if not drawing[0]:
             bar.start()
             drawing[0] = True
         bar.update(task, completed=done, total=total, amount=f"{done:.0f}/{total:.0f}{suffix}")
-        if done >= total:
+        finished[0] = done >= total
+        if finished[0]:
             bar.stop()
             drawing[0] = False
 
