@@ -30,7 +30,7 @@ from bodyfusion.base.progress import ProgressCallback, reporting
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.core.layout import LoadedLayout, validate_layout
 from bodyfusion.core.layout_io import apply_overrides, plain, read_yaml
-from bodyfusion.outputs.write import write_outputs
+from bodyfusion.outputs.write import check_output_folder, write_outputs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner import run_layout
 from bodyfusion.io.tables import tables_by_name
@@ -110,15 +110,20 @@ def _data_tables(raw: dict[str, Any], data: Data) -> dict[str, Any]:
 
 
 def run(layout: LayoutSource, overrides: Overrides = None, *, data: Data = None, truth: Any = None, seed: int = 0,
-        out_dir: str | Path | None = None, progress: bool | ProgressCallback = False) -> RunResult:
+        out_dir: str | Path | None = None, progress: bool | ProgressCallback = False,
+        overwrite: bool = False) -> RunResult:
     """Run a layout in this process and return its result; ``data`` and ``truth`` in memory as
     :func:`load_layout` takes them (no file is written or read for them). With ``out_dir``, also
-    write the outputs ``fusion run`` writes there (metrics.json, trajectories, plots). ``seed``
+    write the outputs ``fusion run`` writes there (metrics.json, trajectories, plots), refusing a
+    folder whose files of those names no earlier run wrote unless ``overwrite``, as ``fusion run``
+    does. ``seed``
     seeds every random choice of the run (ensembles). ``progress``: ``True`` for a bar on stderr,
     or a callable told (seconds of data fused, seconds in all) as the fuser advances."""
     t0 = time.perf_counter()
     fresh = isinstance(layout, LoadedLayout) and not overrides and data is None and truth is None
     loaded = layout if fresh else load_layout(layout, overrides, data=data, truth=truth)
+    if out_dir is not None:
+        check_output_folder(Path(out_dir), overwrite)
     with reporting(progress, "fusing", "s of data") as told:
         result = run_layout(loaded, seed, told)
     if out_dir is not None:

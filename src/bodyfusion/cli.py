@@ -88,12 +88,16 @@ def options(version: Annotated[bool, typer.Option("--version", callback=_print_v
 def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         out: Annotated[Path | None, typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
         set_: SetOption = None,
-        seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
+        seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0,
+        overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace output files in --out that no earlier "
+                                                                    "run wrote (refused otherwise).")] = False) -> None:
     """Run a layout and write metrics.json, trajectories.csv and plots."""
     from bodyfusion.evaluation.figure_process import FigureProcess
 
     figure_process = FigureProcess.start()  # first: matplotlib loads there while this process runs
-    earlier = out is not None and (out / "metrics.json").is_file()  # an earlier run's outputs, replaced
+    from bodyfusion.outputs.write import earlier_run
+
+    earlier = out is not None and earlier_run(out)  # an earlier run's outputs, replaced
     try:
         from rich.console import Console
         from rich.table import Table
@@ -101,7 +105,7 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         from bodyfusion.runner import run as run_layout
 
         with _bar("fusing", "s of data") as progress:
-            result, out_dir = run_layout(config, set_ or [], out, seed, progress, figure_process)
+            result, out_dir = run_layout(config, set_ or [], out, seed, progress, figure_process, overwrite)
     finally:
         if figure_process is not None:
             figure_process.close()
@@ -141,6 +145,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
              "--sink", help="Where states go: - (JSON lines on stdout), tcp://HOST:PORT, or a .jsonl, .csv, "
                             ".parquet or .mcap file; repeatable.")] = None,
          out: Annotated[Path | None, typer.Option("--out", help="Also write the finished run's outputs here.")] = None,
+         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace output files in --out that no "
+                                                                     "earlier run wrote.")] = False,
          interval: Annotated[float, typer.Option("--interval", help="Seconds of data between states.")] = 0.1,
          lookahead: Annotated[float, typer.Option("--lookahead", help="Seconds behind the newest sample at "
                                                                       "which decisions are final.")] = 2.0,
@@ -159,6 +165,10 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
     for value, key in ((interval, "--interval"), (lookahead, "--lookahead"), (warmup, "--warmup")):
         _positive(str(value), key)
     loaded = load_layout(config, set_ or [])
+    if out is not None:
+        from bodyfusion.outputs.write import check_output_folder
+
+        check_output_folder(out, overwrite)
     sinks = []
     try:
         for target in sink or ["-"]:

@@ -115,3 +115,28 @@ def test_covariances_parquet_holds_every_entry_each_system_stores(tmp_path):
     np.testing.assert_array_equal(left.column("cov_attitude_north_rad_attitude_up_rad").to_numpy(),
                                   history.matrix[:, 7, 8])
     assert "cov_east_m_up_m" not in table.column_names  # never stored: no column
+
+
+def test_a_folder_of_the_users_own_files_is_refused_before_the_run_and_an_earlier_run_replaced(tmp_path):
+    """--out holding a trajectories.csv no run of ours wrote: one line naming it, the file kept,
+    nothing run; with --overwrite replaced; a folder of an earlier run's outputs is replaced."""
+    import subprocess
+    import sys
+
+    from tests.paths import ROOT
+
+    def fusion(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "bodyfusion.cli", *args], capture_output=True, text=True)
+
+    config = str(ROOT / "configs" / "dual_foot_vicon.yaml")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "trajectories.csv").write_text("my own\n")
+    (mine / "thesis.txt").write_text("kept\n")
+    proc = fusion("run", config, "--out", str(mine))
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "trajectories.csv" in proc.stderr
+    assert (mine / "trajectories.csv").read_text() == "my own\n" and not (mine / "metrics.json").exists()
+    assert fusion("run", config, "--out", str(mine), "--overwrite").returncode == 0
+    assert (mine / "trajectories.csv").read_text() != "my own\n" and (mine / "thesis.txt").read_text() == "kept\n"
+    again = fusion("run", config, "--out", str(mine))  # an earlier run's outputs: replaced, and said
+    assert again.returncode == 0 and "replaced" in again.stdout

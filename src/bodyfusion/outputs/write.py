@@ -144,6 +144,42 @@ def _write_tracks(result: RunResult, out_dir: Path) -> None:
             write_geojson(path, result.trajectories, result.truths, result.frame.geodetic_origin, decimate)
 
 
+OUTPUT_NAMES = ("metrics.json", "trajectories.csv", "trajectories.parquet", "covariances.parquet", "strides.csv",
+                "tum", "track.geojson")
+"""The data files and folders a run writes (docs/contract.md) beside its plots."""
+PLOT_STEMS = ("trajectory", "error_vs_time", "error_cdf", "nees")
+"""The plots' file names without their format's suffix (:mod:`bodyfusion.evaluation.plots`)."""
+
+
+def earlier_run(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds an earlier run's outputs: a metrics.json of this project's
+    (strict JSON with its ``config_sha256`` and ``runtime``)."""
+    try:
+        doc = json.loads((out_dir / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and "config_sha256" in doc and "runtime" in doc
+
+
+def check_output_folder(out_dir: Path, overwrite: bool = False) -> bool:
+    """Before a run: refuse (FusionError naming the folder and the files) a ``--out`` whose files
+    a run would replace though no earlier run wrote them (a folder of the user's own); an
+    earlier run's outputs are replaced. ``overwrite``: replace them all the same. Returns
+    whether an earlier run's outputs are there."""
+    if not out_dir.is_dir():
+        return False
+    if earlier_run(out_dir):
+        return True
+    if overwrite:
+        return False
+    taken = [p.name for p in sorted(out_dir.iterdir())
+             if p.name in OUTPUT_NAMES or (p.stem in PLOT_STEMS and p.suffix in (".png", ".pdf", ".svg"))]
+    if taken:
+        raise FusionError(f"{out_dir}: holds {', '.join(taken)}, which no earlier run wrote and a run would replace; "
+                          "give another --out, or --overwrite to replace them")
+    return False
+
+
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
                   figure_process: FigureProcess | None = None) -> None:
     """metrics.json, the trajectory files and (unless switched off) the PNG plots. With more

@@ -28,7 +28,7 @@ from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.consistency_findings import nees_findings, nis_findings
 from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings, truth_separation_findings
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
-from bodyfusion.outputs.write import write_outputs
+from bodyfusion.outputs.write import check_output_folder, write_outputs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth, navigation_frame
 from bodyfusion.runner.truth import check_truth_overlap
@@ -177,15 +177,18 @@ def finish_fusion(fusion: Fusion) -> RunResult:
 
 def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
         seed: int = 0, progress: ProgressCallback | None = None,
-        figure_process: FigureProcess | None = None) -> tuple[RunResult, Path]:
+        figure_process: FigureProcess | None = None, overwrite: bool = False) -> tuple[RunResult, Path]:
     """Load, run (``progress`` as :func:`run_layout` takes it), write outputs (the plots by
     ``figure_process`` when given one) and say the run's health findings on the log (stderr from
-    the command line), one line each; returns the result and the output folder."""
+    the command line), one line each; returns the result and the output folder. A folder whose
+    files no earlier run wrote is refused before the run (:func:`~bodyfusion.outputs.write.check_output_folder`;
+    ``overwrite``: replace them)."""
     t0 = time.perf_counter()
     log.info("loading %s", config_path)
     loaded = load_layout(config_path, overrides)
-    result = run_layout(loaded, seed, progress)
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
+    check_output_folder(out, overwrite)
+    result = run_layout(loaded, seed, progress)
     write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0, figure_process=figure_process)
     for finding in result.findings:  # on stderr, as in metrics.json
         LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
