@@ -136,7 +136,7 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
 
 
 @app.command()
-def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
+def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
          source: Annotated[str, typer.Option(
              "--source", help="replay (the layout's recordings), tcp://HOST:PORT or udp://HOST:PORT (JSON lines).")
          ] = "replay",
