@@ -24,12 +24,31 @@ noise (:meth:`bodyfusion.plugins.foot_ins.system.FootIns._run_to`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import ImuStream
 from bodyfusion.nav.error_state import DATT, DPOS, DVEL
 from bodyfusion.nav.saturation import REPAIR_UNCERTAINTY, Clipping, find_clipping
+from bodyfusion.plugins.foot_ins.stance import StanceDetection
+
+
+@dataclass
+class DerivedInputs:
+    """What a foot INS derives from an IMU stream whole
+    (:meth:`~bodyfusion.plugins.foot_ins.system.FootIns._derive`): the stream
+    (saturated runs rebuilt), each clipped sensor's :class:`~bodyfusion.nav.saturation.Clipping`,
+    the rate (Hz), the :class:`~bodyfusion.plugins.foot_ins.stance.StanceDetection`, and the
+    covariance increments (sample indices, (K, 15, 15))."""
+
+    stream: ImuStream
+    clipping: dict
+    rate_hz: float
+    detection: StanceDetection
+    increments: tuple[np.ndarray, np.ndarray]
+
 
 GAP_HOLD_S = 0.1
 """Longest stretch of a gap (s) integrated with the sample after it held: a tenth of a stride,

@@ -38,7 +38,7 @@ from bodyfusion.io.imu import read_imu
 from bodyfusion.nav import detectors
 from bodyfusion.nav.gait import PERIOD_HOP_S
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
-from bodyfusion.plugins.foot_ins.input_policy import clock_lag
+from bodyfusion.plugins.foot_ins.input_policy import DerivedInputs, clock_lag, navigation_clock
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE
 from bodyfusion.plugins.foot_ins.records import RECORDED_COVARIANCE
 
@@ -146,7 +146,7 @@ class StreamingFootIns(Streaming):
         return float(self.stream.t[self._decided - 1]) if self._decided else -math.inf
 
     def extend(self) -> None:
-        live, n0 = self._live, self._decided
+        n0 = self._decided
         hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
         a = max(0, n0 - int(CONTEXT_S * self._rate_hz))
         a -= a % hop  # the stride period's windows on the whole recording's grid
@@ -157,9 +157,17 @@ class StreamingFootIns(Streaming):
             derived = self._derive(read_imu(section))
         finally:
             LOG.disabled = False
+        self._splice(derived, a)
+        self._decide(float(self.stream.t[-1]) - self._lookahead_s)
+
+    def _splice(self, derived: DerivedInputs, a: int) -> None:
+        """Keep the final samples (those before the first undecided one) and take every later one
+        from ``derived``, the derivation of the recording from sample ``a`` on; a row read before
+        that changed is refused."""
+        live, n0 = self._live, self._decided
         tail = derived.stream
         known = len(live) - a  # rows read before, and kept: they must not have changed
-        if not np.array_equal(tail.t[:known], live.t.view()[a:]):
+        if len(tail) < known or not np.array_equal(tail.t[:known], live.t.view()[a:]):
             raise FusionError(f"systems.{self.name}: the live recording changed samples already read "
                               "(live rows must come in time order)")
         k = n0 - a
@@ -171,7 +179,6 @@ class StreamingFootIns(Streaming):
         self._gap_index, self._gap_P = self._merge_increments((self._gap_index, self._gap_P), index[later] + a,
                                                               increments[later], n0)
         self._take_live()
-        self._decide(float(tail.t[-1]) - self._lookahead_s)
 
     @staticmethod
     def _merge_increments(old: tuple[np.ndarray, np.ndarray], index: np.ndarray, increments: np.ndarray,
@@ -204,29 +211,21 @@ class StreamingFootIns(Streaming):
         (counting where it differs: ``revised_inputs``) and decide every sample."""
         live, n0 = self._live, self._decided
         whole = self._derive(read_imu(self.config.data))
-        if len(whole.stream) < len(live) or not np.array_equal(whole.stream.t[:len(live)], live.t.view()):
+        s = whole.stream
+        if len(s) < n0:
             raise FusionError(f"systems.{self.name}: the live recording changed samples already read "
                               "(live rows must come in time order)")
-        s = whole.stream
-        t_nav = s.t - np.cumsum(clock_lag(s))
         differ = ((whole.detection.stance[:n0] != live.stance.view()[:n0])
                   | np.any(s.acc_b[:n0] != live.acc.view()[:n0], axis=1)
                   | np.any(s.gyro_b[:n0] != live.gyro.view()[:n0], axis=1)
-                  | (t_nav[:n0] != live.t_nav.view()[:n0]))
-        index, increments = whole.increments
-        theirs = {int(i): P for i, P in zip(index, increments) if i < n0}
+                  | (navigation_clock(s)[:n0] != live.t_nav.view()[:n0]))
+        theirs = {int(i): P for i, P in zip(*whole.increments) if i < n0}
         mine = {int(i): P for i, P in zip(*self._input_increments) if i < n0}
         for i in set(theirs) | set(mine):
             if i not in theirs or i not in mine or not np.array_equal(theirs[i], mine[i]):
                 differ[i] = True
         self.revised_inputs = int(np.count_nonzero(differ))
-        live.keep(n0)
-        live.append(s.t[n0:], s.acc_b[n0:], s.gyro_b[n0:], whole.detection.stance[n0:], clock_lag(s)[n0:])
-        later = index >= n0
-        self._input_increments = self._merge_increments(self._input_increments, index[later], increments[later], n0)
-        self._gap_index, self._gap_P = self._merge_increments((self._gap_index, self._gap_P), index[later],
-                                                              increments[later], n0)
-        self._take_live()
+        self._splice(whole, 0)
         self.clipping, self.stance_detection = whole.clipping, whole.detection  # the findings of the whole recording
         self.stance_detection.stance = self.stance
         self.stream.report, self.stream.checks = s.report, s.checks

@@ -5,7 +5,6 @@ coloured-noise zero-velocity update (``ckf``), or the ensemble filters (``enekf`
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -28,32 +27,18 @@ from bodyfusion.nav.measurements import GateCounts, chi2_gate
 from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.config import BODY_POSITION_SD_M, STANCE_WIDTH_M, FootInsConfig
 from bodyfusion.plugins.foot_ins.initial_state import InitialState
-from bodyfusion.plugins.foot_ins.input_policy import (covariance_increments, navigation_clock, repair_saturation,
-                                                      saturation_findings)
+from bodyfusion.plugins.foot_ins.input_policy import (DerivedInputs, covariance_increments, navigation_clock,
+                                                      repair_saturation, saturation_findings)
 from bodyfusion.plugins.foot_ins.estimators import ESTIMATORS, EnsembleEkf, Estimator, RunData, compile_step_ahead
 from bodyfusion.plugins.foot_ins.kernels import (C_COLOURED, C_GATED, C_NIS_SUM, C_ZARUS, C_ZUPTS, COUNTERS_SIZE,
                                                  NO_RESET, NO_STANCE, NOT_PACKED)
-from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, StanceDetection, detect_stance, stance_findings
+from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, stance_findings
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
 from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 from bodyfusion.plugins.foot_ins.streaming import StreamingFootIns
-
-@dataclass
-class DerivedInputs:
-    """What a foot INS derives from an IMU stream whole (:meth:`FootIns._derive`): the stream
-    (saturated runs rebuilt), each clipped sensor's :class:`~bodyfusion.nav.saturation.Clipping`,
-    the rate (Hz), the :class:`~bodyfusion.plugins.foot_ins.stance.StanceDetection`, and the
-    covariance increments (sample indices, (K, 15, 15))."""
-
-    stream: ImuStream
-    clipping: dict
-    rate_hz: float
-    detection: StanceDetection
-    increments: tuple[np.ndarray, np.ndarray]
-
 
 MIN_RATE_HZ = 40.0
 """Below this sample rate (Hz) a foot INS's run gets a ``low_rate`` finding: a swing of about
