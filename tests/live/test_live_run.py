@@ -120,3 +120,12 @@ def test_a_row_without_the_sections_columns_is_refused():
         run.push("left_foot", {"time_index": 0.0})
     with pytest.raises(ConfigError, match="no system"):
         run.push("nose", {})
+
+
+def test_a_start_too_early_waits_for_the_walk_and_gives_the_same_run(batch):
+    """A 1 s warm-up: the feet have neither ended their first rest nor walked the 3 m the heading
+    alignment takes; the run tries again every 2 s of data and, started, is the batch run."""
+    run = LiveRun(load_layout(VICON), warmup_s=1.0)
+    replay(run, replay_rows(run))
+    assert run.not_started is not None and "yet" in str(run.not_started)
+    _same_tracks(run.close(), batch)

@@ -28,7 +28,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.errors import ConfigError, NotReady
 from bodyfusion.base.sections import TableSection
 from bodyfusion.core.capabilities import Streaming
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
@@ -141,8 +141,8 @@ class LiveRun:
         self.latency_s: list[float] = []
         self._planned_t = -math.inf
         self._start_after_s = warmup_s
-        self.not_started: FusionError | None = None
-        """Why the run could not start on the data so far (it tries again after each further warm-up)."""
+        self.not_started: NotReady | None = None
+        """Why the run could not start on the data so far (it tries again every :data:`RETRY_S` of data)."""
 
     @property
     def emitted(self) -> int:
@@ -169,7 +169,7 @@ class LiveRun:
                 try:
                     self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
                                                  lookahead_s=self.lookahead_s)
-                except FusionError as err:  # not enough yet: no rest ended, no system travelled far enough to align
+                except NotReady as err:  # not enough yet: no rest ended, no system travelled far enough to align
                     self.not_started = err
                     self._start_after_s += RETRY_S
                     return False
@@ -198,7 +198,8 @@ class LiveRun:
     def close(self) -> RunResult:
         """The recordings are complete: every system reads its whole table, the run finishes as a
         batch run (:func:`~bodyfusion.runner.batch.finish_fusion`, every remaining epoch emitted)
-        and the sinks are closed. A run that never reached its warm-up is refused."""
+        and the sinks are closed. A run that never started starts now, on the whole recording; one
+        without any row is refused."""
         try:
             if self.fusion is None:  # never ready: the whole recording is in hand now
                 if not all(b.rows for b in self.buffers.values()):

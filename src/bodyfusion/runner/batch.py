@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from bodyfusion.base.errors import FusionError, NotReady
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG
 from bodyfusion.core.capabilities import AbsoluteFixes, offers
@@ -58,6 +59,9 @@ class Fusion:
     timings: dict[str, float] = field(default_factory=dict)
     t_fusing: float = 0.0
     """When the navigation began (s, :func:`time.perf_counter`)."""
+    growing: bool = False
+    """Built on the first part of a live run's recordings (the truth is checked against them at
+    the finish)."""
 
 
 def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None,
@@ -70,7 +74,9 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     (:class:`~bodyfusion.core.progress.FusionProgress`). ``lookahead_s``: the recordings are the
     first part of a live run's (:mod:`bodyfusion.live`): once aligned, every system decides its
     samples that far behind its newest (:meth:`~bodyfusion.core.capabilities.Streaming.start_streaming`);
-    ``complete``: the live run's recordings are whole already (a system may not refuse them)."""
+    ``complete``: the live run's recordings are whole already (a system may not refuse them).
+    On a live run's first part, a heading alignment without enough travel is
+    :class:`~bodyfusion.base.errors.NotReady` and the truth is checked at the finish."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
@@ -86,14 +92,21 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     plan_smoothing(systems, loaded.layout.smoother)
     origin = geodetic_origin(loaded, systems)
     truths = load_truth(loaded, origin)
-    check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
+    growing = lookahead_s is not None and not complete
+    if not growing:  # a live run's recordings are checked against the truth once complete (finish_fusion)
+        check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
     timings["load_s"] = time.perf_counter() - t0
 
     t_fusing = time.perf_counter()
     if loaded.layout.constraints and loaded.layout.fuser.method == "none":
         LOG.warning("%s: fuser.method is none: the %d constraint(s) of the layout are not enforced",
                     loaded.path.name if loaded.path else loaded.name, len(loaded.layout.constraints))
-    rotations = align_headings(systems, loaded.layout.heading_alignment)
+    try:
+        rotations = align_headings(systems, loaded.layout.heading_alignment)
+    except FusionError as err:
+        if lookahead_s is None or complete:
+            raise
+        raise NotReady(f"{err} yet") from None  # a live run's first part: its systems may walk on
     if lookahead_s is not None:
         for s in systems.values():
             s.start_streaming(lookahead_s)
@@ -106,7 +119,7 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
                                                {name: s.body_part for name, s in built.items()}, loaded.layout.body)
     fuser = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body, output)
     return Fusion(loaded, built, systems, aiding, monitors, fuser, constraints, rotations, origin, truths, tracker,
-                  timings, t_fusing)
+                  timings, t_fusing, growing)
 
 
 def run_layout(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None) -> RunResult:
@@ -122,6 +135,8 @@ def finish_fusion(fusion: Fusion) -> RunResult:
                                                    fusion.truths)
     timings = fusion.timings
     report = fusion.fuser.finish()
+    if fusion.growing:
+        check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
     for monitor in fusion.monitors.values():
         monitor.flush()
     if fusion.tracker is not None:
