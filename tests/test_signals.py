@@ -104,3 +104,24 @@ def test_an_interrupt_a_library_swallowed_still_ends_the_command_with_130(monkey
         cli.main()
     assert exit_.value.code == 130 and "aborted" in capsys.readouterr().err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the caller's handler back
+
+
+def test_a_signal_taken_inside_a_c_callback_prints_no_traceback(monkeypatch, capsys):
+    """Where Python can only drop the signal's exception (a C callback: LLVM's as numba compiles)
+    it printed 'Exception ignored ... Traceback'; now nothing, and the command ends with 143."""
+    import ctypes
+
+    from bodyfusion import cli
+
+    def command(**_: object) -> None:
+        callback = ctypes.CFUNCTYPE(None)(lambda: os.kill(os.getpid(), signal.SIGTERM))
+        callback()  # called through C: the handler's exception is dropped there
+
+    printed = []  # what would be printed as "Exception ignored ... Traceback"
+    monkeypatch.setattr(sys, "unraisablehook", printed.append)
+    monkeypatch.setattr(cli, "app", command)
+    with pytest.raises(SystemExit) as exit_:
+        cli.main()
+    assert exit_.value.code == 143 and "terminated" in capsys.readouterr().err
+    assert printed == []
+    assert sys.unraisablehook == printed.append  # the caller's hook back

@@ -13,11 +13,13 @@ import sys
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Annotated, Literal
 
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.interrupts import RECEIVED, Terminated, answer_pending
 from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -201,6 +203,7 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
     if out is not None:
         from bodyfusion.outputs.write import write_outputs
 
+        answer_pending()  # interrupted where the exception was dropped: no outputs replaced
         write_outputs(result, out, str(config), total_wall_s=time.perf_counter() - wall0)
     if not CONSOLE.quiet:
         revised = {n: s.revised_inputs for n, s in result.systems.items() if getattr(s, "revised_inputs", 0)}
@@ -390,17 +393,8 @@ class _LevelFormatter(logging.Formatter):
         return f"{record.levelname.lower()}: {super().format(record)}"
 
 
-class Terminated(Exception):
-    """SIGTERM, raised where the process is, so that every ``finally`` runs (files closed whole)."""
-
-
 _MAIN_PID: list[int] = []
 """The process whose SIGTERM raises :class:`Terminated` (a forked child ends at once)."""
-
-
-_RECEIVED: set[int] = set()
-"""The signals this process took (an exception raised from a handler inside a C callback, say
-LLVM's as numba compiles, is printed and dropped there: the command's end still answers it)."""
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -408,12 +402,12 @@ def _terminate(signum: int, frame: object) -> None:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         os.kill(os.getpid(), signal.SIGTERM)
         return
-    _RECEIVED.add(signum)
+    RECEIVED.add(signum)
     raise Terminated
 
 
 def _interrupt(signum: int, frame: object) -> None:
-    _RECEIVED.add(signum)
+    RECEIVED.add(signum)
     raise KeyboardInterrupt
 
 
@@ -424,14 +418,27 @@ def main() -> None:
     CONSOLE.verbosity = 0  # until the global options say otherwise
     configure_logging()
     _MAIN_PID[:] = [os.getpid()]
-    _RECEIVED.clear()
+    RECEIVED.clear()
     previous = {signum: signal.signal(signum, handler) for signum, handler in
                 ((signal.SIGINT, _interrupt), (signal.SIGTERM, _terminate))}
+    unraisable = sys.unraisablehook
+    sys.unraisablehook = _dropped_signal(unraisable)
     try:
         _dispatch()
     finally:  # as they were (a caller that runs main in its own process)
+        sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
+
+
+def _dropped_signal(hook: Callable[..., None]) -> Callable[..., None]:
+    """``hook`` but for a signal's exception raised where Python can only drop it (inside a C
+    callback: LLVM's, as numba compiles): not printed as a traceback, since the command answers
+    the signal (:func:`~bodyfusion.base.interrupts.answer_pending`)."""
+    def quiet(unraisable) -> None:
+        if not isinstance(unraisable.exc_value, (KeyboardInterrupt, Terminated)):
+            hook(unraisable)
+    return quiet
 
 
 def _interrupted(err: BaseException) -> bool:
@@ -450,9 +457,8 @@ def _dispatch() -> None:
     """The command, its outcome turned into the exit status (:func:`main`)."""
     try:
         code = app(standalone_mode=False)  # typer hands back Ctrl-C as exit code 130 here
-        if signal.SIGTERM in _RECEIVED:
-            raise Terminated
-        if code == 130 or signal.SIGINT in _RECEIVED:
+        answer_pending()  # a signal whose exception a C callback dropped
+        if code == 130:
             raise KeyboardInterrupt
         if isinstance(code, int) and code:
             sys.exit(code)

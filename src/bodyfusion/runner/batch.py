@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bodyfusion.base.errors import FusionError, NotReady
+from bodyfusion.base.interrupts import answer_pending
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG
 from bodyfusion.core.capabilities import AbsoluteFixes, offers
@@ -204,6 +205,7 @@ def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: st
     out = Path(out_dir) if out_dir is not None else (loaded.layout.output.dir or Path("out") / loaded.name)
     check_output_folder(out, overwrite)
     result = run_layout(loaded, seed, progress)
+    answer_pending()  # interrupted where the exception was dropped (numba compiling): the earlier outputs stay
     write_outputs(result, out, str(config_path), total_wall_s=time.perf_counter() - t0, figure_process=figure_process)
     for finding in result.findings:  # on stderr, as in metrics.json
         LOG.log(logging.WARNING if finding.severity == "warning" else logging.INFO, "%s", finding.line())
