@@ -59,3 +59,23 @@ def test_a_rail_needs_several_clipped_runs():
     once[stride * 220:(stride + 1) * 220, 1] = np.clip(once[stride * 220:(stride + 1) * 220, 1], -limit, limit)
     found = find_clipping(once, 1.0 / RATE)
     assert len(found.runs) < MIN_CLIPPED_RUNS and np.isnan(found.rail).all()
+
+
+def test_the_runs_of_a_recordings_tail_are_repaired_as_in_the_whole_from_the_cache():
+    """A live pass finds the clipped runs of its context again: where the rail is the whole
+    recording's, each run's repair is the whole's, bit for bit, its flank fit from the cache."""
+    from bodyfusion.nav import saturation
+
+    rng = np.random.default_rng(4)
+    clipped = np.clip(swings(10.0, 20, rng), -7.0, 7.0)
+    whole = find_clipping(clipped, 1.0 / RATE)
+    a = 220 * 8  # a tail from the 9th stride on
+    hits = saturation._cubic_through.cache_info().hits
+    tail = find_clipping(clipped[a:], 1.0 / RATE)
+    assert saturation._cubic_through.cache_info().hits > hits
+    assert tail.rail[1, 0] == whole.rail[1, 0]
+    later = [r for r in whole.runs if r.start >= a]
+    assert [(r.start - a, r.stop - a, r.excess_integral) for r in later] == \
+        [(r.start, r.stop, r.excess_integral) for r in tail.runs]
+    for r, s in zip(later, tail.runs):
+        np.testing.assert_array_equal(r.values, s.values)

@@ -26,12 +26,15 @@ Units: whatever the signal's (m/s^2 or rad/s); times in seconds.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 RAIL_TOLERANCE = 0.005
 """Readings within this fraction of an axis's extreme value are candidates for its rail."""
+FITS_KEPT = 4096
+"""Flank fits :func:`_cubic_through` keeps."""
 FIT_SAMPLES = 4
 """Unclipped samples on each side of a run that its cubic is fitted to."""
 MIN_EXCESS = 0.02
@@ -110,8 +113,16 @@ def _flank_cubic(x: np.ndarray, start: int, stop: int, excluded: np.ndarray) -> 
     if flanks.size < 4:
         return None
     centre = 0.5 * (start + stop - 1)
-    coef = np.polyfit(flanks - centre, x[flanks], 3)
-    return np.polyval(coef, np.arange(start, stop) - centre)
+    return _cubic_through((flanks - centre).tobytes(), x[flanks].tobytes(), stop - start).copy()
+
+
+@functools.lru_cache(maxsize=FITS_KEPT)
+def _cubic_through(offsets: bytes, values: bytes, length: int) -> np.ndarray:
+    """The least-squares cubic through the float64 points (``offsets``, ``values``), evaluated
+    at the run's ``length`` samples centred on offset 0. Cached: a live run derives the same
+    runs' flanks on every pass (:mod:`bodyfusion.plugins.foot_ins.streaming`), the same bits."""
+    coef = np.polyfit(np.frombuffer(offsets), np.frombuffer(values), 3)
+    return np.polyval(coef, np.arange(length) - 0.5 * (length - 1))
 
 
 def find_clipping(signal: np.ndarray, dt: float) -> Clipping:

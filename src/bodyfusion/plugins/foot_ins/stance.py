@@ -106,9 +106,12 @@ def _watch(found: StanceDetection, statistic: np.ndarray, window: int, rate: flo
     if statistic.size == 0:
         return
     period = found.reference_period()
+    shortest = MISSED_STRIDES * float(period.min()) * rate if period.size else 0.0
     swing = ~found.detected
     edges = np.diff(np.concatenate(([0], swing.astype(np.int8), [0])))
     for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        if b - a <= shortest:  # shorter than two of the shortest strides: two of its own strides at least
+            continue
         p = float(np.median(period[a:b])) * rate  # samples per stride here
         if b - a <= MISSED_STRIDES * p:
             continue
