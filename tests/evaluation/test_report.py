@@ -225,3 +225,23 @@ def test_a_folder_that_is_not_a_run_or_study_is_refused_in_one_line(tmp_path, ma
     with pytest.raises(FusionError, match=re.escape(missing)):
         write_report(folder)
 
+
+
+def test_the_study_figures_draw_one_statistic_in_html_and_png(tmp_path):
+    """The HTML study figure's bars are the 95 % confidence interval of the mean, as the PNG plots
+    draw it (Student t over the runs), not ± 1 sd."""
+    import numpy as np
+    from scipy import stats
+
+    from bodyfusion.evaluation.report_figures import confidence_half_width, study_metric
+
+    values = np.array([1.2, 0.8, 1.5, 1.1, 0.9])
+    lo, hi = stats.t.interval(0.95, values.size - 1, loc=values.mean(), scale=stats.sem(values))
+    assert confidence_half_width(float(values.std(ddof=1)), values.size) == pytest.approx((hi - lo) / 2)
+    assert confidence_half_width(0.3, 1) is None
+    summary = [{"layout": "walk", "outage_duration_s": str(d), "metric": "outage.end_error_m", "runs": "5",
+                "failed": "0", "mean": "1.0", "sd": "0.2", "p50": "1.0", "p90": "1.3"} for d in (0, 30)]
+    fig = study_metric(summary, "outage.end_error_m")
+    bars = fig.data[0].error_y.array
+    assert list(bars) == pytest.approx([confidence_half_width(0.2, 5)] * 2)
+    assert "95 % confidence interval" in fig.layout.title.text

@@ -198,9 +198,21 @@ def study_axis(summary: list[dict[str, str]]) -> str:
     return next((c for c in columns if c.startswith("param.")), "layout")
 
 
+def confidence_half_width(sd: float | None, runs: float | None) -> float | None:
+    """Half the 95 % confidence interval of a mean of ``runs`` values of sample standard
+    deviation ``sd`` (Student t), the statistic the study's PNG plots draw too
+    (:func:`~bodyfusion.evaluation.plots.plot_against_outage_duration`); None below two runs."""
+    if sd is None or runs is None or runs < 2:
+        return None
+    from scipy.stats import t as student_t  # slow to import; only the study figures need it
+
+    return float(student_t.ppf(0.975, runs - 1) * sd / np.sqrt(runs))
+
+
 def study_metric(summary: list[dict[str, str]], metric: str) -> go.Figure:
     """One summary metric (m) against :func:`study_axis`: per layout and other parameter
-    values the mean with ± 1 sd bars and the 90th percentile dotted; hover gives the runs."""
+    values the mean with its 95 % confidence interval (:func:`confidence_half_width`, as the
+    PNG plots draw it) and the 90th percentile dotted; hover gives the runs."""
     axis = study_axis(summary)
     keys = [c for c in (summary[0] if summary else {}) if c == "layout" or c.startswith("param.")]
     groups: dict[str, list[dict[str, str]]] = {}
@@ -215,11 +227,13 @@ def study_metric(summary: list[dict[str, str]], metric: str) -> go.Figure:
         x = [_number(r.get(axis)) if numeric else r.get(axis) for r in rows]
         fig.add_scatter(x=x, y=[_number(r.get("mean")) for r in rows], mode="lines+markers", name=f"{label} mean",
                         legendgroup=label, line={"color": _colour(i)},
-                        error_y={"type": "data", "array": [_number(r.get("sd")) or 0.0 for r in rows],
+                        error_y={"type": "data", "array": [confidence_half_width(_number(r.get("sd")),
+                                                                                 _number(r.get("runs"))) or 0.0
+                                                           for r in rows],
                                  "thickness": 1, "color": _rgba(_colour(i), 0.5)},
                         customdata=[[r.get("runs"), r.get("failed")] for r in rows],
                         hovertemplate="%{x}: mean %{y:.3g}<br>%{customdata[0]} runs, %{customdata[1]} failed")
         fig.add_scatter(x=x, y=[_number(r.get("p90")) for r in rows], mode="lines", name=f"{label} p90",
                         legendgroup=label, line={"color": _colour(i), "dash": "dot", "width": 1})
-    title = f"{metric} against {axis} (mean ± 1 sd, 90th percentile dotted)"
+    title = f"{metric} against {axis} (mean with its 95 % confidence interval, 90th percentile dotted)"
     return _layout(fig, title, axis, "value [m]" if "_m." in metric or metric.endswith("_m") else "value")
