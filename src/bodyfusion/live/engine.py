@@ -77,8 +77,7 @@ class RowBuffer:
         missing = [c for c in self.columns if c not in row]
         if missing:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
-        t = (float(row[self._time_column]) * self._time_scale if self._time_column is not None
-             else self.rows / float(self._rate_hz))  # as times() makes them, one row
+        t = float(self._time(row[self._time_column] if self._time_column is not None else 0.0, self.rows))
         if not t > self.newest_t:
             self.dropped += 1
             return False
@@ -91,12 +90,18 @@ class RowBuffer:
         return True
 
     def times(self, columns: Mapping[str, np.ndarray], first: int = 0) -> np.ndarray:
-        """Times (s) of rows ``columns`` (column → array), the first of them row ``first``, as the
-        section defines them: its time column × ``time_scale``, or the row number / ``rate_hz``."""
-        if self._time_column is not None:
-            return np.asarray(columns[self._time_column], dtype=float) * self._time_scale
+        """Times (s) of rows ``columns`` (column → array), the first of them row ``first``
+        (:meth:`_time`)."""
         n = len(next(iter(columns.values())))
-        return (first + np.arange(n)) / float(self._rate_hz)
+        value = np.asarray(columns[self._time_column], dtype=float) if self._time_column is not None else 0.0
+        return np.broadcast_to(self._time(value, first + np.arange(n)), (n,))
+
+    def _time(self, value: float | np.ndarray, row: int | np.ndarray) -> float | np.ndarray:
+        """The time (s) of a row (scalars or arrays) as the section defines it: its time column's
+        ``value`` × ``time_scale``, or the row number ``row`` / ``rate_hz``."""
+        if self._time_column is not None:
+            return value * self._time_scale
+        return row / float(self._rate_hz)
 
     @property
     def span_s(self) -> float:
