@@ -58,32 +58,46 @@ class JacobianCase:
 
 
 
-@dataclass
+@dataclass(frozen=True)
 class CovarianceHistory:
     """A system's error-state covariance over time as it stores it: ``t`` (N,) s, ``states``
-    (the k error states each row and column of ``matrix`` belongs to, in the names of
+    (the k error states each row and column of a matrix belongs to, in the names of
     :meth:`SensorSystem.states` where the state is one of those: ``east_m``, ``north_m``,
-    ``up_m``...), ``matrix`` (N, k, k) in the states' units squared; an entry the system does not
-    store is NaN. ``stored`` says in words what the system keeps."""
+    ``up_m``...), ``stored`` (what the system keeps, in words) and ``block``, which forms the
+    (n, k, k) matrices of a slice of the epochs in the states' units squared, NaN where the system
+    does not store the entry. Formed on demand, a slice at a time (:meth:`columns` of
+    ``epochs``): a long run's whole history of k × k matrices is never held unless asked for
+    (:attr:`matrix`)."""
 
     t: np.ndarray
     states: tuple[str, ...]
-    matrix: np.ndarray
     stored: str
+    block: Callable[[slice], np.ndarray]
+
+    @classmethod
+    def of_matrices(cls, t: np.ndarray, states: tuple[str, ...], matrix: np.ndarray, stored: str) -> CovarianceHistory:
+        """The history of matrices in hand, ``matrix`` (N, k, k)."""
+        return cls(np.asarray(t), states, stored, lambda epochs: matrix[epochs])
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(N, k, k): every epoch's matrix."""
+        return self.block(slice(None))
 
     def variances(self) -> dict[str, np.ndarray]:
         """State name → (N,) variance."""
         diag = np.diagonal(self.matrix, axis1=1, axis2=2)
         return {name: diag[:, k] for k, name in enumerate(self.states)}
 
-    def columns(self) -> dict[str, np.ndarray]:
-        """``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle), each (N,)."""
-        cols: dict[str, np.ndarray] = {"t": self.t}
+    def columns(self, epochs: slice = slice(None)) -> dict[str, np.ndarray]:
+        """``t``, ``var_<state>`` and ``cov_<a>_<b>`` (the upper triangle) at ``epochs``, each (n,)."""
+        matrix = self.block(epochs)
+        cols: dict[str, np.ndarray] = {"t": self.t[epochs]}
         for a, name in enumerate(self.states):
-            cols[f"var_{name}"] = self.matrix[:, a, a]
+            cols[f"var_{name}"] = matrix[:, a, a]
         for a, name in enumerate(self.states):
             for b in range(a + 1, len(self.states)):
-                cols[f"cov_{name}_{self.states[b]}"] = self.matrix[:, a, b]
+                cols[f"cov_{name}_{self.states[b]}"] = matrix[:, a, b]
         return cols
 
     def to_frame(self) -> pd.DataFrame:
@@ -93,16 +107,21 @@ class CovarianceHistory:
         return pd.DataFrame(self.columns())
 
 
-def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray | None, stored: str) -> CovarianceHistory:
+def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray | None,
+                        stored: str) -> CovarianceHistory:
     """The (N, 3, 3) east, north, up covariance of variances ``var_enu`` (N, 3) m² and the
     east–north covariance ``cov_en`` (N,) m² (None: not stored); the east–up and north–up
     covariances are not stored (NaN)."""
-    n = len(t)
-    matrix = np.full((n, 3, 3), np.nan)
-    matrix[:, [0, 1, 2], [0, 1, 2]] = var_enu
-    if cov_en is not None:
-        matrix[:, 0, 1] = matrix[:, 1, 0] = cov_en
-    return CovarianceHistory(np.asarray(t), ("east_m", "north_m", "up_m"), matrix, stored)
+
+    def block(epochs: slice) -> np.ndarray:
+        var = var_enu[epochs]
+        matrix = np.full((len(var), 3, 3), np.nan)
+        matrix[:, [0, 1, 2], [0, 1, 2]] = var
+        if cov_en is not None:
+            matrix[:, 0, 1] = matrix[:, 1, 0] = cov_en[epochs]
+        return matrix
+
+    return CovarianceHistory(np.asarray(t), ("east_m", "north_m", "up_m"), stored, block)
 
 
 @dataclass(frozen=True)

@@ -12,32 +12,56 @@ system → what it keeps).
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from bodyfusion.core.system import SensorSystem
+from bodyfusion.core.system import CovarianceHistory, SensorSystem
+from bodyfusion.outputs.trajectories import ROWS, arrow_numbers, arrow_strings
 
 COVARIANCE_FORMAT_VERSION = "1"
 
 
-def covariance_table(name: str, system: SensorSystem, decimate: int = 1) -> pa.Table:
-    """One system's rows: ``t``, ``system`` and every entry it stores (a column that is NaN
-    throughout is left out)."""
-    history = system.covariance_history()
-    columns = {key: np.asarray(value)[::decimate] for key, value in history.columns().items()}
-    kept = {key: value for key, value in columns.items() if key == "t" or not np.isnan(value).all()}
-    n = len(kept["t"])
-    return pa.table({"t": kept.pop("t"), "system": pa.array([name] * n, pa.string()), **kept})
+PIECE_ROWS = ROWS // 4
+"""Epochs formed and written at once: a piece of a 9-state history's matrices is 10 MB."""
+
+
+def _epoch_pieces(history: CovarianceHistory, decimate: int) -> Iterator[slice]:
+    """The kept epochs (every ``decimate``-th) in pieces of :data:`PIECE_ROWS` (at least one)."""
+    n = len(history.t)
+    step = PIECE_ROWS * decimate
+    yield from (slice(a, min(a + step, n), decimate) for a in range(0, max(n, 1), step))
+
+
+def _stored_columns(history: CovarianceHistory, decimate: int) -> list[str]:
+    """The history's columns that hold a number at some kept epoch (``t`` first), a piece at a time."""
+    names = list(history.columns(slice(0, 0)))
+    held = {"t"}
+    for epochs in _epoch_pieces(history, decimate):
+        held.update(k for k, v in history.columns(epochs).items() if k not in held and not np.isnan(v).all())
+    return [k for k in names if k in held]
 
 
 def write_covariances_parquet(path: Path, systems: Mapping[str, SensorSystem], decimate: int = 1) -> None:
-    """``covariances.parquet`` (module docstring) of every navigation system."""
-    tables = [covariance_table(name, s, decimate) for name, s in systems.items()]
-    table = pa.concat_tables(tables, promote_options="permissive")
+    """``covariances.parquet`` (module docstring) of every navigation system, :data:`PIECE_ROWS` epochs
+    of one system at a time (a row group each): the systems' columns in the order they first
+    appear, null where a system stores no such entry."""
+    histories = {name: s.covariance_history() for name, s in systems.items()}
+    kept = {name: _stored_columns(h, decimate) for name, h in histories.items()}
+    names = list(dict.fromkeys(["t", "system", *(k for cols in kept.values() for k in cols[1:])]))
     meta = {"bodyfusion.format_version": COVARIANCE_FORMAT_VERSION,
-            "bodyfusion.stored": json.dumps({name: s.covariance_history().stored for name, s in systems.items()})}
-    pq.write_table(table.replace_schema_metadata(meta), path, compression="zstd", use_dictionary=["system"])
+            "bodyfusion.stored": json.dumps({name: h.stored for name, h in histories.items()})}
+    schema = pa.schema([(k, pa.string() if k == "system" else pa.float64()) for k in names]).with_metadata(meta)
+    with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=["system"]) as writer:
+        for name, history in histories.items():
+            held = set(kept[name])
+            for epochs in _epoch_pieces(history, decimate):
+                columns = history.columns(epochs)
+                n = len(columns["t"])
+                writer.write_batch(pa.RecordBatch.from_arrays(
+                    [arrow_strings([name] * n) if k == "system" else
+                     arrow_numbers(columns[k]) if k in held else pa.nulls(n, pa.float64()) for k in names],
+                    schema=schema))

@@ -112,7 +112,7 @@ def write_trajectories_csv(path: Path, trajectories: Mapping[str, Trajectory], d
                     schema=schema))
 
 
-def _numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
+def arrow_numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
     """A float64 (int32 for int32 ``values``) Arrow array on a copy of ``values``, null where
     ``mask``; as ``pa.array`` makes it, which imports pandas (0.3 s) to ask whether the values
     are a pandas object."""
@@ -122,8 +122,8 @@ def _numbers(values: np.ndarray, mask: np.ndarray | None = None) -> pa.Array:
                                  null_count=0 if validity is None else int(mask.sum()))
 
 
-def _strings(values: list[str]) -> pa.Array:
-    """A string Arrow array of ``values``, without ``pa.array`` (see :func:`_numbers`)."""
+def arrow_strings(values: list[str]) -> pa.Array:
+    """A string Arrow array of ``values``, without ``pa.array`` (see :func:`arrow_numbers`)."""
     encoded = [v.encode() for v in values]
     offsets = np.concatenate(([0], np.cumsum([len(e) for e in encoded]))).astype(np.int32)
     return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))])
@@ -164,11 +164,11 @@ def _trajectory_columns(names: list[str], k: int, traj: Trajectory, epochs: slic
     none = np.ones(len(t), dtype=bool)
     missing = np.full(len(t), np.nan)
     cov = missing if traj.pos_cov_en is None else np.asarray(traj.pos_cov_en)[epochs]
-    system = pa.DictionaryArray.from_arrays(_numbers(np.full(len(t), k, dtype=np.int32)), _strings(names))
-    return [system, _numbers(t), *(_numbers(getattr(traj, a)[epochs, j]) for a in ("pos_n", "pos_sd") for j in range(3)),
-            *(_numbers(missing, mask=none) if v is None else _numbers(v, mask=~np.isfinite(v))
+    system = pa.DictionaryArray.from_arrays(arrow_numbers(np.full(len(t), k, dtype=np.int32)), arrow_strings(names))
+    return [system, arrow_numbers(t), *(arrow_numbers(getattr(traj, a)[epochs, j]) for a in ("pos_n", "pos_sd") for j in range(3)),
+            *(arrow_numbers(missing, mask=none) if v is None else arrow_numbers(v, mask=~np.isfinite(v))
               for v in _motion(traj, epochs)),
-            _numbers(cov, mask=np.full(len(t), traj.pos_cov_en is None))]
+            arrow_numbers(cov, mask=np.full(len(t), traj.pos_cov_en is None))]
 
 
 def _trajectory_schema(columns: list[pa.Array]) -> pa.Schema:
@@ -233,13 +233,13 @@ def _tum_table(t: np.ndarray, pos_n: np.ndarray, q_wxyz: np.ndarray | None, time
     identity's constant columns are not printed again."""
     key = t.tobytes()
     if key not in times:
-        times[key] = pc.cast(_numbers(t), pa.string())
+        times[key] = pc.cast(arrow_numbers(t), pa.string())
     if q_wxyz is None:
-        identity = pc.cast(_numbers(np.array([0.0, 0.0, 0.0, 1.0])), pa.string())
+        identity = pc.cast(arrow_numbers(np.array([0.0, 0.0, 0.0, 1.0])), pa.string())
         q = [pa.repeat(identity[j], len(t)) for j in range(4)]
     else:
-        q = [pc.cast(_numbers(q_wxyz[:, j]), pa.string()) for j in (1, 2, 3, 0)]
-    xyz = [pc.cast(_numbers(v), pa.string()) for v in (pos_n[:, 0], pos_n[:, 1], np.nan_to_num(pos_n[:, 2], nan=0.0))]
+        q = [pc.cast(arrow_numbers(q_wxyz[:, j]), pa.string()) for j in (1, 2, 3, 0)]
+    xyz = [pc.cast(arrow_numbers(v), pa.string()) for v in (pos_n[:, 0], pos_n[:, 1], np.nan_to_num(pos_n[:, 2], nan=0.0))]
     return pa.table(dict(zip(_TUM_COLUMNS, [times[key], *xyz, *q])))
 
 
@@ -299,7 +299,7 @@ def _lon_lat_h(pos_n: np.ndarray, origin: tuple[float, float, float], flat: bool
 
 
 def _mask(flags: np.ndarray) -> pa.Array:
-    """A boolean Arrow array of ``flags`` (see :func:`_numbers`)."""
+    """A boolean Arrow array of ``flags`` (see :func:`arrow_numbers`)."""
     return pa.Array.from_buffers(pa.bool_(), len(flags), [None, pa.py_buffer(np.packbits(flags, bitorder="little"))])
 
 
@@ -309,7 +309,7 @@ def _json_floats(values: np.ndarray) -> pa.Array:
     1e-4 ≤ |x| < 1e9 and 0, only without the ``.0`` of a whole number; the other values
     (exponent notation, NaN, infinities) are printed by ``json.dumps``."""
     x = np.array(values, dtype=np.float64)
-    text = pc.cast(_numbers(x), pa.string())
+    text = pc.cast(arrow_numbers(x), pa.string())
     magnitude = np.abs(x)
     with np.errstate(invalid="ignore"):
         python = ~(((magnitude >= 1e-4) & (magnitude < 1e9)) | (x == 0.0))  # NaN too
@@ -317,14 +317,14 @@ def _json_floats(values: np.ndarray) -> pa.Array:
     if whole.any():
         text = pc.if_else(_mask(whole), pc.binary_join_element_wise(text, ".0", ""), text)
     if python.any():
-        text = pc.replace_with_mask(text, _mask(python), _strings([json.dumps(v) for v in x[python].tolist()]))
+        text = pc.replace_with_mask(text, _mask(python), arrow_strings([json.dumps(v) for v in x[python].tolist()]))
     return text
 
 
 def _json_elements(elements: pa.Array) -> str:
     """The text of JSON array elements (strings, each an element's JSON), ``", "``-separated
     as ``json.dumps`` separates them."""
-    bounds = _numbers(np.array([0, len(elements)], dtype=np.int32))
+    bounds = arrow_numbers(np.array([0, len(elements)], dtype=np.int32))
     return pc.binary_join(pa.ListArray.from_arrays(bounds, elements), ", ")[0].as_py()
 
 

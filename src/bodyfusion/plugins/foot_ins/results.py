@@ -48,18 +48,22 @@ def foot_covariance(t: np.ndarray, recorded: np.ndarray) -> CovarianceHistory:
     N, 4 where smoothed: the position block) as (N, 9, 9) over :data:`COVARIANCE_STATES`: the
     position variances and east–north covariance, the velocity variances, the attitude block;
     every other entry (position–velocity, the velocity covariances...) NaN: not stored."""
-    n = len(t)
-    matrix = np.full((n, 9, 9), np.nan)
-    k = np.arange(3)
-    matrix[:, k, k] = recorded[:, :3]
-    matrix[:, 0, 1] = matrix[:, 1, 0] = recorded[:, 3]
-    if recorded.shape[1] >= RECORDED_COVARIANCE:
-        matrix[:, 3 + k, 3 + k] = recorded[:, VELOCITY_VARIANCE]
-        att = recorded[:, ATTITUDE_COVARIANCE]  # EE, NN, UU, EN, EU, NU
-        matrix[:, 6 + k, 6 + k] = att[:, :3]
-        for (a, b), column in zip(((0, 1), (0, 2), (1, 2)), (3, 4, 5)):
-            matrix[:, 6 + a, 6 + b] = matrix[:, 6 + b, 6 + a] = att[:, column]
-    return CovarianceHistory(np.asarray(t), COVARIANCE_STATES, matrix, STORED)
+
+    def block(epochs: slice) -> np.ndarray:
+        rec = recorded[epochs]
+        matrix = np.full((len(rec), 9, 9), np.nan)
+        k = np.arange(3)
+        matrix[:, k, k] = rec[:, :3]
+        matrix[:, 0, 1] = matrix[:, 1, 0] = rec[:, 3]
+        if rec.shape[1] >= RECORDED_COVARIANCE:
+            matrix[:, 3 + k, 3 + k] = rec[:, VELOCITY_VARIANCE]
+            att = rec[:, ATTITUDE_COVARIANCE]  # EE, NN, UU, EN, EU, NU
+            matrix[:, 6 + k, 6 + k] = att[:, :3]
+            for (a, b), column in zip(((0, 1), (0, 2), (1, 2)), (3, 4, 5)):
+                matrix[:, 6 + a, 6 + b] = matrix[:, 6 + b, 6 + a] = att[:, column]
+        return matrix
+
+    return CovarianceHistory(np.asarray(t), COVARIANCE_STATES, STORED, block)
 
 
 def zupt_columns(t: np.ndarray, hist_nis: np.ndarray, gate: float) -> dict[str, np.ndarray]:
