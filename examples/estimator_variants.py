@@ -93,15 +93,14 @@ from typing import Callable, Iterable
 import numpy as np
 
 from bodyfusion.core.layout import load_layout
+from bodyfusion.reproduce.dual_foot import ALPHA, FEET, filter_overrides, run_figures
 from bodyfusion.runner import run_layout
 from bodyfusion.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "configs" / "sim_dual_foot_consumer_walk.yaml"
 VICON = ROOT / "configs" / "dual_foot_vicon.yaml"
-FEET = ("left_foot", "right_foot")
 KINDS = {"ekf": "KF", "ckf": "cKF", "enekf": "EnEKF", "cenekf": "cEnEKF"}
-ALPHA = 0.9
 SIM_SIGMA_XI = 0.005  # the scenario's driving σ (m/s)
 VICON_SIGMA_STATIONARY = 0.01  # the layout's default ZUPT σ (m/s)
 DC_LIMIT_M = 1.0  # the scenario's max constraint (m)
@@ -143,40 +142,7 @@ PAPER_MDC_CKF = {
 }
 
 Run = dict[str, float]
-"""One run's figures: ``rmse_<foot>`` and ``end_<foot>`` (m), ``mid_rmse`` (m, the feet's
-midpoint), ``epochs``, ``activations``."""
-
-
-def filter_overrides(kind: str, sigma_xi: float) -> list[str]:
-    """``--set`` overrides selecting ``kind`` on both feet with the noise pairing of the docstring."""
-    out = []
-    for foot in FEET:
-        out.append(f"systems.{foot}.filter.kind={kind}")
-        if kind in ("ckf", "cenekf"):
-            out += [f"systems.{foot}.filter.colour_factor={ALPHA}", f"systems.{foot}.filter.zupt_sigma_mps={sigma_xi}"]
-        else:
-            out.append(f"systems.{foot}.filter.zupt_sigma_mps={sigma_xi / np.sqrt(1.0 - ALPHA**2)}")
-    return out
-
-
-def run_figures(result) -> Run:
-    """Horizontal RMSE and end error (m) per foot after the layout's evaluation alignment, the
-    RMSE of the feet's midpoint, and the constraint epochs and activations (0 without a fuser)."""
-    out: Run = {}
-    errs = []
-    for foot in FEET:
-        score = result.scores[foot]
-        err = score.pos_est_aligned[:, :2] - score.pos_truth[:, :2]
-        errs.append(err)
-        out[f"rmse_{foot}"] = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-        out[f"end_{foot}"] = float(np.hypot(*err[-1]))
-    same_epochs = np.array_equal(result.scores[FEET[0]].t, result.scores[FEET[1]].t)
-    mid = 0.5 * (errs[0] + errs[1]) if same_epochs else np.full((1, 2), np.nan)
-    out["mid_rmse"] = float(np.sqrt(np.mean(np.sum(mid**2, axis=1))))
-    rep = result.fuser
-    out["epochs"] = float(rep.epochs if rep is not None else 0)
-    out["activations"] = float(rep.activations if rep is not None else 0)
-    return out
+"""One run's figures (:func:`bodyfusion.reproduce.dual_foot.run_figures`)."""
 
 
 def run_variants(config: Path, sigma_xi: float, seed: int,

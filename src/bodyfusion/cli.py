@@ -1,5 +1,5 @@
-"""Command-line interface (docs/contract.md): ``fusion run | live | simulate | study | validate | report | example |
-plugins``.
+"""Command-line interface (docs/contract.md): ``fusion run | live | simulate | study | reproduce | validate | report |
+example | plugins``.
 
 Each command imports what it needs when it runs (the compiled kernels, matplotlib, Dask are
 heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
@@ -285,6 +285,18 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
     say(f"{report.total} runs: {report.done} done, {report.failed} failed, {report.skipped} skipped "
                f"in {report.wall_s:.1f} s ({report.runs_per_s:.2f} runs/s, {report.executor}, "
                f"{report.workers} workers) -> {report.out_dir}")
+
+
+@app.command()
+def reproduce(paper: Annotated[str, typer.Argument(metavar="PAPER", help="s000, s001, s002, s004 or all.")],
+              out: Annotated[Path, typer.Option("--out", help="Output folder: table.csv and README.md.")],
+              seeds: Annotated[int, typer.Option("--seeds", help="Seeds per experiment.")] = 10,
+              jobs: Annotated[int, typer.Option("--jobs", help="Processes.")] = 1) -> None:
+    """Reproduce a source paper's table where its mechanism acts: the paper's figures beside ours."""
+    from bodyfusion.reproduce import reproduce as reproduce_paper
+
+    cells = reproduce_paper(paper, out, seeds, jobs)
+    say(f"{len(cells)} cells -> {out / 'table.csv'}, {out / 'README.md'}")
 
 
 @app.command()

@@ -293,6 +293,23 @@ def test_turn_on_bias_scale_and_misalignment():
     np.testing.assert_allclose(y[:, 2], G * 1.001)
 
 
+def test_warm_up_drift_settles_the_bias_at_its_own_draw_and_leaves_the_other_terms_alone():
+    """b_w (1 − e^(−t/τ_w)): zero at the first sample, 1 − e^(−1) of the settled bias at τ_w; the
+    other terms' draws are those of the same unit without it (its stream is its own)."""
+    rate, n = 100.0, 60_001
+    plain = SensorErrors(noise_density=1e-3, bias_instability=1e-3, bias_sd=0.01)
+    warm = SensorErrors(noise_density=1e-3, bias_instability=1e-3, bias_sd=0.01, warmup_sd=0.05, warmup_tau_s=120.0)
+    drift = (corrupt(np.zeros((n, 3)), rate, warm, error_generators(4, "w"), "acc")
+             - corrupt(np.zeros((n, 3)), rate, plain, error_generators(4, "w"), "acc"))
+    settled = drift[-1] / -np.expm1(-600.0 / 120.0)
+    np.testing.assert_allclose(drift[0], 0.0, atol=1e-15)
+    np.testing.assert_allclose(drift[12_000], settled * -np.expm1(-1.0), rtol=1e-9)
+    assert np.all(np.abs(settled) > 1e-4) and np.all(np.abs(settled) < 0.25)  # a draw of σ 0.05 per axis
+    draws = np.array([corrupt(np.zeros((2, 3)), rate, SensorErrors(warmup_sd=0.05, warmup_tau_s=1e-9),
+                              error_generators(s, "w"), "gyro")[-1] for s in range(400)])
+    assert np.std(draws) == pytest.approx(0.05, rel=0.1)
+
+
 def test_presets_and_overrides():
     icm = ImuErrorConfig(preset="icm20948").resolve()
     assert icm.gyro.noise_density == pytest.approx(0.5 * math.pi / 180 / 60)

@@ -18,12 +18,15 @@ mechanisation with those terms reaches ≈ 0.25 mm per stride at 100 Hz
 
 Error model (per triad, accelerometer and gyroscope alike)::
 
-    y_k = (I + S + M) x_k + b_const + b_gm(t_k) + b_rw(t_k) + n_k
+    y_k = (I + S + M) x_k + b_const + b_gm(t_k) + b_rw(t_k) + b_w (1 − e^(−t_k/τ_w)) + n_k
 
 ``S``: scale factors (ppm); ``M``: axis misalignment (off-diagonal, mrad);
 ``b_const``: turn-on bias (given vector plus a draw of σ ``*_bias_sd_*``);
 ``b_gm``: first-order Gauss–Markov bias instability (stationary σ, correlation time τ);
-``b_rw``: bias random walk (density, starts at 0); ``n_k``: white noise of
+``b_rw``: bias random walk (density, starts at 0); ``b_w``: the warm-up drift, the bias's
+move while the part heats after power-on (a draw of σ ``*_bias_warmup_*`` per axis, reached with
+time constant τ_w ``*_bias_warmup_tau_s``: the temperature transient a datasheet's bias
+temperature coefficient and a filter's bias model leave out); ``n_k``: white noise of
 per-sample σ = density·√rate. A sensor with a ``range`` then clips every axis of ``y_k`` to
 ±range (saturation: a swing turning faster than the gyroscope measures). Units: accelerometer m/s^2 (density m/s^2/√Hz, random
 walk m/s^3/√Hz), gyroscope rad/s (density rad/s/√Hz, random walk rad/s^2/√Hz).
@@ -205,6 +208,10 @@ class SensorErrors:
     bias_sd: float = 0.0
     scale_ppm: Vec3 = (0.0, 0.0, 0.0)
     misalignment_mrad: Vec6 = (0.0,) * 6
+    warmup_sd: float = 0.0
+    """σ per axis of the bias's warm-up drift b_w (module docstring)."""
+    warmup_tau_s: float = 300.0
+    """Time constant τ_w of the warm-up drift (s)."""
     range: float = math.inf
     """Largest reading per axis (m/s^2 or rad/s); beyond it the sensor reads ±range."""
 
@@ -320,6 +327,12 @@ class ImuErrorConfig(StrictModel):
     gyro_scale_ppm: Vec3 | float | None = None
     acc_misalignment_mrad: Vec6 | None = None
     gyro_misalignment_mrad: Vec6 | None = None
+    acc_bias_warmup_mps2: float | None = Field(default=None, ge=0)
+    """σ per axis of the accelerometer bias's warm-up drift (m/s^2; unset: none)."""
+    gyro_bias_warmup_radps: float | None = Field(default=None, ge=0)
+    """σ per axis of the gyroscope bias's warm-up drift (rad/s; unset: none)."""
+    acc_bias_warmup_tau_s: float | None = Field(default=None, gt=0)
+    gyro_bias_warmup_tau_s: float | None = Field(default=None, gt=0)
     acc_range_mps2: float | None = Field(default=None, gt=0)
     """Accelerometer full scale per axis, m/s^2 (unset: unlimited); beyond it the reading clips."""
     gyro_range_radps: float | None = Field(default=None, gt=0)
@@ -347,13 +360,15 @@ class ImuErrorConfig(StrictModel):
                 bias_sd=float(get(f"bias_sd_{unit}", 0.0)),
                 scale_ppm=scale3,
                 misalignment_mrad=tuple(float(v) for v in get("misalignment_mrad", (0.0,) * 6)),
+                warmup_sd=float(get(f"bias_warmup_{unit}", 0.0)),
+                warmup_tau_s=float(get("bias_warmup_tau_s", 300.0)),
                 range=float(get(f"range_{unit}", math.inf)),
             )
 
         return ImuErrorModel(acc=triad("acc", "mps2"), gyro=triad("gyro", "radps"))
 
 
-ERROR_TERMS = ("bias", "gauss_markov", "random_walk", "white")
+ERROR_TERMS = ("bias", "gauss_markov", "random_walk", "white", "warmup")
 """One random stream per (sensor, term), spawned in this fixed order (append new terms at
 the end so the existing streams keep their bits)."""
 
@@ -424,6 +439,9 @@ def corrupt(ideal: np.ndarray, rate_hz: float, errors: SensorErrors,
     if errors.noise_density > 0:
         for lo, z in _normal_blocks(r["white"], n):
             out[lo:lo + len(z)] += errors.noise_density * math.sqrt(rate_hz) * z
+    if errors.warmup_sd > 0:
+        settled = errors.warmup_sd * r["warmup"].standard_normal(3)
+        out += np.outer(-np.expm1(-np.arange(n) * dt / errors.warmup_tau_s), settled)
     if math.isfinite(errors.range):
         np.clip(out, -errors.range, errors.range, out=out)
     return out

@@ -90,23 +90,31 @@ def exit_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def run_local(tasks: list[list[RunSpec]], workers: int, on_row: Callable[[dict[str, Any]], None]) -> None:
-    """Execute ``tasks`` on a pool of ``workers`` spawned processes, which end with the study
-    (:func:`exit_with_parent`); a dead worker stops the study with a FusionError (the rows
-    already handed over are kept; the runs of its task are run again on resume)."""
+@contextlib.contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A pool of ``workers`` spawned processes that run single-threaded BLAS and end with this
+    one (:func:`exit_with_parent`); spawned as the first jobs are submitted, inside the block."""
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=exit_with_parent, initargs=(os.getpid(),))
     try:
-        with _worker_environment():  # workers are spawned as the first tasks are submitted
-            futures = [pool.submit(execute_runs, task) for task in tasks]
-        for fut in as_completed(futures):
-            for row in fut.result():
-                on_row(row)
+        with _worker_environment():
+            yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_local(tasks: list[list[RunSpec]], workers: int, on_row: Callable[[dict[str, Any]], None]) -> None:
+    """Execute ``tasks`` on a :func:`worker_pool` of ``workers``; a dead worker stops the study
+    with a FusionError (the rows already handed over are kept; the runs of its task are run
+    again on resume)."""
+    try:
+        with worker_pool(workers) as pool:
+            for fut in as_completed([pool.submit(execute_runs, task) for task in tasks]):
+                for row in fut.result():
+                    on_row(row)
     except BrokenProcessPool:
         message = "a worker process died; the finished runs are saved: run the study again to resume"
         raise FusionError(message) from None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def run_dask(tasks: list[list[RunSpec]], workers: int, scheduler: str | None,

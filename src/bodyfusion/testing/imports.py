@@ -8,8 +8,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-LAYERS = ("cli", "api", "study", "testing", "examples", "live", "runner", "outputs", "results", "evaluation", "plugins",
-          "sim", "io", "core", "nav", "base")
+LAYERS = ("cli", "api", "reproduce", "study", "testing", "examples", "live", "runner", "outputs", "results",
+          "evaluation", "plugins", "sim", "io", "core", "nav", "base")
 """bodyfusion's packages from the top down (docs/architecture.md, "Layers"): a package imports
 only those below it."""
 
