@@ -75,18 +75,18 @@ def test_arrow_arrays_are_those_pa_array_makes():
     import numpy as np
     import pyarrow as pa
 
-    from bodyfusion.outputs.trajectories import _numbers, _strings
+    from bodyfusion.outputs.trajectories import arrow_numbers, arrow_strings
 
     values = np.array([0.5, -1.25, 3.0, 1e300, 7.0])
     mask = np.array([False, True, False, False, True])
-    assert _numbers(values).equals(pa.array(values, pa.float64()))
-    assert _numbers(values, mask=mask).equals(pa.array(values, pa.float64(), mask=mask))
-    assert _numbers(values, mask=mask).null_count == 2
-    assert _numbers(values[::2]).equals(pa.array(values[::2], pa.float64()))
+    assert arrow_numbers(values).equals(pa.array(values, pa.float64()))
+    assert arrow_numbers(values, mask=mask).equals(pa.array(values, pa.float64(), mask=mask))
+    assert arrow_numbers(values, mask=mask).null_count == 2
+    assert arrow_numbers(values[::2]).equals(pa.array(values[::2], pa.float64()))
     codes = np.array([0, 1, 1, 0], dtype=np.int32)
-    assert _numbers(codes).equals(pa.array(codes))
+    assert arrow_numbers(codes).equals(pa.array(codes))
     names = ["left_foot", "hand", "füße"]
-    assert _strings(names).equals(pa.array(names, pa.string()))
+    assert arrow_strings(names).equals(pa.array(names, pa.string()))
 
 
 SIGNATURE_PROBE = """

@@ -105,3 +105,51 @@ def test_a_body_limit_needs_two_parts_the_body_knows():
         load_layout(config, ["constraints.0.distance_m=body"])
     with pytest.raises(ConfigError, match=r"constraints\.0\.distance_m"):
         load_layout(VICON, ["constraints=[{between: [left_foot, right_foot], kind: min}]"])
+
+
+def _jumped_fixes(tables: dict, east_m: float, after_s: float) -> None:
+    """The phone's GNSS fixes moved ``east_m`` east from ``after_s`` on, and left there."""
+    (key,) = [k for k in tables if "gnss" in k]
+    fixes = tables[key]
+    lat = np.deg2rad(fixes["lat_deg"][0])
+    later = fixes["t"] >= after_s
+    fixes["lon_deg"] = np.where(later, fixes["lon_deg"] + np.rad2deg(east_m / (6378137.0 * np.cos(lat))),
+                                fixes["lon_deg"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("east_m", [50e3, 1e6])
+def test_a_gnss_jump_that_stays_is_followed_by_the_body_not_fought_by_the_constraint(east_m):
+    from bodyfusion.core.layout import validate_layout
+    from bodyfusion.sim.scenario import simulated
+
+    layout, tables = simulated(ROOT / "configs" / "foot_hand_gnss_outage.yaml", 0).in_memory()
+    layout.pop("outages", None)
+    _jumped_fixes(tables, east_m, 60.0)
+    result = run_layout(validate_layout(layout, None, ROOT / "configs", tables=tables))
+    (followed,) = [f for f in result.findings if f.kind == "reset_followed"]
+    assert followed.system == "hand_phone" and 60.0 < followed.t_start < 75.0
+    assert result.fuser.limits.summary()["resets_followed"] == 1
+    assert result.systems["hand_phone"].diagnostics()["gnss"]["position_resets"] == 1
+    # the foot moved with the phone: the limit never broken by more than a stride's worth again
+    log = result.fuser.constraint_log
+    assert result.fuser.max_violation_before_m < 20.0
+    after = log.t[:log.n] > followed.t_start
+    foot, phone = result.systems["left_foot"].trajectory(), result.systems["hand_phone"].trajectory()
+    moved = np.interp(log.t[:log.n][after][-1], foot.t, foot.pos_n[:, 0]) - foot.pos_n[0, 0]
+    assert moved > 0.99 * east_m
+    assert np.hypot(*(foot.pos_n[-1, :2] - phone.pos_n[-1, :2])) < 1.6
+
+
+def test_a_reset_within_the_limit_moves_no_other_system():
+    from bodyfusion.core.layout import BodyConfig, ConstraintConfig
+    from bodyfusion.core.limits import LimitGuard
+
+    guard = LimitGuard([ConstraintConfig(between=["left_foot", "hand_phone"], kind="max", distance_m=1.5)],
+                       [False], ["left_foot", "hand_phone"], ["foot", "hand"], {}, BodyConfig())
+    assert not guard.beyond_limits("hand_phone", np.array([1.0, 1.0, 5.0]))  # 1.41 m horizontally
+    assert guard.beyond_limits("hand_phone", np.array([1.2, 1.0, 0.0]))
+    assert not guard.beyond_limits("right_foot", np.array([100.0, 0.0, 0.0]))  # held by no limit
+    guard.follow(61.0, "hand_phone", ["left_foot"], np.array([3.0, 4.0, 0.0]))
+    (finding,) = guard.findings()
+    assert finding.kind == "reset_followed" and "5.0 m" in finding.message and "left_foot" in finding.message

@@ -15,6 +15,8 @@ trajectory. A system offers more by deriving from one of these classes as well; 
 - :class:`Smoothing`: it smooths its own run once the fuser is done (the layout's ``smoother``).
 - :class:`AbsoluteFixes`: it carries an absolute position sensor (a phone's GNSS): its fixes
   alone are what the fused track is scored beside, and what a geographic frame is fitted to.
+- :class:`PositionResets`: it may take its position afresh from its absolute sensor when that
+  sensor keeps disagreeing with it; the systems held to it then move with it (the fuser).
 - :class:`Streaming`: it runs live (:mod:`bodyfusion.live`): its data table grows while it
   runs, and it decides its samples some look-ahead behind the newest.
 """
@@ -133,6 +135,20 @@ class AbsoluteFixes(ABC):
     def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The sensor alone: fix times (K,) s and ENU positions (K, 3) m, every fix its user would
         have (outages masked); None when the run has none."""
+
+
+class PositionResets(ABC):
+    """A system that takes its position afresh from its own absolute sensor when that sensor has
+    disagreed with it too long (a phone's GNSS after ``reset_after_rejections`` gated-out fixes:
+    the fixes jumped and stayed, or the dead reckoning strayed). A move larger than a body limit
+    cannot be one system's alone: the fuser moves the systems held to it by the same amount
+    (:meth:`~bodyfusion.core.fuser.Fuser.follow_position_resets`), so that the fix is followed,
+    not fought by the constraint."""
+
+    @abstractmethod
+    def take_position_resets(self) -> list[tuple[float, np.ndarray]]:
+        """The resets since the last call (then forgotten): time (s) and the position's move
+        (3,) ENU m."""
 
 
 class Streaming(ABC):

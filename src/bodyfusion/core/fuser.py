@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
-from bodyfusion.core.capabilities import TransitionTracking, offers
+from bodyfusion.core.capabilities import AbsoluteFixes, PositionResets, TransitionTracking, offers
 from bodyfusion.core.heading import HeadingTie
 from bodyfusion.core.layout import BodyConfig, ConstraintConfig, FuserConfig
 from bodyfusion.core.limits import LimitGuard
@@ -384,6 +384,7 @@ class Fuser:
         tracked)."""
         joint, rep, pos = self.joint, self.report, self._pos
         joint.advance(t)
+        self.follow_position_resets()
         P = joint.covariance()
         p_hat = np.concatenate([position() for position in self._positions])
         limits = rep.limits.limits(t, p_hat)
@@ -413,6 +414,45 @@ class Fuser:
         rep.activations += int(bool(sol.active))
         joint.correct(dx, P_new, self._corrected)
         rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, solve_us, limits, tail)
+
+    def follow_position_resets(self) -> None:
+        """Move the body with a system that took its position afresh from its absolute sensor
+        (:class:`~bodyfusion.core.capabilities.PositionResets`) by more than a limit it is held
+        to: every system reached from it through the constraints, but those with absolute fixes
+        of their own (and what lies beyond them), moves by the same amount (a translation: a
+        relative correction, covariance kept), so that the constraint follows the fix instead of
+        dragging the system back from it at every epoch. Each move is in the limits' record
+        (:meth:`~bodyfusion.core.limits.LimitGuard.follow`)."""
+        guard = self.report.limits
+        for name, system in zip(self._order, self.joint.systems):
+            if not offers(system, PositionResets):
+                continue
+            for t_reset, move in system.take_position_resets():
+                if not guard.beyond_limits(name, move):
+                    continue
+                followers = self._held_to(name)
+                for follower in followers:
+                    held = self.systems[follower]
+                    dx = np.zeros(held.P.shape[0])
+                    dx[held.position_indices] = move
+                    held.apply_relative_correction(dx, held.P.copy())
+                guard.follow(t_reset, name, followers, move)
+
+    def _held_to(self, name: str) -> list[str]:
+        """The systems reached from ``name`` through the constraints, not passing through (nor
+        taking) one that carries absolute fixes of its own."""
+        reached, todo = [name], [name]
+        while todo:
+            here = todo.pop()
+            for c in self.constraints:
+                if here in c.between:
+                    other = c.between[1] if c.between[0] == here else c.between[0]
+                    system = self.systems[other]
+                    if other in reached or (offers(system, AbsoluteFixes) and system.absolute_fixes() is not None):
+                        continue
+                    reached.append(other)
+                    todo.append(other)
+        return reached[1:]
 
     def _solvers_for(self, limits: np.ndarray) -> tuple:
         """The solver and the density truncation of the constraints at ``limits`` (m), built once

@@ -17,6 +17,11 @@ separation); when over the last :data:`FIGHT_EPOCHS` epochs of a constraint e â‰
 :data:`FIGHT_SIGMAS` at least :data:`FIGHT_SHARE` of the time, the constraint fights the
 systems: the limit is relaxed to :data:`RELAX_FACTOR` times the separation the estimates hold
 (``fuser.relax_fights``), and it becomes a finding.
+
+Fixes followed. A system that takes its position afresh from its own absolute sensor (a
+phone's GNSS that jumped and stayed) by more than a limit it is held to cannot be there alone:
+the fuser moves the systems held to it with it (:meth:`LimitGuard.follow` keeps the record), and
+it becomes a finding.
 """
 
 from __future__ import annotations
@@ -85,6 +90,8 @@ class LimitGuard:
     """(K,) metres added to each limit by relaxing it."""
     fights: list[tuple[int, float, float, float, float]] = field(default_factory=list)
     """Every relaxation: (constraint, t_start s, t s, limit before m, limit after m)."""
+    followed: list[tuple[float, str, tuple[str, ...], np.ndarray]] = field(default_factory=list)
+    """Every position reset the body followed: (t s, system, the systems moved with it, move (3,) m)."""
     _strides: dict[int, list[float]] = field(default_factory=dict)
     _last: dict[int, np.ndarray] = field(default_factory=dict)
     _next_sync: dict[int, int] = field(default_factory=dict)
@@ -156,9 +163,21 @@ class LimitGuard:
                 self.relaxation[k] += relaxed - limits[k]
                 history.clear()
 
+    def beyond_limits(self, name: str, move: np.ndarray) -> bool:
+        """Whether a move (3,) m of system ``name`` is longer, horizontally, than the smallest
+        limit it is held to (its constraints' current ``max`` limits; False when it has none)."""
+        held = [float(c.distance_m) + self.relaxation[k] for k, c in enumerate(self.constraints)
+                if c.kind == "max" and name in c.between]
+        return bool(held) and float(np.hypot(move[0], move[1])) > min(held)
+
+    def follow(self, t: float, name: str, followers: list[str], move: np.ndarray) -> None:
+        """Record that ``followers`` moved by ``move`` (3,) m with system ``name``'s reset at ``t`` (s)."""
+        self.followed.append((float(t), name, tuple(followers), np.asarray(move, dtype=float).copy()))
+
     def findings(self) -> list[Finding]:
-        """A finding per constraint that fought the systems."""
-        out = []
+        """A finding per constraint that fought the systems, and one per system whose position
+        resets the body followed."""
+        out = self._followed_findings()
         for k, c in enumerate(self.constraints):
             fights = [f for f in self.fights if f[0] == k]
             if not fights:
@@ -178,8 +197,27 @@ class LimitGuard:
                 "leave heading_deg at auto so that both share one frame."))
         return out
 
+    def _followed_findings(self) -> list[Finding]:
+        out = []
+        for name in dict.fromkeys(f[1] for f in self.followed):
+            moves = [f for f in self.followed if f[1] == name]
+            sizes = [float(np.hypot(*f[3][:2])) for f in moves]
+            followers = ", ".join(dict.fromkeys(n for f in moves for n in f[2])) or "no other system"
+            out.append(Finding(
+                "reset_followed", "warning", name, moves[0][0], moves[-1][0],
+                f"{name} took its position afresh from its absolute sensor {len(moves)} time(s), by up to "
+                f"{max(sizes):.1f} m, beyond the body's limits; {followers} moved with it, so that the constraints "
+                "follow the fixes instead of dragging it back.",
+                "the absolute sensor jumped and stayed there (a receiver reset, a changed datum or antenna offset, "
+                "spoofing), or the dead reckoning strayed further than a constraint could hold.",
+                f"look at {name}'s fixes at those times; if the jump is the receiver's error, mask it with an outage "
+                "(outages: [{system, start_s, duration_s}])."))
+        return out
+
     def summary(self) -> dict:
-        """metrics.json figures: the gait's stride and each constraint's relaxation."""
+        """metrics.json figures: the gait's stride, each constraint's relaxation, and the
+        position resets the body followed."""
         stride = self.stride_m()
         return {"stride_m": stride, "follows_gait": [bool(f) for f in self.follows],
-                "fights": len(self.fights), "relaxation_m": [float(x) for x in self.relaxation]}
+                "fights": len(self.fights), "relaxation_m": [float(x) for x in self.relaxation],
+                "resets_followed": len(self.followed)}

@@ -12,7 +12,7 @@ system → what it keeps).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bodyfusion.core.system import CovarianceHistory, SensorSystem
-from bodyfusion.outputs.trajectories import ROWS, arrow_numbers, arrow_strings
+from bodyfusion.outputs.trajectories import ROWS, arrow_numbers, arrow_strings, epoch_pieces
 
 COVARIANCE_FORMAT_VERSION = "1"
 
@@ -29,18 +29,11 @@ PIECE_ROWS = ROWS // 4
 """Epochs formed and written at once: a piece of a 9-state history's matrices is 10 MB."""
 
 
-def _epoch_pieces(history: CovarianceHistory, decimate: int) -> Iterator[slice]:
-    """The kept epochs (every ``decimate``-th) in pieces of :data:`PIECE_ROWS` (at least one)."""
-    n = len(history.t)
-    step = PIECE_ROWS * decimate
-    yield from (slice(a, min(a + step, n), decimate) for a in range(0, max(n, 1), step))
-
-
 def _stored_columns(history: CovarianceHistory, decimate: int) -> list[str]:
     """The history's columns that hold a number at some kept epoch (``t`` first), a piece at a time."""
     names = list(history.columns(slice(0, 0)))
     held = {"t"}
-    for epochs in _epoch_pieces(history, decimate):
+    for epochs in epoch_pieces(len(history.t), decimate, PIECE_ROWS):
         held.update(k for k, v in history.columns(epochs).items() if k not in held and not np.isnan(v).all())
     return [k for k in names if k in held]
 
@@ -58,7 +51,7 @@ def write_covariances_parquet(path: Path, systems: Mapping[str, SensorSystem], d
     with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=["system"]) as writer:
         for name, history in histories.items():
             held = set(kept[name])
-            for epochs in _epoch_pieces(history, decimate):
+            for epochs in epoch_pieces(len(history.t), decimate, PIECE_ROWS):
                 columns = history.columns(epochs)
                 n = len(columns["t"])
                 writer.write_batch(pa.RecordBatch.from_arrays(

@@ -81,9 +81,9 @@ ROWS = 1 << 16
 (the same bytes as at once), never holding a whole long track's rows, strings or tables."""
 
 
-def _pieces(n: int, decimate: int) -> Iterator[slice]:
-    """Slices of the epochs 0..n that keep every ``decimate``-th, :data:`ROWS` kept epochs each."""
-    step = ROWS * decimate
+def epoch_pieces(n: int, decimate: int, rows: int = ROWS) -> Iterator[slice]:
+    """Slices of the epochs 0..n that keep every ``decimate``-th, ``rows`` kept epochs each."""
+    step = rows * decimate
     for a in range(0, n, step):
         yield slice(a, min(a + step, n), decimate)
 
@@ -185,7 +185,7 @@ def _trajectory_pieces(trajectories: Mapping[str, Trajectory], decimate: int) ->
     names = list(trajectories)
     empty = True
     for k, traj in enumerate(trajectories.values()):
-        for epochs in _pieces(len(traj.t), decimate):
+        for epochs in epoch_pieces(len(traj.t), decimate):
             empty = False
             yield _trajectory_columns(names, k, traj, epochs)
     if empty:
@@ -262,7 +262,7 @@ def write_tum(folder: Path, trajectories: Mapping[str, Trajectory], truths: Mapp
     for name, (t, pos, step, q) in tracks.items():
         written.append(folder / f"{name}.txt")
         with pacsv.CSVWriter(written[-1], schema, write_options=options) as writer:
-            for epochs in _pieces(len(t), step):
+            for epochs in epoch_pieces(len(t), step):
                 writer.write_table(_tum_table(t[epochs], pos[epochs], None if q is None else q[epochs], times))
     return written
 
@@ -383,12 +383,12 @@ def _line_feature(properties: dict, t: np.ndarray, pos_n: np.ndarray, sd: np.nda
 
     def column(values: np.ndarray, decimals: int) -> _JsonArray:
         return _JsonArray(lambda: (_json_elements(_json_floats(np.round(values[k[p]], decimals)))
-                                   for p in _pieces(k.size, 1)))
+                                   for p in epoch_pieces(k.size, 1)))
 
     properties = {**properties, "times": column(t, 6)}
     if sd is not None:
         properties.update({f"sd_{axis}_m": column(sd[:, j], 5) for j, axis in enumerate(("east", "north", "up"))})
-    coordinates = _JsonArray(lambda: (_json_positions(pos_n[k[p]], origin, flat) for p in _pieces(k.size, 1)))
+    coordinates = _JsonArray(lambda: (_json_positions(pos_n[k[p]], origin, flat) for p in epoch_pieces(k.size, 1)))
     return _feature(properties, "LineString", coordinates)
 
 

@@ -85,7 +85,9 @@ class PdrFilterConfig(StrictModel):
     no β). So a minute of fixes is not taken for a minute of independent evidence.
     Chi-square gating with ``gate_probability``; after ``reset_after_rejections`` fixes in
     a row fail the gate the filter has lost the GNSS (its position is wrong, or the GNSS
-    jumped): the position is forgotten and taken again from the fix (0: never). Skipped:
+    jumped): the position is forgotten and taken again from the fix, however far (0: never);
+    the systems a constraint holds to the phone move with it when the move is longer than the
+    limit (:meth:`~bodyfusion.core.fuser.Fuser.follow_position_resets`). Skipped:
     a fix whose reported ground speed exceeds ``max_speed_mps`` (more than a walking
     pedestrian's: the receiver's solution moving on its own, converging from a cold start
     or jumping between multipath solutions; nor can it be the start), and a fix that

@@ -18,6 +18,8 @@ model are the system's; the module docstring there states the measurement models
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bodyfusion.core.heading import wrap_angle
@@ -74,10 +76,12 @@ class GnssAiding:
         ok = self._update(H, residual, R, self._gate_pos, walking and steady, "gnss_position")
         self._rejected_in_row = 0 if ok else self._rejected_in_row + 1
         if not ok and 0 < f.reset_after_rejections <= self._rejected_in_row:
+            before = self.position_n().copy()
             self._forget_position()
-            ok = self._update(H, residual, R, self._gate_pos, False, None)
+            ok = self._update(H, residual, R, math.inf, False, None)  # a reset takes the fix, however far
             counts["position_resets"] += 1
             self._rejected_in_row = 0
+            self._position_resets.append((self._tc, self.position_n() - before))
         elif ok and len(self._bank) == 1 and np.hypot(*self._bank.moments(copy=False)[0][5:7]) > BIAS_LIMIT:
             self._reanchor()  # the filter explains the fixes by a bias no fix has: the PDR strayed
             ok = self._update(H, residual, R, self._gate_pos, False, None)

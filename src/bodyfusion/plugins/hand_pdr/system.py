@@ -74,7 +74,7 @@ from bodyfusion.base.findings import Finding
 from bodyfusion.base.types import InputReport, Trajectory
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
-from bodyfusion.core.capabilities import AbsoluteFixes, HeadingAlignment, TransitionTracking
+from bodyfusion.core.capabilities import AbsoluteFixes, HeadingAlignment, PositionResets, TransitionTracking
 from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
 from bodyfusion.nav.filter_health import NisRecord, innovation_columns
 from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
@@ -111,7 +111,7 @@ STEP, GNSS, MAGNETOMETER, STEADY = range(4)
 """Event kinds, in the order they are processed at one time."""
 
 
-class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes):
+class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes, PositionResets):
     """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
     with the magnetometer's holding offset), or a bank of them while the heading is unknown.
 
@@ -295,6 +295,7 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
                             "heading_skipped_accuracy": 0, "track_heading_accepted": 0, "track_heading_rejected": 0,
                             "reanchored": 0}
         self.reanchor_times: list[float] = []
+        self._position_resets: list[tuple[float, np.ndarray]] = []
         self.nis_records = {"gnss_position": NisRecord(3), "gnss_course": NisRecord(1), "gnss_track": NisRecord(1)}
         self._track = TrackHeading(f.gnss_correlated_fraction)
         if self._mag is not None:
@@ -446,6 +447,12 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
     @property
     def heading_is_auto(self) -> bool:
         return self.config.initial.heading_deg == "auto"
+
+    def take_position_resets(self) -> list[tuple[float, np.ndarray]]:
+        """The position resets to a GNSS fix since the last call: time (s), move (3,) ENU m
+        (:class:`~bodyfusion.core.capabilities.PositionResets`)."""
+        out, self._position_resets = self._position_resets, []
+        return out
 
     def absolute_fixes(self) -> tuple[np.ndarray, np.ndarray] | None:
         """Every GNSS fix outside the layout's outages (the phone's GNSS alone)."""
