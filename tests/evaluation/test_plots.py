@@ -271,3 +271,51 @@ def test_a_bad_figures_section_is_refused_naming_its_key(write_yaml, figures, ke
     with pytest.raises(ConfigError) as err:
         load_layout(write_yaml(layout))
     assert err.value.key == key and reason in err.value.reason
+
+
+def test_a_system_keeps_its_colour_in_every_figure_png_and_html_even_where_another_is_left_out():
+    """Three systems, the first without truth: the scored figures draw only the other two, each in
+    the colour the plan view gives it, and the HTML report's figures use the same colours."""
+    from bodyfusion.evaluation import report_figures
+    from bodyfusion.evaluation.colours import system_colours
+
+    t = np.linspace(0.0, 10.0, 201)
+    estimates = {"phone": walk(t, 1.0), "left": walk(t, 0.25), "right": walk(t, -0.05)}
+    truths = {"left": TruthTrack(t, walk(t, 0.15).pos_n), "right": TruthTrack(t, walk(t, -0.15).pos_n)}
+    transform, scores = score_systems({k: estimates[k] for k in truths}, truths, alignment="none")
+    nees = {"left": NeesTrack(t, np.full(t.size, 2.0)), "right": NeesTrack(t, np.full(t.size, 3.0))}
+    run_ = ScoredTracks(estimates, truths, transform, scores, nees)
+    expected = system_colours(run_)
+    assert len(set(expected.values())) == 3
+
+    def drawn(fig: Figure) -> dict[str, tuple]:
+        return {line.get_label().split(" ")[0]: to_rgb(line.get_color()) for ax in fig.axes for line in ax.lines
+                if line.get_label().split(" ")[0] in expected and line.get_linestyle() in ("-", "steps-post")}
+
+    for fig in (plot_trajectories(run_), plot_error_vs_time(run_), plot_error_cdf(run_), plot_nees(run_)):
+        lines = drawn(fig)
+        assert lines, fig.axes[0].get_title()
+        for name, rgb in lines.items():
+            assert rgb == to_rgb(expected[name]), (fig.axes[0].get_title(), name)
+    html = {trace.name.split(" ")[0]: trace.line.color for fig in (report_figures.plan_view(run_),
+                                                                   report_figures.error_vs_time(run_))
+            for trace in fig.data if trace.mode == "lines" and trace.name.split(" ")[0] in expected}
+    assert html and all(colour == expected[name] for name, colour in html.items())
+    metrics = {"systems": {name: {"health": {"nees": {"mean": 2.0, "profile": {"t_s": [0.0], "mean": [2.0]}}}}
+                           if name in nees else {} for name in estimates}}
+    (trace, *_) = report_figures.nees_profile(metrics).data
+    assert trace.name.startswith("left") and trace.line.color == expected["left"]
+
+
+def test_a_study_curve_has_one_colour_in_the_png_and_the_html_whatever_the_order_of_its_rows():
+    from bodyfusion.evaluation import report_figures
+
+    curves = {"foot_hand": {0.0: [1.0, 1.2], 60.0: [2.0, 2.5]}, "dual_foot_hand": {0.0: [0.8, 0.9], 60.0: [1.1, 1.3]}}
+    png = {line.get_label().split(" ")[0]: to_rgb(line.get_color())
+           for line in plot_against_outage_duration(curves, "t").axes[0].lines if "(mean" in line.get_label()}
+    summary = [{"layout": layout, "outage_duration_s": str(d), "metric": "outage.end_error_m", "mean": str(np.mean(v)),
+                "sd": "0.1", "runs": "2", "p90": str(max(v))}
+               for layout in ("dual_foot_hand", "foot_hand") for d, v in curves[layout].items()]
+    html = {trace.name.split(" ")[0]: to_rgb(trace.line.color)
+            for trace in report_figures.study_metric(summary, "outage.end_error_m").data if trace.name.endswith("mean")}
+    assert png.keys() == html.keys() == curves.keys() and png == html

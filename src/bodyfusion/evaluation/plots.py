@@ -37,6 +37,7 @@ from bodyfusion.base.files import replaced_atomically
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import SystemScore, error_cdf, horizontal_sigma_m, score_systems
+from bodyfusion.evaluation.colours import colours, system_colours
 from bodyfusion.evaluation.scored_run import ScoredRun
 from bodyfusion.evaluation.thinning import thin_index
 
@@ -194,10 +195,6 @@ def _log_y(ax: Axes) -> None:
     ax.yaxis.set_minor_formatter(DecadeLabels(labelOnlyBase=False))
 
 
-def _colours(names: Sequence[str]) -> dict[str, str]:
-    return {name: f"C{i % 10}" for i, name in enumerate(names)}
-
-
 def _darker(colour: str, factor: float = 0.55) -> tuple[float, float, float]:
     r, g, b = to_rgb(colour)
     return (r * factor, g * factor, b * factor)
@@ -272,7 +269,7 @@ def plot_trajectories(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
     (surveyed points as crosses); open circles mark the starts, squares the ends. Where the run
     is scored the legend gives each system's horizontal RMSE."""
     transform = run.transform
-    colour = _colours(list(dict.fromkeys([*run.trajectories, *run.truths])))
+    colour = system_colours(run)
     ax = _axes(ax, 8.0, 6.0)
     for name, traj in run.trajectories.items():
         _draw_track(ax, transform.apply(np.asarray(traj.pos_n, dtype=float)), colour[name],
@@ -292,7 +289,7 @@ def plot_method_comparison(runs: Mapping[str, ScoredRun], system: str, *, ax: Ax
     own colour, against the truth of the first run that has one (black, dashed); with truth the
     legend gives each method's horizontal RMSE. Starts and ends marked as in :func:`plot_trajectories`."""
     tracks = {label: run for label, run in runs.items() if system in run.trajectories}
-    colour = _colours(list(tracks))
+    colour = colours(tracks)
     aligned = {label: Trajectory(t.t, run.transform.apply(np.asarray(t.pos_n, dtype=float)), t.pos_sd, t.pos_cov_en)
                for label, run in tracks.items() for t in (run.trajectories[system],)}
     truth = next((run.truths[system] for run in runs.values() if system in run.truths), None)
@@ -319,7 +316,7 @@ def plot_error_vs_time(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
     band wider than them is cut at the top rather than squeezing the errors flat."""
     scores, estimates = run.scores, run.trajectories
     ax = _axes(ax)
-    colour = _colours(list(scores))
+    colour = system_colours(run)
     top = 0.0
     for name, sc in scores.items():
         if name in estimates:
@@ -349,7 +346,7 @@ def plot_error_cdf(run: ScoredRun, *, ax: Axes | None = None) -> Figure:
     """Empirical CDF of the horizontal error (m) per scored system of ``run``."""
     scores = run.scores
     ax = _axes(ax)
-    colour = _colours(list(scores))
+    colour = system_colours(run)
     for name, sc in scores.items():
         e, p = error_cdf(sc.horizontal_error_m)
         if e.size:
@@ -376,7 +373,7 @@ def plot_nees(run: ScoredRun, title: str = "Horizontal position NEES against tim
     and the share of epochs inside the band."""
     tracks = run.nees
     ax = _axes(ax)
-    colour = _colours(list(tracks))
+    colour = system_colours(run)
     low = []
     for name, track in tracks.items():
         ok = np.isfinite(track.nees) & (track.nees > 0)
@@ -424,7 +421,7 @@ def plot_against_outage_duration(curves: Mapping[str, Mapping[float, Sequence[fl
     from scipy.stats import t as student_t
 
     ax = _axes(ax)
-    colour = _colours(list(curves))
+    colour = colours(sorted(curves))  # by label, as the study report's HTML figure
     span = max((abs(float(d)) for by_duration in curves.values() for d in by_duration), default=0.0) or 1.0
     top = 0.0
     for k, (label, by_duration) in enumerate(curves.items()):

@@ -13,18 +13,18 @@ from typing import Any
 
 import numpy as np
 import plotly.graph_objects as go
-from plotly.colors import qualitative
 from plotly.subplots import make_subplots
 
+from bodyfusion.evaluation.colours import PALETTE, colours, system_colours
 from bodyfusion.evaluation.metrics import horizontal_sigma_m
 from bodyfusion.evaluation.scored_run import ScoredRun
 from bodyfusion.evaluation.thinning import thin_index
 
-PALETTE = qualitative.Plotly
 HEIGHT_PX = 460
 
 
 def _colour(i: int) -> str:
+    """The i-th colour of the palette, for what is no system (a bar of counts)."""
     return PALETTE[i % len(PALETTE)]
 
 
@@ -56,8 +56,9 @@ def plan_view(run: ScoredRun) -> go.Figure:
     """Estimates (solid, after the evaluation transform) against truth (dashed, darker; surveyed
     points as crosses), east vs north at equal scale; circles at the starts, squares at the ends."""
     fig = go.Figure()
-    for i, (name, traj) in enumerate(run.trajectories.items()):
-        colour, truth = _colour(i), run.truths.get(name)
+    palette = system_colours(run)
+    for name, traj in run.trajectories.items():
+        colour, truth = palette[name], run.truths.get(name)
         if truth is not None:
             p = truth.pos_n[thin_index(len(truth.t))] if not truth.sparse else truth.pos_n
             fig.add_scatter(x=_f32(p[:, 0]), y=_f32(p[:, 1]), name=f"{name} truth", legendgroup=name,
@@ -89,8 +90,9 @@ def error_vs_time(run: ScoredRun) -> go.Figure:
     (0 to 2 √(σ_E² + σ_N²)), the axis following the errors; without truth, the 2DRMS alone."""
     fig = go.Figure()
     top = 0.0
-    for i, (name, traj) in enumerate(run.trajectories.items()):
-        colour, score = _colour(i), run.scores.get(name)
+    palette = system_colours(run)
+    for name, traj in run.trajectories.items():
+        colour, score = palette[name], run.scores.get(name)
         t = score.t if score is not None else traj.t
         idx = thin_index(len(t))
         band = 2.0 * horizontal_sigma_m(traj, t[idx])
@@ -122,14 +124,15 @@ def nees_profile(metrics: dict[str, Any]) -> go.Figure | None:
     if not tracks:
         return None
     fig = go.Figure()
-    for i, (name, nees) in enumerate(tracks.items()):
+    palette = colours(metrics.get("systems", {}))  # every system's place, as in the run's other figures
+    for name, nees in tracks.items():
         prof = nees.get("profile") or {}
         mean, share = nees.get("mean"), nees.get("in_band_fraction")
         facts = ([f"mean {mean:.3g}"] if mean is not None else []) + (
             [f"{100 * share:.0f} % of epochs in band"] if share is not None else [])
         label = f"{name} ({', '.join(facts)})" if facts else name
         fig.add_scatter(x=prof.get("t_s", []), y=prof.get("mean", []), mode="lines+markers", name=label,
-                        line={"color": _colour(i)})
+                        line={"color": palette[name]})
     first = next(iter(tracks.values()))
     lo, hi = first.get("band") or (None, None)
     if lo is not None:
@@ -222,18 +225,19 @@ def study_metric(summary: list[dict[str, str]], metric: str) -> go.Figure:
             groups.setdefault(label or metric, []).append(row)
     fig = go.Figure()
     numeric = all(_number(r.get(axis)) is not None for rows in groups.values() for r in rows)
-    for i, (label, rows) in enumerate(groups.items()):
+    palette = colours(sorted(groups))  # by label, as the study's PNG plots
+    for label, rows in groups.items():
         rows = sorted(rows, key=lambda r: _number(r.get(axis)) or 0.0) if numeric else rows
         x = [_number(r.get(axis)) if numeric else r.get(axis) for r in rows]
         fig.add_scatter(x=x, y=[_number(r.get("mean")) for r in rows], mode="lines+markers", name=f"{label} mean",
-                        legendgroup=label, line={"color": _colour(i)},
+                        legendgroup=label, line={"color": palette[label]},
                         error_y={"type": "data", "array": [confidence_half_width(_number(r.get("sd")),
                                                                                  _number(r.get("runs"))) or 0.0
                                                            for r in rows],
-                                 "thickness": 1, "color": _rgba(_colour(i), 0.5)},
+                                 "thickness": 1, "color": _rgba(palette[label], 0.5)},
                         customdata=[[r.get("runs"), r.get("failed")] for r in rows],
                         hovertemplate="%{x}: mean %{y:.3g}<br>%{customdata[0]} runs, %{customdata[1]} failed")
         fig.add_scatter(x=x, y=[_number(r.get("p90")) for r in rows], mode="lines", name=f"{label} p90",
-                        legendgroup=label, line={"color": _colour(i), "dash": "dot", "width": 1})
+                        legendgroup=label, line={"color": palette[label], "dash": "dot", "width": 1})
     title = f"{metric} against {axis} (mean with its 95 % confidence interval, 90th percentile dotted)"
     return _layout(fig, title, axis, "value [m]" if "_m." in metric or metric.endswith("_m") else "value")
