@@ -130,3 +130,40 @@ def test_every_stance_update_has_its_nis_in_the_innovations(vicon):
     assert (~zupt.accepted).sum() == diag["zupt_gated"]
     assert zupt.nis.mean() == pytest.approx(diag["zupt_mean_nis"], rel=1e-9)
     assert zupt.t.is_monotonic_increasing
+
+
+def test_a_system_exports_to_an_xarray_dataset_with_its_states_named_and_its_units(vicon):
+    pytest.importorskip("xarray")
+    import json
+
+    ds = vicon.to_xarray("left_foot")
+    traj, score, history = vicon.trajectories["left_foot"], vicon.scores["left_foot"], vicon.covariances("left_foot")
+    np.testing.assert_array_equal(ds["t"], traj.t)
+    np.testing.assert_array_equal(ds["north_m"], traj.pos_n[:, 1])
+    np.testing.assert_array_equal(ds["sd_up_m"], traj.pos_sd[:, 2])
+    np.testing.assert_array_equal(ds["heading_deg"], vicon.states("left_foot")["heading_deg"])
+    np.testing.assert_array_equal(ds["horizontal_error_m"], score.horizontal_error_m)
+    np.testing.assert_array_equal(ds["t_truth"], score.t)
+    # the covariance by the states' names, as the system stores it
+    np.testing.assert_array_equal(ds["covariance"].sel(state="east_m", state_other="north_m"), history.matrix[:, 0, 1])
+    assert list(ds["state"].values) == list(history.states)
+    assert ds["east_m"].attrs["units"] == "m" and ds["t"].attrs["units"] == "s"
+    assert ds["v_up_mps"].attrs["units"] == "m/s"
+    assert json.loads(ds.attrs["frame"]) == vicon.frame.to_dict() and ds.attrs["system"] == "left_foot"
+    with pytest.raises(KeyError, match="no system"):
+        vicon.to_xarray("hand")
+
+
+def test_a_hand_dataset_has_its_whole_error_state_covariance_on_its_records():
+    pytest.importorskip("xarray")
+    from bodyfusion.core.layout import validate_layout
+    from bodyfusion.sim.scenario import simulated
+
+    layout, tables = simulated(CONFIGS / "foot_hand_gnss_outage.yaml", 0).in_memory()
+    result = run_layout(validate_layout(layout, None, CONFIGS, tables=tables))
+    ds = result.to_xarray("hand_phone")
+    history = result.covariances("hand_phone")
+    assert ds.sizes["t"] == len(result.trajectories["hand_phone"].t)
+    np.testing.assert_array_equal(ds["t_covariance"], history.t)  # each step and update
+    assert ds.sizes["state"] == len(history.states) >= 8
+    assert np.all(np.isfinite(ds["covariance"].values))

@@ -20,8 +20,9 @@ from bodyfusion.evaluation.consistency import NeesTrack
 from bodyfusion.nav.filter_health import CovarianceHealth
 from bodyfusion.evaluation.metrics import PlanarTransform, SystemScore
 
-if TYPE_CHECKING:  # pandas loads when a table is asked for
+if TYPE_CHECKING:  # pandas loads when a table is asked for, xarray when a dataset is
     import pandas as pd
+    import xarray as xr
 
 
 _MAPPINGS = ("systems", "trajectories", "truths", "scores", "heading_rotations_rad", "timings_s", "aiding", "nees",
@@ -34,7 +35,8 @@ class RunResult:
     (units: :data:`~bodyfusion.base.types.NavigationFrame.UNITS`), scores, findings; its tables
     as pandas DataFrames (:meth:`to_frame`, :meth:`states`, :meth:`covariances`, :meth:`events`,
     :meth:`innovations`, :meth:`constraint_events`, :meth:`errors`, :meth:`truth_frame`), each
-    with the frame and units in its ``attrs``.
+    with the frame and units in its ``attrs``, and a system's as an xarray Dataset
+    (:meth:`to_xarray`).
 
     Frozen: its attributes cannot be set and its mappings are read-only views. Building one
     copies nothing: it holds what the run made. It is a
@@ -148,6 +150,16 @@ class RunResult:
         error-state covariance at each step and update; the random walk its whole (position)
         covariance at every sample."""
         return self.system(name).covariance_history()
+
+    def to_xarray(self, name: str) -> xr.Dataset:
+        """System ``name``'s trajectory, covariance history and errors against truth as one
+        :class:`xarray.Dataset` with the states' names and every unit in its attributes
+        (:func:`bodyfusion.results.arrays.system_dataset`; the optional dependency xarray:
+        ``pip install "bodyfusion[xarray]"``)."""
+        from bodyfusion.results.arrays import system_dataset
+
+        return system_dataset(name, self.system(name), self.trajectories[name], self.scores.get(name),
+                              self.frame.to_dict())
 
     def events(self) -> pd.DataFrame:
         """Gait events of every system: ``system``, ``event`` (``stance``: the foot INS's
