@@ -245,3 +245,28 @@ def test_the_study_figures_draw_one_statistic_in_html_and_png(tmp_path):
     bars = fig.data[0].error_y.array
     assert list(bars) == pytest.approx([confidence_half_width(0.2, 5)] * 2)
     assert "95 % confidence interval" in fig.layout.title.text
+
+
+def test_a_geo_referenced_run_has_a_map_in_longitude_and_latitude_and_one_without_has_none(tmp_path):
+    import pymap3d
+
+    from bodyfusion.evaluation.report_figures import map_view
+    from bodyfusion.sim import simulate
+
+    sim = simulate(ROOT / "configs" / "foot_hand_gnss_outage.yaml", tmp_path / "sim", seed=0)
+    run(sim.config_path, ["output.plots=false"], out_dir=tmp_path / "out")
+    content = read_folder(tmp_path / "out")
+    origin = content.tracks.frame.geodetic_origin
+    fig = map_view(content.tracks)
+    hand = next(trace for trace in fig.data if trace.name == "hand_phone")
+    lat, lon, _ = pymap3d.enu2geodetic(*content.tracks.trajectories["hand_phone"].pos_n[0], *origin)
+    assert hand.x[0] == pytest.approx(lon, abs=1e-9) and hand.y[0] == pytest.approx(lat, abs=1e-9)
+    assert fig.layout.yaxis.scaleratio == pytest.approx(1.0 / np.cos(np.radians(origin[0])))
+    assert {t.name for t in fig.data} >= {"left_foot", "hand_phone", "left_foot truth"}
+    page = write_report(tmp_path / "out")
+    assert 'id="plot-map"' in page.read_text()
+    if CHROMIUM.exists():
+        dom, console = render(page, tmp_path / "profile")
+        assert console == [] and "plot-map" in dom.drawn
+    assert map_view(read_folder(walkers_run(tmp_path / "walkers")).tracks) is None
+    assert 'id="plot-map"' not in write_report(tmp_path / "walkers").read_text()

@@ -160,6 +160,7 @@ def run_page(run: RunFolder) -> str:
         _section("Metrics", table(SYSTEM_HEADER, _system_rows(m)), table(("run", "value"), _run_facts(run)),
                  "".join(_note(f"warning: {w}") for w in warnings)),
         _section("Trajectory", _note(truth_note), _figure(figures.plan_view(run.tracks), "plot-trajectory", "")),
+        *([_section("Map", _figure(map_, "plot-map", ""))] if (map_ := figures.map_view(run.tracks)) else []),
         _section("Horizontal error", _note("2DRMS = 2 √(σ_E² + σ_N²) of the trajectory covariance: about "
                                            "95–98 % of a consistent filter's horizontal errors lie below it."),
                  _figure(figures.error_vs_time(run.tracks), "plot-error", "")),

@@ -17,6 +17,7 @@ from plotly.subplots import make_subplots
 
 from bodyfusion.evaluation.colours import PALETTE, colours, system_colours
 from bodyfusion.evaluation.metrics import horizontal_sigma_m
+from bodyfusion.io.gnss import enu_to_geodetic
 from bodyfusion.evaluation.scored_run import ScoredRun
 from bodyfusion.evaluation.thinning import thin_index
 
@@ -82,6 +83,37 @@ def plan_view(run: ScoredRun) -> go.Figure:
     title = "Trajectories, plan view" + (f" (estimates aligned: rotation {rotation:.1f}°)" if rotation else "")
     _layout(fig, title, "east [m]", "north [m]", height=620)
     fig.update_yaxes(scaleanchor="x", scaleratio=1)
+    return fig
+
+
+def map_view(run: ScoredRun) -> go.Figure | None:
+    """Each system's track (and its truth, dashed) in WGS-84 longitude and latitude about the
+    run's geodetic origin, at equal ground scale along both axes, hover giving the time and the
+    coordinates: a map without tiles (nothing fetched when the page is viewed). None where the
+    frame has no geodetic origin."""
+    origin = run.frame.geodetic_origin
+    if origin is None:
+        return None
+    fig = go.Figure()
+    palette = system_colours(run)
+    for name, traj in run.trajectories.items():
+        colour, truth = palette[name], run.truths.get(name)
+        if truth is not None:
+            k = thin_index(len(truth.t)) if not truth.sparse else slice(None)
+            llh = enu_to_geodetic(np.nan_to_num(truth.pos_n[k], nan=0.0), origin)
+            fig.add_scatter(x=llh[:, 1], y=llh[:, 0], name=f"{name} truth", legendgroup=name,
+                            mode="markers" if truth.sparse else "lines",
+                            line={"color": _rgba(colour, 1.0, 0.55), "width": 1.2, "dash": "dash"},
+                            marker={"symbol": "x", "size": 9, "color": _rgba(colour, 1.0, 0.55)})
+        idx = thin_index(len(traj.t))
+        llh = enu_to_geodetic(np.nan_to_num(traj.pos_n[idx], nan=0.0), origin)
+        fig.add_scatter(x=llh[:, 1], y=llh[:, 0], customdata=_f32(traj.t[idx]), mode="lines", name=name,
+                        legendgroup=name, line={"color": colour, "width": 1.6},
+                        hovertemplate="t %{customdata:.2f} s<br>lat %{y:.7f}°<br>lon %{x:.7f}°")
+    _layout(fig, f"Map: WGS-84 about the origin {origin[0]:.5f}°, {origin[1]:.5f}°", "longitude [°]",
+            "latitude [°]", height=620)
+    fig.update_yaxes(scaleanchor="x", scaleratio=1.0 / np.cos(np.radians(origin[0])), tickformat=".5f")
+    fig.update_xaxes(tickformat=".5f")
     return fig
 
 
