@@ -58,26 +58,29 @@ class JacobianCase:
 
 
 
-@dataclass(frozen=True)
 class CovarianceHistory:
     """A system's error-state covariance over time as it stores it: ``t`` (N,) s, ``states``
     (the k error states each row and column of a matrix belongs to, in the names of
     :meth:`SensorSystem.states` where the state is one of those: ``east_m``, ``north_m``,
-    ``up_m``...), ``stored`` (what the system keeps, in words) and ``block``, which forms the
-    (n, k, k) matrices of a slice of the epochs in the states' units squared, NaN where the system
-    does not store the entry. Formed on demand, a slice at a time (:meth:`columns` of
-    ``epochs``): a long run's whole history of k × k matrices is never held unless asked for
-    (:attr:`matrix`)."""
+    ``up_m``...), ``matrix`` in the states' units squared, NaN where the system does not store the
+    entry, and ``stored`` (what the system keeps, in words). ``matrix`` is the (N, k, k) array, or
+    a function that forms the matrices of a slice of the epochs (``epochs`` → (n, k, k)): then a
+    long run's whole history of k × k matrices is formed a slice at a time (:meth:`block`,
+    :meth:`columns` of ``epochs``) and never held unless asked for (:attr:`matrix`)."""
 
-    t: np.ndarray
-    states: tuple[str, ...]
-    stored: str
-    block: Callable[[slice], np.ndarray]
+    def __init__(self, t: np.ndarray, states: tuple[str, ...],
+                 matrix: np.ndarray | Callable[[slice], np.ndarray], stored: str) -> None:
+        self.t = np.asarray(t)
+        self.states = tuple(states)
+        self.stored = stored
+        self._form = matrix if callable(matrix) else np.asarray(matrix).__getitem__
 
-    @classmethod
-    def of_matrices(cls, t: np.ndarray, states: tuple[str, ...], matrix: np.ndarray, stored: str) -> CovarianceHistory:
-        """The history of matrices in hand, ``matrix`` (N, k, k)."""
-        return cls(np.asarray(t), states, stored, lambda epochs: matrix[epochs])
+    def block(self, epochs: slice) -> np.ndarray:
+        """(n, k, k): the matrices at ``epochs``."""
+        return self._form(epochs)
+
+    def __repr__(self) -> str:
+        return f"CovarianceHistory({len(self.t)} epochs, states={self.states}, stored={self.stored!r})"
 
     @property
     def matrix(self) -> np.ndarray:
@@ -121,7 +124,7 @@ def position_covariance(t: np.ndarray, var_enu: np.ndarray, cov_en: np.ndarray |
             matrix[:, 0, 1] = matrix[:, 1, 0] = cov_en[epochs]
         return matrix
 
-    return CovarianceHistory(np.asarray(t), ("east_m", "north_m", "up_m"), stored, block)
+    return CovarianceHistory(t, ("east_m", "north_m", "up_m"), block, stored)
 
 
 @dataclass(frozen=True)

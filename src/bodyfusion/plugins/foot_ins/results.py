@@ -63,7 +63,7 @@ def foot_covariance(t: np.ndarray, recorded: np.ndarray) -> CovarianceHistory:
                 matrix[:, 6 + a, 6 + b] = matrix[:, 6 + b, 6 + a] = att[:, column]
         return matrix
 
-    return CovarianceHistory(np.asarray(t), COVARIANCE_STATES, STORED, block)
+    return CovarianceHistory(t, COVARIANCE_STATES, block, STORED)
 
 
 def zupt_columns(t: np.ndarray, hist_nis: np.ndarray, gate: float) -> dict[str, np.ndarray]:

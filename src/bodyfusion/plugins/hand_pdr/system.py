@@ -545,7 +545,7 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
     def covariance_history(self) -> CovarianceHistory:
         """The whole error-state covariance (:data:`~bodyfusion.plugins.hand_pdr.results.ERROR_STATES`) at every record."""
         h, P = self._history()
-        return CovarianceHistory.of_matrices(h[:, 0], ERROR_STATES[:self.n_err], P.copy(), STORED)
+        return CovarianceHistory(h[:, 0], ERROR_STATES[:self.n_err], P.copy(), STORED)
 
     def events(self) -> dict[str, np.ndarray]:
         """The detected steps: their time (s) and modelled length (m, before the step scale)."""

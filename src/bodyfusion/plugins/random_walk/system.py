@@ -122,8 +122,8 @@ class RandomWalk(SensorSystem, TransitionTracking):
     def covariance_history(self) -> CovarianceHistory:
         """The whole error-state (position) covariance at every sample."""
         n = self._i + 1
-        return CovarianceHistory.of_matrices(self.t[:n], ("east_m", "north_m", "up_m"), self.hist_cov[:n].copy(),
-                                             "the whole error-state (position) covariance at every sample (m^2)")
+        return CovarianceHistory(self.t[:n], ("east_m", "north_m", "up_m"), self.hist_cov[:n].copy(),
+                                 "the whole error-state (position) covariance at every sample (m^2)")
 
     def horizontal_nees(self) -> np.ndarray:
         """(N,) normalised estimation error squared of the horizontal position against the
