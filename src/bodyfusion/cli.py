@@ -19,7 +19,7 @@ from typing import Annotated, Literal
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.base.interrupts import RECEIVED, Terminated, answer_pending
+from bodyfusion.base.interrupts import RECEIVED, Terminated, answer_pending, deferring
 from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -415,12 +415,14 @@ def _terminate(signum: int, frame: object) -> None:
         os.kill(os.getpid(), signal.SIGTERM)
         return
     RECEIVED.add(signum)
-    raise Terminated
+    if not deferring():  # else answered where the deferred work ends
+        raise Terminated
 
 
 def _interrupt(signum: int, frame: object) -> None:
     RECEIVED.add(signum)
-    raise KeyboardInterrupt
+    if not deferring():
+        raise KeyboardInterrupt
 
 
 def main() -> None:

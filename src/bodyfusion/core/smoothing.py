@@ -16,6 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from bodyfusion.base.interrupts import deferred
 from bodyfusion.core.capabilities import Smoothing, offers
 from bodyfusion.core.constraints import violations
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
@@ -41,11 +42,13 @@ def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> 
     """Smooth every system that smooths; returns {system: its smoothing diagnostics}, in the
     layout's order. Systems that smooth in a thread
     (:attr:`~bodyfusion.core.capabilities.Smoothing.smooths_in_a_thread`) are smoothed at the
-    same time, one thread each; the others here, one after another."""
+    same time, one thread each; the others here, one after another. A signal taken meanwhile is
+    answered once every smoother is done (:func:`~bodyfusion.base.interrupts.deferred`): raised
+    while a thread waits on a lock the main thread holds, it would leave them both waiting."""
     systems = smoothing_systems(systems)
     threaded = [name for name, system in systems.items() if system.smooths_in_a_thread]
     done = {}
-    with ThreadPoolExecutor(max_workers=max(1, len(threaded) - 1)) as pool:
+    with deferred(), ThreadPoolExecutor(max_workers=max(1, len(threaded) - 1)) as pool:
         futures = {name: pool.submit(systems[name].smooth, cfg) for name in threaded[1:]}
         for name, system in systems.items():
             if name not in futures:

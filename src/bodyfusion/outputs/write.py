@@ -13,6 +13,7 @@ import numpy as np
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.files import replaced_atomically, sole_writer
 from bodyfusion.base.forking import Forked
+from bodyfusion.base.interrupts import deferred
 from bodyfusion.outputs.covariances import write_covariances_parquet
 from bodyfusion.outputs.trajectories import (
     ROWS,
@@ -188,13 +189,16 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     writes the rest; the plots by ``figure_process`` when given one. Each file replaces the
     previous one in one step (:func:`~bodyfusion.base.files.replaced_atomically`), one run at a
     time (:func:`~bodyfusion.base.files.sole_writer`); a write that fails (a full disk, a
-    read-only folder) is a :class:`FusionError` naming the folder, the previous files kept."""
+    read-only folder) is a :class:`FusionError` naming the folder, the previous files kept. A
+    SIGINT or SIGTERM taken while writing is answered once every file is written
+    (:func:`~bodyfusion.base.interrupts.deferred`): the folder holds one run's files, never some of
+    each."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     try:
-        with sole_writer(out_dir):
+        with deferred(), sole_writer(out_dir):  # an interrupt waits for the last file: never a mixed folder
             _write_all(result, out_dir, config_label, total_wall_s, figure_process)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot write the outputs: {err.strerror or err} (the files of an earlier run "
