@@ -3,7 +3,7 @@ into one folder at once, a write limit that fills the disk, special files as dat
 always holds whole files — each the earlier run's or the new one's, never a torn one — no
 process outlives the run, and a refusal is one line with exit status 2.
 
-Cases per fault class: ``BODYFUSION_FAULT_CASES`` (default 2; the long mode,
+Cases per fault class: ``BODYFUSION_FAULT_CASES`` (default 1; the long mode,
 ``benchmarks/faults_long.py``, runs many), drawn from one seed: the same cases every time. With
 ``BODYFUSION_FAULT_TABLE`` set, each case's outcome is appended to that CSV (class, case,
 outcome, detail): ``previous`` / ``new`` (every file the earlier or the new run's), ``mixed``
@@ -29,7 +29,7 @@ from tests.paths import ROOT
 
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc: Linux")]
 
-CASES = int(os.environ.get("BODYFUSION_FAULT_CASES", "2"))
+CASES = int(os.environ.get("BODYFUSION_FAULT_CASES", "1"))
 TABLE = os.environ.get("BODYFUSION_FAULT_TABLE")
 VICON = ROOT / "configs" / "dual_foot_vicon.yaml"
 NEW = ["--set", "smoother.kind=rts"]

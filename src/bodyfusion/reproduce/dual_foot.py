@@ -30,7 +30,7 @@ from functools import partial
 import numpy as np
 
 from bodyfusion.reproduce.scenarios import over_seeds, run_simulated, simulate
-from bodyfusion.reproduce.table import Cell
+from bodyfusion.reproduce.table import Cell, seed_sd
 from bodyfusion.results.run_result import RunResult
 
 SCENARIO = "sim_dual_foot_consumer_walk.yaml"
@@ -138,9 +138,6 @@ def _text(paper: str, runs: list[dict], seeds: int) -> str:
     def mean_rmse(case: str) -> np.ndarray:
         return np.array([0.5 * (r[case]["east_left_foot"] + r[case]["north_left_foot"]) for r in runs])
 
-    def sd(v: np.ndarray) -> float:
-        return float(np.std(v, ddof=1)) if v.size > 1 else 0.0
-
     cases = list(PAPERS[paper])
     title = ("# s000 — [Deng2026] distance-constraint ensemble EKF (Table 3, path 1)" if paper == "s000" else
              "# s001 — [Xu2024] minimum-distance-constraint KF under coloured noise (Table 3, path 1)")
@@ -153,8 +150,8 @@ def _text(paper: str, runs: list[dict], seeds: int) -> str:
         active = np.array([r[case]["activations"] / max(r[case]["epochs"], 1.0) for r in runs])
         ind = np.array([0.5 * (r[f"{kind} independent"]["east_left_foot"] + r[f"{kind} independent"]
                                 ["north_left_foot"]) for r in runs])
-        lines.append(f"- {case}: {mean_rmse(case).mean():.3f} ± {sd(mean_rmse(case)):.3f} m (paper "
-                     f"{PAPERS[paper][case][2]:g}); independent feet {ind.mean():.3f} ± {sd(ind):.3f} m; active on "
+        lines.append(f"- {case}: {mean_rmse(case).mean():.3f} ± {seed_sd(mean_rmse(case)):.3f} m (paper "
+                     f"{PAPERS[paper][case][2]:g}); independent feet {ind.mean():.3f} ± {seed_sd(ind):.3f} m; active on "
                      f"{active.mean():.1%} of epochs")
     lines.append("")
     pairs = [(a, b) for a, b in zip(cases[::2], cases[1::2])]  # (white, coloured) of each estimator
@@ -162,12 +159,12 @@ def _text(paper: str, runs: list[dict], seeds: int) -> str:
         gain = mean_rmse(white) - mean_rmse(coloured)
         share = gain.mean() / mean_rmse(white).mean()
         paper_share = 1.0 - PAPERS[paper][coloured][2] / PAPERS[paper][white][2]
-        lines.append(f"{white} → {coloured}: {share:+.0%} here ({gain.mean():.3f} ± {sd(gain):.3f} m paired, "
+        lines.append(f"{white} → {coloured}: {share:+.0%} here ({gain.mean():.3f} ± {seed_sd(gain):.3f} m paired, "
                      f"{int(np.sum(gain > 0))}/{seeds} seeds better), {paper_share:+.0%} in the paper; the ordering "
                      f"{white} > {coloured} {'holds' if gain.mean() > 0 else 'does not hold'}.")
     if paper == "s000":
         ens = mean_rmse("DC-KF") - mean_rmse("DC-EnEKF")
-        lines.append(f"DC-KF → DC-EnEKF (the ensemble's gain): {ens.mean():+.3f} ± {sd(ens):.3f} m paired "
+        lines.append(f"DC-KF → DC-EnEKF (the ensemble's gain): {ens.mean():+.3f} ± {seed_sd(ens):.3f} m paired "
                      f"(paper {PAPERS['s000']['DC-KF'][2] - PAPERS['s000']['DC-EnEKF'][2]:+.2f} m).")
     if paper == "s000":
         lines += ["", "How the limit is applied (the same walks; both feet's mean horizontal RMSE, m, and their mean "

@@ -21,7 +21,7 @@ import numpy as np
 
 from bodyfusion.core.layout import load_layout
 from bodyfusion.reproduce.scenarios import over_seeds, run_simulated, scenario_file, simulate
-from bodyfusion.reproduce.table import Cell
+from bodyfusion.reproduce.table import Cell, seed_sd
 from bodyfusion.runner import run_layout
 
 PAPER = "s002"
@@ -94,7 +94,7 @@ def _text(rmse: dict[str, float], ratio: float, runs: int, outages: list[dict], 
         parts = []
         for case in ("before constraint", "after constraint"):
             v = figure(case, duration)
-            parts.append(f"{case} {v.mean():.2f} ± {np.std(v, ddof=1) if v.size > 1 else 0:.2f} m "
+            parts.append(f"{case} {v.mean():.2f} ± {seed_sd(v):.2f} m "
                          f"(worst {v.max():.2f})")
         lines.append(f"- {duration:g} s: " + "; ".join(parts))
     before, after = figure("before constraint", 40.0), figure("after constraint", 60.0)

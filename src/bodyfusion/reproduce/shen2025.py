@@ -26,7 +26,7 @@ import numpy as np
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.plugins.foot_ins.smoothing import smooth_record
 from bodyfusion.reproduce.scenarios import over_seeds, run_simulated, simulate
-from bodyfusion.reproduce.table import Cell
+from bodyfusion.reproduce.table import Cell, seed_sd
 from bodyfusion.sim.imu import ImuErrorConfig
 
 PAPER = "s004"
@@ -135,10 +135,6 @@ def reproduce(seeds: int = 10, jobs: int = 1) -> tuple[list[Cell], str]:
     return cells, _text(runs, seeds)
 
 
-def _sd(v: np.ndarray) -> float:
-    return float(np.std(v, ddof=1)) if v.size > 1 else 0.0
-
-
 def _text(runs: dict[bool, list[dict]], seeds: int) -> str:
     """What matches, what does not, and why, from the per-seed RMSEs."""
     def rmse(real: bool, case: str) -> np.ndarray:
@@ -154,13 +150,13 @@ def _text(runs: dict[bool, list[dict]], seeds: int) -> str:
     verdicts = {}
     for real, label in ((True, "real unit"), (False, "datasheet unit")):
         lines.append(f"- {label}: " + ", ".join(
-            f"{case} {rmse(real, case).mean():.4f} ± {_sd(rmse(real, case)):.4f}" for case in CASES)
+            f"{case} {rmse(real, case).mean():.4f} ± {seed_sd(rmse(real, case)):.4f}" for case in CASES)
             + f" m; ZUPT along the walked direction {rmse(real, 'ZUPT along-track').mean():.4f} m, across it "
             f"{rmse(real, 'ZUPT cross-track').mean():.4f} m")
         gains = [(a, b, rmse(real, a) - rmse(real, b)) for a, b in zip(CASES, CASES[1:])]
-        lines.append("  - gains: " + ", ".join(f"{a} → {b} {g.mean() * 1000:+.1f} ± {_sd(g) * 1000:.1f} mm"
+        lines.append("  - gains: " + ", ".join(f"{a} → {b} {g.mean() * 1000:+.1f} ± {seed_sd(g) * 1000:.1f} mm"
                                              for a, b, g in gains))
-        spread = max(_sd(rmse(real, case)) for case in CASES)
+        spread = max(seed_sd(rmse(real, case)) for case in CASES)
         verdicts[label] = (all(g.mean() > 0 for _, _, g in gains), all(g.mean() > spread for _, _, g in gains),
                            spread)
     ordered, beyond, spread = verdicts["real unit"]

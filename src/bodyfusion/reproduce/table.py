@@ -22,6 +22,12 @@ from bodyfusion.base.files import replaced_atomically
 COLUMNS = ("paper", "case", "metric", "paper_value", "our_value", "our_sd", "n_seeds")
 
 
+def seed_sd(values: Sequence[float]) -> float:
+    """The seed-to-seed spread of ``values``: their sample standard deviation (0 for one seed)."""
+    v = np.asarray(values, dtype=float)
+    return float(v.std(ddof=1)) if v.size > 1 else 0.0
+
+
 @dataclass(frozen=True)
 class Cell:
     """One cell of a paper's table: the paper's figure (None: not given) and ours over seeds."""
@@ -39,7 +45,7 @@ class Cell:
                    values: Sequence[float]) -> Cell:
         """The cell of per-seed ``values``: their mean and sample standard deviation."""
         v = np.asarray(values, dtype=float)
-        return cls(paper, case, metric, paper_value, float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else None,
+        return cls(paper, case, metric, paper_value, float(v.mean()), seed_sd(v) if v.size > 1 else None,
                    int(v.size))
 
     def row(self) -> list[str]:
