@@ -1,6 +1,6 @@
-"""Writing a run's outputs loses nothing: each file replaces the previous one in one step, a
-write that fails (a full disk) keeps the earlier run's files whole and says so in one line, and a
-second run cannot mix its files into a folder another run is writing."""
+"""Writing a run's outputs loses nothing: the set of files replaces the previous set once all are
+written, a write that fails part-way (a full disk) keeps every file of the earlier run whole and
+says so in one line, and a second run cannot mix its files into a folder another run is writing."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from bodyfusion.base.errors import FusionError
-from bodyfusion.base.files import replaced_atomically, sole_writer
+from bodyfusion.base.files import STAGING_PREFIX, replaced_atomically, sole_writer, staged_outputs
 from bodyfusion.core.layout import load_layout
 from bodyfusion.outputs import write
 from bodyfusion.outputs.write import write_outputs
@@ -26,7 +26,8 @@ def result(write_yaml):
 
 
 def _no_partial_files(folder: Path) -> bool:
-    return not [p for p in folder.rglob("*") if ".partial" in p.name or p.name.endswith(".old")]
+    return not [p for p in folder.rglob("*") if ".partial" in p.name or p.name.endswith(".old")
+                or p.name.startswith(STAGING_PREFIX)]
 
 
 def test_a_run_writes_its_files_whole_and_leaves_nothing_partial(result, tmp_path):
@@ -35,7 +36,10 @@ def test_a_run_writes_its_files_whole_and_leaves_nothing_partial(result, tmp_pat
     assert _no_partial_files(tmp_path)
 
 
-def test_a_full_disk_keeps_the_previous_runs_files_and_says_so_in_one_line(result, tmp_path, monkeypatch):
+@pytest.mark.parametrize("failing", ["write_trajectories_csv", "write_trajectories_parquet",
+                                     "write_covariances_parquet"])
+def test_a_disk_that_fills_part_way_keeps_every_file_of_the_previous_run_and_says_so_in_one_line(
+        result, tmp_path, monkeypatch, failing):
     write_outputs(result, tmp_path, "walk", 1.0)
     before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
 
@@ -43,12 +47,36 @@ def test_a_full_disk_keeps_the_previous_runs_files_and_says_so_in_one_line(resul
         Path(path).write_bytes(b"PAR1 half a file")
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(write, "write_trajectories_parquet", full_disk)
+    def new_file(path, *args, **kwargs):  # the new run's files differ from the earlier ones
+        Path(path).write_bytes(b"the new run's")
+
+    for writer in ("write_trajectories_csv", "write_trajectories_parquet", "write_covariances_parquet"):
+        monkeypatch.setattr(write, writer, full_disk if writer == failing else new_file)
     with pytest.raises(FusionError) as err:
-        write_outputs(result, tmp_path, "walk", 1.0)
+        write_outputs(result, tmp_path, "walk again", 1.0)
     assert "No space left on device" in str(err.value) and "\n" not in str(err.value)
-    assert (tmp_path / "trajectories.parquet").read_bytes() == before[tmp_path / "trajectories.parquet"]
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before  # the files written first too
     assert _no_partial_files(tmp_path)
+
+
+def test_a_staged_set_replaces_the_earlier_one_whole_and_clears_what_a_killed_writer_left(tmp_path):
+    (tmp_path / "a.txt").write_text("old a")
+    (tmp_path / "gone.txt").write_text("an earlier set's file this set does not make")
+    (tmp_path / "notes.txt").write_text("the user's own")
+    dead = multiprocessing.get_context("fork").Process(target=lambda: None)
+    dead.start()
+    dead.join()
+    (tmp_path / f"{STAGING_PREFIX}{dead.pid}").mkdir()  # a writer killed while staging
+    with pytest.raises(RuntimeError), staged_outputs(tmp_path, owned=lambda n: n in ("a.txt", "gone.txt")) as stage:
+        (stage / "a.txt").write_text("new a")
+        raise RuntimeError("a writer that fails half way")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "gone.txt", "notes.txt"]
+    assert (tmp_path / "a.txt").read_text() == "old a"
+    with staged_outputs(tmp_path, last=("a.txt",), owned=lambda n: n in ("a.txt", "gone.txt")) as stage:
+        (stage / "a.txt").write_text("new a")
+        (stage / "tum").mkdir()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "notes.txt", "tum"]
+    assert (tmp_path / "a.txt").read_text() == "new a"
 
 
 def _hold(folder: str, ready, release) -> None:

@@ -1,13 +1,14 @@
 """Files read and written safely: whether a path names a file a reader may open (a FIFO would
 block the reader for ever, /dev/zero would feed it without end, a directory is no recording), and
-outputs that replace the previous ones in one step or not at all."""
+outputs that replace the previous ones in one step or not at all: a file
+(:func:`replaced_atomically`) or a set of files (:func:`staged_outputs`)."""
 
 from __future__ import annotations
 
 import os
 import shutil
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -64,6 +65,61 @@ def _replace_folder(new: Path, path: Path) -> None:
         os.replace(path, old)
     os.replace(new, path)
     shutil.rmtree(old, ignore_errors=True)
+
+
+STAGING_PREFIX = ".staging."
+"""Name of a staging folder (:func:`staged_outputs`) less the writer's process id."""
+
+
+@contextmanager
+def staged_outputs(folder: Path, last: tuple[str, ...] = (),
+                   owned: Callable[[str], bool] = lambda name: False) -> Iterator[Path]:
+    """A staging folder inside ``folder`` (same file system) to write a set of outputs into. Once
+    the block ends without an error, each entry of it takes its place in ``folder`` (``os.replace``;
+    a folder by :func:`_replace_folder`), the names in ``last`` after the others (a file that marks
+    the set complete), and an entry of ``folder`` the set ``owned`` (a name the writer writes)
+    though this set has none is removed before them (an earlier set's file this one does
+    not make); else the staging folder is removed and ``folder`` keeps every earlier file.
+    Nothing is replaced until everything is written, so a write that fails part-way (a full disk,
+    a read-only file) leaves the earlier set whole, not some files of each; the step that puts
+    them in place only renames, which needs no space. Staging folders a killed writer left behind
+    (its process gone) are removed first. Call it as the folder's sole writer
+    (:func:`sole_writer`)."""
+    folder = Path(folder)
+    for stale in folder.glob(STAGING_PREFIX + "*"):
+        pid = stale.name[len(STAGING_PREFIX):]
+        if pid.isdigit() and int(pid) != os.getpid() and not _process_alive(int(pid)):
+            shutil.rmtree(stale, ignore_errors=True)
+    staging = folder / f"{STAGING_PREFIX}{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    try:
+        yield staging
+        entries = sorted(staging.iterdir(), key=lambda p: (p.name in last, last.index(p.name) if p.name in last else 0,
+                                                           p.name))
+        written = {entry.name for entry in entries}
+        for earlier in folder.iterdir():
+            if owned(earlier.name) and earlier.name not in written:
+                shutil.rmtree(earlier) if earlier.is_dir() else earlier.unlink()
+        for entry in entries:
+            if entry.is_dir():
+                _replace_folder(entry, folder / entry.name)
+            else:
+                os.replace(entry, folder / entry.name)
+        staging.rmdir()
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
 
 
 @contextmanager

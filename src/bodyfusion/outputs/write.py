@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyfusion.base.errors import FusionError
-from bodyfusion.base.files import replaced_atomically, sole_writer
+from bodyfusion.base.files import sole_writer, staged_outputs
 from bodyfusion.base.forking import Forked
 from bodyfusion.base.interrupts import deferred
 from bodyfusion.outputs.covariances import write_covariances_parquet
@@ -135,14 +135,12 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
 
 
 def _write_tracks(result: RunResult, out_dir: Path) -> None:
-    """The TUM files (a folder written whole beside the old one, then put in its place) and, for
-    a geo-referenced run, track.geojson."""
+    """The TUM files (a folder) and, for a geo-referenced run, track.geojson."""
     decimate = result.loaded.layout.output.decimate
-    with replaced_atomically(out_dir / "tum") as tum:
-        write_tum(tum, result.trajectories, result.truths, decimate)
+    write_tum(out_dir / "tum", result.trajectories, result.truths, decimate)
     if result.frame.geodetic_origin is not None:
-        with replaced_atomically(out_dir / "track.geojson") as path:
-            write_geojson(path, result.trajectories, result.truths, result.frame.geodetic_origin, decimate)
+        write_geojson(out_dir / "track.geojson", result.trajectories, result.truths, result.frame.geodetic_origin,
+                      decimate)
 
 
 OUTPUT_NAMES = ("metrics.json", "trajectories.csv", "trajectories.parquet", "covariances.parquet", "strides.csv",
@@ -150,6 +148,12 @@ OUTPUT_NAMES = ("metrics.json", "trajectories.csv", "trajectories.parquet", "cov
 """The data files and folders a run writes (docs/contract.md) beside its plots."""
 PLOT_STEMS = ("trajectory", "error_vs_time", "error_cdf", "nees")
 """The plots' file names without their format's suffix (:mod:`bodyfusion.evaluation.plots`)."""
+
+
+def output_name(name: str) -> bool:
+    """Whether ``name`` is a file or folder a run writes (:data:`OUTPUT_NAMES`, the plots)."""
+    stem, _, suffix = name.rpartition(".")
+    return name in OUTPUT_NAMES or (stem in PLOT_STEMS and suffix in ("png", "pdf", "svg"))
 
 
 def earlier_run(out_dir: Path) -> bool:
@@ -173,8 +177,7 @@ def check_output_folder(out_dir: Path, overwrite: bool = False) -> bool:
         return True
     if overwrite:
         return False
-    taken = [p.name for p in sorted(out_dir.iterdir())
-             if p.name in OUTPUT_NAMES or (p.stem in PLOT_STEMS and p.suffix in (".png", ".pdf", ".svg"))]
+    taken = [p.name for p in sorted(out_dir.iterdir()) if output_name(p.name)]
     if taken:
         raise FusionError(f"{out_dir}: holds {', '.join(taken)}, which no earlier run wrote and a run would replace; "
                           "give another --out, or --overwrite to replace them")
@@ -186,11 +189,12 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     """metrics.json, the trajectory files and (unless switched off) the PNG plots. With more
     than :data:`~bodyfusion.outputs.trajectories.ROWS` rows of tracks, the TUM files and track.geojson
     are written in a forked process (:class:`~bodyfusion.base.forking.Forked`) while this one
-    writes the rest; the plots by ``figure_process`` when given one. Each file replaces the
-    previous one in one step (:func:`~bodyfusion.base.files.replaced_atomically`), one run at a
-    time (:func:`~bodyfusion.base.files.sole_writer`); a write that fails (a full disk, a
-    read-only folder) is a :class:`FusionError` naming the folder, the previous files kept. A
-    SIGINT or SIGTERM taken while writing is answered once every file is written
+    writes the rest; the plots by ``figure_process`` when given one. Every file is written into a
+    staging folder inside ``out_dir`` and, once all are written, put in place of the previous ones
+    (:func:`~bodyfusion.base.files.staged_outputs`, metrics.json last), one run at a time
+    (:func:`~bodyfusion.base.files.sole_writer`); a write that fails part-way (a full disk, a
+    read-only folder) is a :class:`FusionError` naming the folder, every previous file kept. A
+    SIGINT or SIGTERM taken while writing is answered once every file is in place
     (:func:`~bodyfusion.base.interrupts.deferred`): the folder holds one run's files, never some of
     each."""
     try:
@@ -198,34 +202,30 @@ def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wal
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot create output folder: {err.strerror}") from None
     try:
-        with deferred(), sole_writer(out_dir):  # an interrupt waits for the last file: never a mixed folder
-            _write_all(result, out_dir, config_label, total_wall_s, figure_process)
+        log.info("writing the outputs to %s", out_dir)
+        with deferred(), sole_writer(out_dir), staged_outputs(out_dir, last=("metrics.json",), owned=output_name) as staging:
+            _write_all(result, staging, config_label, total_wall_s, figure_process)
     except OSError as err:
         raise FusionError(f"{out_dir}: cannot write the outputs: {err.strerror or err} (the files of an earlier run "
                           "there are kept whole)") from None
 
 
-def _write_all(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
+def _write_all(result: RunResult, staging: Path, config_label: str, total_wall_s: float,
                figure_process: FigureProcess | None) -> None:
+    """Every output of ``result`` into the folder ``staging`` (:func:`write_outputs`)."""
     output = result.loaded.layout.output
     if output.plots and figure_process is not None:
         log.info("plotting beside the other outputs")
-        figure_process.submit(out_dir, result, output.figures)
-    log.info("writing the outputs to %s", out_dir)
+        figure_process.submit(staging, result, output.figures)
     long = sum(len(track.t) for track in result.trajectories.values()) // output.decimate > ROWS  # worth a fork
-    beside = Forked(lambda: _write_tracks(result, out_dir), fork=long)  # at the same time as the two tables
-    with replaced_atomically(out_dir / "trajectories.csv") as path:
-        write_trajectories_csv(path, result.trajectories, output.decimate)
-    with replaced_atomically(out_dir / "strides.csv") as path:
-        write_strides_csv(path, result.systems)
-    with replaced_atomically(out_dir / "trajectories.parquet") as path:
-        write_trajectories_parquet(path, result.trajectories, decimate=output.decimate,
-                                   config_sha256=result.loaded.sha256, frame=result.frame)
-    with replaced_atomically(out_dir / "covariances.parquet") as path:
-        write_covariances_parquet(path, result.systems, decimate=output.decimate)
+    beside = Forked(lambda: _write_tracks(result, staging), fork=long)  # at the same time as the two tables
+    write_trajectories_csv(staging / "trajectories.csv", result.trajectories, output.decimate)
+    write_strides_csv(staging / "strides.csv", result.systems)
+    write_trajectories_parquet(staging / "trajectories.parquet", result.trajectories, decimate=output.decimate,
+                               config_sha256=result.loaded.sha256, frame=result.frame)
+    write_covariances_parquet(staging / "covariances.parquet", result.systems, decimate=output.decimate)
     doc = metrics_document(result, config_label, total_wall_s)
-    with replaced_atomically(out_dir / "metrics.json") as path:
-        path.write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
+    (staging / "metrics.json").write_text(json.dumps(_json_safe(doc), indent=2, allow_nan=False) + "\n")
     beside.result()
     if output.plots and figure_process is not None:
         figure_process.written()
@@ -233,4 +233,4 @@ def _write_all(result: RunResult, out_dir: Path, config_label: str, total_wall_s
         from bodyfusion.evaluation import plots  # matplotlib loads only when plots are asked for
 
         log.info("plotting")
-        plots.write_run_plots(out_dir, result, output.figures)
+        plots.write_run_plots(staging, result, output.figures)
