@@ -42,7 +42,7 @@ def _alive(pid: int) -> bool:
 
 def _start_run(out: Path) -> tuple[subprocess.Popen, int]:
     """``fusion run`` of the Vicon walk into ``out``, once its figure process is up: (process, child pid)."""
-    proc = subprocess.Popen([sys.executable, "-m", "bodyfusion.cli", "run", str(VICON), "--out", str(out)],
+    proc = subprocess.Popen([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 60
     while time.time() < deadline:
@@ -61,7 +61,7 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/p
 @pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_a_signal_stops_a_run_with_its_status_and_leaves_the_earlier_outputs(tmp_path, signum, status):
     out = tmp_path / "run"
-    subprocess.run([sys.executable, "-m", "bodyfusion.cli", "run", str(VICON), "--out", str(out)], check=True,
+    subprocess.run([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(out)], check=True,
                    capture_output=True)
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     proc, child = _start_run(out)
@@ -125,3 +125,58 @@ def test_a_signal_taken_inside_a_c_callback_prints_no_traceback(monkeypatch, cap
     assert exit_.value.code == 143 and "terminated" in capsys.readouterr().err
     assert printed == []
     assert sys.unraisablehook == printed.append  # the caller's hook back
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_while_the_command_line_loads_ends_it_with_its_status_and_no_traceback(tmp_path, signum, status):
+    """The handlers are in place before the command line's modules load (bodyfusion.__main__)."""
+    for delay in (0.06, 0.12, 0.2):
+        proc = subprocess.Popen([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(tmp_path / "run")],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == status, (delay, proc.returncode, err)
+        assert "Traceback" not in err
+
+
+def _status_of_module(program: str, folder: Path) -> int:
+    """The exit status of ``program`` run as ``python -m`` runs a module (as ``-m bodyfusion``):
+    the interpreter's own exit path, where ``-c`` and a script exit straight from the error."""
+    (folder / "program.py").write_text(program)
+    return subprocess.run([sys.executable, "-m", "program"], cwd=folder, capture_output=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}).returncode
+
+
+def test_ctrl_c_once_passed_through_code_run_from_a_string_still_exits_130(tmp_path):
+    """CPython kills itself with SIGINT at exit once a KeyboardInterrupt has left code run from a
+    string (SciPy's array-API layer imports so), whatever the status; the command's 130 stands."""
+    program = """
+import os, signal, sys
+from bodyfusion.base.interrupts import as_process
+def command():
+    from bodyfusion import cli
+    def app(**_):
+        try:
+            exec("os.kill(os.getpid(), signal.SIGINT); import time; time.sleep(5)")
+        except KeyboardInterrupt:
+            raise
+    cli.app = app
+    cli.command()
+as_process(command)
+"""
+    assert _status_of_module(program, tmp_path) == 130
+
+
+def test_once_the_command_has_ended_a_signal_no_longer_changes_its_status(tmp_path):
+    """Ignored, not masked: the interpreter's shutdown puts Python handlers back to the default,
+    which a signal delivered to a worker thread would take (death by the signal)."""
+    program = """
+import signal, sys
+from bodyfusion.base.interrupts import as_process
+try:
+    as_process(lambda: sys.exit(0))
+finally:
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+"""
+    assert _status_of_module(program, tmp_path) == 0

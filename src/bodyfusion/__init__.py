@@ -15,7 +15,6 @@ file, a dict or models; overrides as a dict or dotted strings), :func:`run` (wit
 from __future__ import annotations
 
 import importlib
-from typing import Any
 
 __version__ = "0.2.0"
 
@@ -29,7 +28,7 @@ __all__ = ["Layout", "LoadedLayout", "RunResult", "Simulation", "__version__", "
            "simulate"]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:  # no typing import: the command takes its signals sooner
     if name not in _API:
         raise AttributeError(f"module 'bodyfusion' has no attribute {name!r}")
     value = getattr(importlib.import_module(_API[name]), name)

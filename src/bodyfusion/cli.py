@@ -7,8 +7,6 @@ heavy), so ``fusion --help`` and ``fusion plugins`` answer at once."""
 from __future__ import annotations
 
 import logging
-import os
-import signal
 import sys
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -19,7 +17,8 @@ from typing import Annotated, Literal
 import typer
 
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.base.interrupts import RECEIVED, Terminated, answer_pending, deferring
+from bodyfusion.base.interrupts import (Terminated, answer_pending, as_process, exit_aborted, exit_terminated,
+                                        restore_signals, take_signals)
 from bodyfusion.base.progress import ProgressCallback, reporting
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -405,44 +404,33 @@ class _LevelFormatter(logging.Formatter):
         return f"{record.levelname.lower()}: {super().format(record)}"
 
 
-_MAIN_PID: list[int] = []
-"""The process whose SIGTERM raises :class:`Terminated` (a forked child ends at once)."""
-
-
-def _terminate(signum: int, frame: object) -> None:
-    if os.getpid() not in _MAIN_PID:  # a copy forked before it set its own handlers: end as by default
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        os.kill(os.getpid(), signal.SIGTERM)
-        return
-    RECEIVED.add(signum)
-    if not deferring():  # else answered where the deferred work ends
-        raise Terminated
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    RECEIVED.add(signum)
-    if not deferring():
-        raise KeyboardInterrupt
-
-
 def main() -> None:
-    """Entry point: user errors print one line on stderr and exit 2, never a traceback; Ctrl-C
-    (SIGINT) exits 130 and SIGTERM 143, each after every open file is closed whole. Both are
-    taken even where the shell started the command with them ignored (a background job)."""
+    """Entry point for a caller in its own process: user errors print one line on stderr and exit
+    2, never a traceback; Ctrl-C (SIGINT) exits 130 and SIGTERM 143, each after every open file is
+    closed whole (:func:`~bodyfusion.base.interrupts.take_signals`); the caller's signal handlers
+    and the package logger's handlers, level and propagation (:func:`configure_logging`) are put
+    back after. The process entry is :func:`bodyfusion.__main__.main`."""
+    package_log = logging.getLogger("bodyfusion")
+    logging_before = (package_log.handlers[:], package_log.level, package_log.propagate)
+    previous = take_signals()
+    try:
+        command()
+    finally:
+        restore_signals(previous)
+        package_log.handlers[:], package_log.propagate = logging_before[0], logging_before[2]
+        package_log.setLevel(logging_before[1])
+
+
+def command() -> None:
+    """The command line's work and its exit status, SIGINT and SIGTERM taken already (:func:`main`)."""
     CONSOLE.verbosity = 0  # until the global options say otherwise
     configure_logging()
-    _MAIN_PID[:] = [os.getpid()]
-    RECEIVED.clear()
-    previous = {signum: signal.signal(signum, handler) for signum, handler in
-                ((signal.SIGINT, _interrupt), (signal.SIGTERM, _terminate))}
     unraisable = sys.unraisablehook
     sys.unraisablehook = _dropped_signal(unraisable)
     try:
         _dispatch()
-    finally:  # as they were (a caller that runs main in its own process)
+    finally:
         sys.unraisablehook = unraisable
-        for signum, handler in previous.items():
-            signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
 def _dropped_signal(hook: Callable[..., None]) -> Callable[..., None]:
@@ -477,20 +465,17 @@ def _dispatch() -> None:
         if isinstance(code, int) and code:
             sys.exit(code)
     except Terminated:
-        print("terminated", file=sys.stderr)
-        sys.exit(143)
+        exit_terminated()
     except FusionError as err:
         more = len(getattr(err, "others", ()))
         print(f"error: {err}" + (f" (and {more} more: fusion validate lists every one)" if more else ""),
               file=sys.stderr)
         sys.exit(2)
     except (typer.Abort, KeyboardInterrupt):
-        print("aborted", file=sys.stderr)
-        sys.exit(130)
+        exit_aborted()
     except Exception as err:  # usage errors, from click or from typer's own copy of it
         if _interrupted(err):  # Ctrl-C inside a library that wrapped it (pydantic building a model class)
-            print("aborted", file=sys.stderr)
-            sys.exit(130)
+            exit_aborted()
         import click
 
         if isinstance(err, (click.ClickException, typer.TyperException)) and hasattr(err, "show"):
@@ -499,5 +484,5 @@ def _dispatch() -> None:
         raise
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # python -m bodyfusion.cli: as the process entry runs it, once this module has loaded
+    as_process(command)

@@ -39,7 +39,7 @@ TIMEOUT_S = 120
 
 
 def fusion_run(out: Path, *extra: str, **popen) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bodyfusion.cli", "run", str(VICON), "--out", str(out), *extra],
+    return subprocess.Popen([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(out), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
@@ -141,11 +141,11 @@ def test_a_run_stopped_at_any_moment_leaves_whole_files_and_no_process(runs, sig
             time.sleep(delay)
             proc.send_signal(signum)
             _, err = proc.communicate(timeout=TIMEOUT_S)
-            # 130 / 143, or the signal's own death (a shell shows the same status) where it came after the
-            # command's handlers were put back; 0 where the run had finished
-            assert proc.returncode in (status, -abs(signum) if signum != signal.SIGKILL else status, 0), \
-                (proc.returncode, err)
-            assert "Traceback" not in err, err
+            # 130 / 143; the signal's own death (a shell shows the same status) only where it came before
+            # the interpreter ran the command's first instruction (~30 ms); 0 where the run had finished
+            early = delay < 0.03 and signum != signal.SIGKILL
+            assert proc.returncode in (status, 0) or (early and proc.returncode == -signum), (proc.returncode, err)
+            assert "Traceback" not in err or early, err
             no_survivor(out)
             outcome = judge(runs, out)
             if signum != signal.SIGKILL:  # stopped cleanly: the earlier files, or all new ones written first
@@ -213,7 +213,7 @@ def test_a_special_file_as_data_is_refused_unopened(runs, tmp_path, make):
 
     def check() -> str:
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "bodyfusion.cli", "run", str(layout), "--out",
+        proc = subprocess.run([sys.executable, "-m", "bodyfusion", "run", str(layout), "--out",
                                str(tmp_path / "out")], capture_output=True, text=True, timeout=60)
         one_line_refusal(proc.returncode, proc.stderr)
         assert time.perf_counter() - t0 < 30
