@@ -45,10 +45,10 @@ CONFIG = ROOT / "configs" / "dual_foot_vicon.yaml"
 
 
 def fusion_run(config: Path, out: Path, overrides: list[str]) -> list[str]:
-    """``fusion run CONFIG --out DIR`` with ``--set`` overrides (the README's main command with
-    the default ``config``)."""
+    """``fusion run CONFIG --out DIR --overwrite`` with ``--set`` overrides (the README's main
+    command with the default ``config``; run again and again into one folder)."""
     sets = [arg for kv in overrides for arg in ("--set", kv)]
-    return ["run", str(config), "--out", str(out), *sets]
+    return ["run", str(config), "--out", str(out), "--overwrite", *sets]
 
 
 def timed_process(argv: list[str], cache: Path) -> tuple[float, float]:

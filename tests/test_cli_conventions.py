@@ -72,7 +72,7 @@ def test_verbose_logs_each_stage_and_the_bar_and_very_verbose_debug(one_foot, tm
     assert "debug:" not in proc.stderr
     bar = [line for line in proc.stderr.splitlines() if line.startswith("fusing")]
     assert len(bar) == 1 and "120/120 s of data" in bar[0], proc.stderr  # a pipe gets the finished bar once
-    proc = fusion_here("-vv", "run", one_foot, "--out", tmp_path / "out")
+    proc = fusion_here("-vv", "run", one_foot, "--out", tmp_path / "out", "--overwrite")
     assert proc.returncode == 0 and "debug: fused in" in proc.stderr, proc.stderr
 
 

@@ -90,15 +90,16 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
         out: Annotated[Path | None, typer.Option("--out", help="Output folder (default ./out/<config name>).")] = None,
         set_: SetOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0,
-        overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace output files in --out that no earlier "
-                                                                    "run wrote (refused otherwise).")] = False) -> None:
+        overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace the outputs (an earlier run's, or files "
+                                                                    "of their names) in --out (refused otherwise).")]
+        = False) -> None:
     """Run a layout and write metrics.json, trajectories.csv and plots."""
     from bodyfusion.evaluation.figure_process import FigureProcess
 
     figure_process = FigureProcess.start()  # first: matplotlib loads there while this process runs
     from bodyfusion.outputs.write import earlier_run
 
-    earlier = out is not None and earlier_run(out)  # an earlier run's outputs, replaced
+    earlier = out is not None and earlier_run(out)  # an earlier run's outputs, replaced (--overwrite)
     try:
         from rich.console import Console
         from rich.table import Table
@@ -146,8 +147,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
              "--sink", help="Where states go: - (JSON lines on stdout), tcp://HOST:PORT, or a .jsonl, .csv, "
                             ".parquet or .mcap file; repeatable.")] = None,
          out: Annotated[Path | None, typer.Option("--out", help="Also write the finished run's outputs here.")] = None,
-         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace output files in --out that no "
-                                                                     "earlier run wrote.")] = False,
+         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace the outputs (an earlier run's, or "
+                                                                     "files of their names) in --out.")] = False,
          interval: Annotated[float, typer.Option("--interval", help="Seconds of data between states.")] = 0.1,
          lookahead: Annotated[float, typer.Option("--lookahead", help="Seconds behind the newest sample at "
                                                                       "which decisions are final.")] = 2.0,

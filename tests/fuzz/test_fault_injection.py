@@ -39,7 +39,9 @@ TIMEOUT_S = 120
 
 
 def fusion_run(out: Path, *extra: str, **popen) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(out), *extra],
+    """``fusion run`` of the Vicon walk into ``out``, an earlier run's outputs there replaced."""
+    return subprocess.Popen([sys.executable, "-m", "bodyfusion", "run", str(VICON), "--out", str(out), "--overwrite",
+                             *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 

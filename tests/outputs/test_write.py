@@ -145,9 +145,10 @@ def test_covariances_parquet_holds_every_entry_each_system_stores(tmp_path):
     assert "cov_east_m_up_m" not in table.column_names  # never stored: no column
 
 
-def test_a_folder_of_the_users_own_files_is_refused_before_the_run_and_an_earlier_run_replaced(tmp_path):
+def test_a_folder_holding_outputs_is_refused_before_the_run_unless_overwrite(tmp_path):
     """--out holding a trajectories.csv no run of ours wrote: one line naming it, the file kept,
-    nothing run; with --overwrite replaced; a folder of an earlier run's outputs is replaced."""
+    nothing run; with --overwrite replaced. A folder of an earlier run's outputs is kept as well,
+    unless --overwrite, which says it replaced them."""
     import subprocess
     import sys
 
@@ -166,5 +167,9 @@ def test_a_folder_of_the_users_own_files_is_refused_before_the_run_and_an_earlie
     assert (mine / "trajectories.csv").read_text() == "my own\n" and not (mine / "metrics.json").exists()
     assert fusion("run", config, "--out", str(mine), "--overwrite").returncode == 0
     assert (mine / "trajectories.csv").read_text() != "my own\n" and (mine / "thesis.txt").read_text() == "kept\n"
-    again = fusion("run", config, "--out", str(mine))  # an earlier run's outputs: replaced, and said
-    assert again.returncode == 0 and "replaced" in again.stdout
+    first = (mine / "trajectories.csv").read_bytes()
+    again = fusion("run", config, "--out", str(mine))  # an earlier run's outputs: kept
+    assert again.returncode == 2 and "an earlier run's outputs" in again.stderr
+    assert (mine / "trajectories.csv").read_bytes() == first
+    replaced = fusion("run", config, "--out", str(mine), "--overwrite")  # replaced, and said
+    assert replaced.returncode == 0 and "replaced" in replaced.stdout

@@ -167,21 +167,20 @@ def earlier_run(out_dir: Path) -> bool:
 
 
 def check_output_folder(out_dir: Path, overwrite: bool = False) -> bool:
-    """Before a run: refuse (FusionError naming the folder and the files) a ``--out`` whose files
-    a run would replace though no earlier run wrote them (a folder of the user's own); an
-    earlier run's outputs are replaced. ``overwrite``: replace them all the same. Returns
-    whether an earlier run's outputs are there."""
+    """Before a run: refuse (FusionError naming the folder and the files) a ``--out`` holding any
+    file or folder a run writes (:func:`output_name`: an earlier run's outputs, or files of those
+    names of the user's own), unless ``overwrite``: nothing is replaced that the user did not ask
+    to replace. Other files there are never touched. Returns whether an earlier run's outputs
+    are there (replaced, with ``overwrite``)."""
     if not out_dir.is_dir():
         return False
-    if earlier_run(out_dir):
-        return True
-    if overwrite:
-        return False
     taken = [p.name for p in sorted(out_dir.iterdir()) if output_name(p.name)]
-    if taken:
-        raise FusionError(f"{out_dir}: holds {', '.join(taken)}, which no earlier run wrote and a run would replace; "
-                          "give another --out, or --overwrite to replace them")
-    return False
+    earlier = earlier_run(out_dir)
+    if taken and not overwrite:
+        held = "an earlier run's outputs" if earlier else "files no earlier run wrote"
+        raise FusionError(f"{out_dir}: holds {held} ({', '.join(taken)}), which a run would replace; give another "
+                          "--out, or --overwrite to replace them")
+    return earlier
 
 
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,

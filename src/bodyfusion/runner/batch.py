@@ -196,8 +196,8 @@ def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: st
         figure_process: FigureProcess | None = None, overwrite: bool = False) -> tuple[RunResult, Path]:
     """Load, run (``progress`` as :func:`run_layout` takes it), write outputs (the plots by
     ``figure_process`` when given one) and say the run's health findings on the log (stderr from
-    the command line), one line each; returns the result and the output folder. A folder whose
-    files no earlier run wrote is refused before the run (:func:`~bodyfusion.outputs.write.check_output_folder`;
+    the command line), one line each; returns the result and the output folder. A folder already
+    holding outputs is refused before the run (:func:`~bodyfusion.outputs.write.check_output_folder`;
     ``overwrite``: replace them)."""
     t0 = time.perf_counter()
     log.info("loading %s", config_path)

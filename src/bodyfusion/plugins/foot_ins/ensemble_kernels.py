@@ -84,7 +84,7 @@ def _record_motion_covariance(ens: np.ndarray, mean: np.ndarray, D: np.ndarray, 
     """``row[4:13]`` ← the members' sample covariance of the velocity and attitude deviations
     (:data:`MOTION_PAIRS`)."""
     M = ens.shape[0]
-    ensemble_deviations(ens, mean, D, True)
+    ensemble_deviations(ens, mean, D, np.bool_(True))  # not a literal: one signature
     for c in range(9):
         a, b = MOTION_PAIRS[c]
         s = 0.0
