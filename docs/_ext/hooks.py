@@ -1,21 +1,27 @@
 """MkDocs hooks of the documentation site (mkdocs.yml ``hooks:``).
 
-- The tutorial notebook ``docs/tutorial_vicon.ipynb`` is rendered as the page
-  ``tutorial_vicon.md``: its Markdown cells as they are, its code cells as Python blocks (the
-  notebook is kept without outputs; the test suite runs it).
+- The tutorial notebook ``docs/tutorial_vicon.ipynb`` (kept without outputs) is executed at each
+  build in a Jupyter kernel of the building Python (nbclient; its exports to a temporary folder)
+  and rendered as the page ``tutorial_vicon.md`` with its outputs (nbconvert's Markdown exporter:
+  printed text, tables, the figures as PNG files beside the page). A cell that raises fails the
+  build.
 - Citations by key (``[Xu2024]``, in the guides and the docstrings) link to their entry in
   ``references.md``, whose entries get the keys as anchors.
 """
 
 from __future__ import annotations
 
-import json
+import os
 import re
+import tempfile
 from pathlib import Path
+from unittest.mock import patch
 
 from mkdocs.structure.files import File, Files
 
 NOTEBOOK = "tutorial_vicon.ipynb"
+KERNEL_TIMEOUT_S = 600
+"""Longest a notebook cell may run (s)."""
 REFERENCES = "references.md"
 KEY = re.compile(r"^- \*\*\[([A-Za-z0-9]+)\]\*\*", re.MULTILINE)
 # HTML split into what not to touch (tags, code, links) and the text in between.
@@ -23,23 +29,33 @@ UNTOUCHED = re.compile(r"(<code\b.*?</code>|<pre\b.*?</pre>|<a\b.*?</a>|<[^>]+>)
 _keys: list[str] = []
 
 
-def notebook_markdown(path: Path) -> str:
-    """The notebook's cells as one Markdown page."""
-    cells = json.loads(path.read_text(encoding="utf-8"))["cells"]
-    parts = []
-    for cell in cells:
-        source = "".join(cell["source"]).strip("\n")
-        if not source:
-            continue
-        parts.append(source if cell["cell_type"] == "markdown" else f"```python\n{source}\n```")
-    parts.insert(1, f"*This page is the notebook [`docs/{NOTEBOOK}`]({NOTEBOOK}); "
-                    "open it in Jupyter anywhere in the repository to run it.*")
-    return "\n\n".join(parts) + "\n"
+def executed_notebook(path: Path) -> tuple[str, dict[str, bytes]]:
+    """The notebook run top to bottom in a fresh kernel (cwd its folder), as Markdown with its
+    outputs, and the output images by file name (under ``<stem>_files/``)."""
+    import nbformat
+    from nbclient import NotebookClient
+    from nbconvert import MarkdownExporter
+
+    notebook = nbformat.read(path, as_version=4)
+    with tempfile.TemporaryDirectory(prefix="bodyfusion-tutorial-") as out:
+        client = NotebookClient(notebook, timeout=KERNEL_TIMEOUT_S, kernel_name="python3",
+                                resources={"metadata": {"path": str(path.parent)}})
+        with patch.dict(os.environ, BODYFUSION_TUTORIAL_OUT=out):  # the kernel inherits it
+            client.execute()
+    body, resources = MarkdownExporter().from_notebook_node(
+        notebook, resources={"output_files_dir": f"{path.stem}_files"})
+    preface = (f"*This page is the notebook [`docs/{path.name}`]({path.name}), run as the site was built; "
+               "open it in Jupyter anywhere in the repository to run it.*")
+    title, _, rest = body.partition("\n\n")
+    return f"{title}\n\n{preface}\n\n{rest}", resources.get("outputs", {})
 
 
 def on_files(files: Files, config) -> Files:
     docs = Path(config["docs_dir"])
-    files.append(File.generated(config, "tutorial_vicon.md", content=notebook_markdown(docs / NOTEBOOK)))
+    page, images = executed_notebook(docs / NOTEBOOK)
+    files.append(File.generated(config, "tutorial_vicon.md", content=page))
+    for name, content in images.items():
+        files.append(File.generated(config, name, content=content))
     _keys[:] = KEY.findall((docs / REFERENCES).read_text(encoding="utf-8"))
     return files
 
