@@ -6,11 +6,12 @@ column, scaled and swapped columns, duplicated, deleted or reversed lines, re-en
 checksums redone, layout keys set wrong, deleted or added; each case through ``fusion validate``
 and ``fusion run``) with ``--examples`` per target (7 targets; default 300: 2,100 cases),
 derandomised (the same cases every time), and every case's outcome recorded: ``refused`` (exit
-2, one ``error:`` line), ``ran`` (exit 0, finite trajectories, strict JSON) or ``defect``
-(anything else: a traceback, a hang over 60 s, a non-finite output, a second error line).
+2, one ``error:`` line), ``ran`` (exit 0, finite trajectories, strict JSON), ``silent`` (a score
+moved past the suite's margin with no warning: a silent wrong result) or ``defect`` (anything
+else: a traceback, a hang over 60 s, a non-finite output, a second error line).
 
 Writes ``--table`` (CSV: target, classes, outcome, detail, case) and prints the summary per
-target and per edit class; last line ``cases=… refused=… ran=… defects=…``.
+target and per edit class; last line ``cases=… refused=… ran=… silent=… defects=…``.
 
 Run: python benchmarks/fuzz_long.py [--examples 300] [--table fuzz_cases.csv]
 """
@@ -51,11 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/fuzz/test_fuzz_inputs.py"],
                    cwd=ROOT, env=env)
     per, totals = summarise(args.table)
-    print(f"{'target':<24} {'edit class':<16} {'cases':>6} {'refused':>8} {'ran':>6} {'defects':>8}")
+    print(f"{'target':<24} {'edit class':<16} {'cases':>6} {'refused':>8} {'ran':>6} {'silent':>7} {'defects':>8}")
     for (target, cls), counts in sorted(per.items()):
         print(f"{target:<24} {cls:<16} {sum(counts.values()):>6} {counts['refused']:>8} {counts['ran']:>6} "
-              f"{counts['defect']:>8}")
-    print(f"cases={sum(totals.values())} refused={totals['refused']} ran={totals['ran']} defects={totals['defect']}")
+              f"{counts['silent']:>7} {counts['defect']:>8}")
+    print(f"cases={sum(totals.values())} refused={totals['refused']} ran={totals['ran']} silent={totals['silent']} "
+          f"defects={totals['defect']}")
     return 0
 
 

@@ -246,6 +246,36 @@ def test_a_truth_with_too_few_epochs_in_the_run_is_refused_before_fusing(write_y
     assert err.value.key == "truth" and "2 truth epoch(s) within its run" in err.value.reason
 
 
+def test_a_truth_position_beyond_any_local_frame_is_refused_naming_its_line(write_yaml, tmp_path):
+    def corrupt(df):
+        df.loc[100, [c for c in df.columns if c.startswith("pos_")][0]] = 1e308
+        return df
+
+    with pytest.raises(InputError, match=r"truth\.csv: line 102: left_foot's truth position .* beyond 1e\+07 m"):
+        run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, truth=corrupt)))
+
+
+def test_a_truth_cut_short_is_scored_on_its_part_with_a_warning(write_yaml, tmp_path, caplog):
+    layout = _left_foot_layout(write_yaml, tmp_path, truth=lambda df: df.iloc[: len(df) // 2])
+    with caplog.at_level("WARNING", logger="bodyfusion"):
+        result = run_layout(load_layout(layout))
+    assert "left_foot" in result.scores
+    warned = [r.getMessage() for r in caplog.records if "scored on that part only" in r.getMessage()]
+    assert len(warned) == 1 and "left_foot" in warned[0] and "50 % of its run" in warned[0], warned
+
+
+def test_a_system_the_truth_has_no_track_for_is_named_unscored(tmp_path, caplog):
+    layouts = write_recording(tmp_path)
+    truth = tmp_path / "truth.csv"
+    truth.write_text("".join(line for line in truth.read_text().splitlines(keepends=True)
+                             if not line.startswith("hand_phone,")))
+    with caplog.at_level("WARNING", logger="bodyfusion"):
+        result = run_layout(load_layout(layouts["csv"]))
+    assert set(result.scores) == {"left_foot", "right_foot"}
+    assert [r.getMessage() for r in caplog.records if "truth: no track" in r.getMessage()] == [
+        "truth: no track for hand_phone in the truth section's file: not scored"]
+
+
 def test_a_truth_in_millimetres_is_named_as_such_and_its_unit_fixes_it(write_yaml, tmp_path):
     def millimetres(df):
         df[[c for c in df.columns if c.startswith("pos_")]] *= 1000.0

@@ -1,7 +1,9 @@
 """Fuzzing: corrupted IMU, truth, GNSS (CSV, NMEA), phone-log, UWB-range files and layouts, each
 through ``fusion validate`` and ``fusion run`` in-process. A run either refuses the input with
 exit code 2 and one line, or finishes with exit code 0, a trajectories.csv without NaN and a
-metrics.json that is strict JSON; never a traceback, never a hang (60 s per command).
+metrics.json that is strict JSON; never a traceback, never a hang (60 s per command); and a
+corrupted file that changes a score past a margin says so with a warning (no silent wrong
+result).
 
 Examples per target: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35; 7 targets → 245 inputs).
 Hypothesis is derandomised: the same inputs every run, so a failure reproduces. With
@@ -87,8 +89,8 @@ def _no_constant(name: str) -> float:
 def recorded(target: str, edits: list) -> contextlib.AbstractContextManager:
     """The case's outcome appended to the table at ``BODYFUSION_FUZZ_TABLE`` (CSV: target, classes,
     outcome, detail, case) when that is set (the long mode, ``benchmarks/fuzz_long.py``):
-    ``refused`` (exit 2, one line), ``ran`` (exit 0, finite outputs) or ``defect`` (anything
-    else: the test fails as well)."""
+    ``refused`` (exit 2, one line), ``ran`` (exit 0, finite outputs), ``silent`` (a silent wrong
+    result, :func:`silent_change`) or ``defect`` (anything else); the test fails on the last two."""
     table = os.environ.get("BODYFUSION_FUZZ_TABLE")
     return _recording(Path(table), target, edits) if table else contextlib.nullcontext()
 
@@ -101,7 +103,9 @@ def _recording(table: Path, target: str, edits: list) -> Iterator[None]:
         yield
         outcome = CASE_OUTCOME.pop("outcome", "ran")
     except BaseException as err:
-        outcome, detail = "defect", f"{type(err).__name__}: {str(err).splitlines()[0][:160] if str(err) else ''}"
+        first = str(err).splitlines()[0][:160] if str(err) else ""
+        outcome = "silent" if first.startswith("silent wrong result") else "defect"
+        detail = f"{type(err).__name__}: {first}"
         raise
     finally:
         new = not table.exists()
@@ -116,9 +120,32 @@ CASE_OUTCOME: dict[str, str] = {}
 """What :func:`check_outcome` found of the case it checked last (``refused`` or ``ran``)."""
 
 
-def check_outcome(layout: Path, out: Path) -> None:
+SILENT_FACTOR, SILENT_M = 1.5, 0.2
+"""A corrupted file's run is a silent wrong result when, with no ``warning:`` line, a system's
+horizontal RMSE (m) moved beyond this factor of the clean run's, plus this margin, either way
+(a wrong track, or a wrong score: truth in other units)."""
+
+
+def silent_change(clean: dict, doc: dict, err: str) -> str | None:
+    """What a run's metrics.json ``doc`` changed from the ``clean`` run's without a warning on its
+    stderr ``err`` (a system gone or its score moved past :data:`SILENT_FACTOR`), or None."""
+    if any(line.startswith("warning:") for line in err.splitlines()):
+        return None
+    scores = {name: (block.get("horizontal_error_m") or {}).get("rmse") for name, block in doc["systems"].items()}
+    for name, block in clean["systems"].items():
+        before = block["horizontal_error_m"]["rmse"]
+        after = scores.get(name)
+        if after is None:
+            return f"{name}: scored in the clean run ({before:.3f} m), not in this one, and no warning"
+        if after > SILENT_FACTOR * before + SILENT_M or before > SILENT_FACTOR * after + SILENT_M:
+            return f"{name}: horizontal RMSE {before:.3f} → {after:.3f} m, and no warning"
+    return None
+
+
+def check_outcome(layout: Path, out: Path, clean: dict | None = None) -> None:
     """validate then run: exit 0 or 2; a refusal says one ``error:`` line; a finished run wrote
-    finite trajectories and strict JSON."""
+    finite trajectories and strict JSON, and, given the ``clean`` run's metrics of the same layout,
+    did not change a score past :data:`SILENT_FACTOR` without a warning."""
     code, err = fusion("validate", str(layout))
     assert code in (0, 2), f"validate exit {code}: {err}"
     code, err = fusion("run", str(layout), "--out", str(out))
@@ -128,7 +155,7 @@ def check_outcome(layout: Path, out: Path) -> None:
         assert len(errors) == 1 and "Traceback" not in err, err
         CASE_OUTCOME["outcome"] = "refused"
         return
-    json.loads((out / "metrics.json").read_text(), parse_constant=_no_constant)
+    doc = json.loads((out / "metrics.json").read_text(), parse_constant=_no_constant)
     with (out / "trajectories.csv").open() as f:
         reader = csv.reader(f)
         header = next(reader)
@@ -136,6 +163,8 @@ def check_outcome(layout: Path, out: Path) -> None:
             values = [float(v) for v in row[1:] if v]
             assert len(values) >= 7, f"a position or its σ missing in trajectories.csv: {dict(zip(header, row))}"
             assert all(math.isfinite(v) for v in values), f"non-finite value in trajectories.csv: {dict(zip(header, row))}"
+    silent = silent_change(clean, doc, err) if clean is not None else None
+    assert silent is None, f"silent wrong result: {silent}"
 
 
 @pytest.fixture(scope="module")
@@ -172,8 +201,9 @@ def corrupt_and_run(recording: tuple[Path, dict[str, Path]], layout: str, target
             text = edit(text)
         (case_dir / target).unlink()
         write_text(case_dir / target, text)
+        clean = json.loads((folder / f"clean_{layout}" / "metrics.json").read_text())
         with recorded(target, edits):
-            check_outcome(case_dir / layouts[layout].name, case_dir / "out")
+            check_outcome(case_dir / layouts[layout].name, case_dir / "out", clean)
 
 
 TARGETS = [("csv", "left_foot_imu.csv"), ("csv", "truth.csv"), ("csv", "hand_phone_gnss.csv"),

@@ -25,6 +25,23 @@ from bodyfusion.io.tables import (
 from bodyfusion.io.timestamps import apply_timestamp_policy, check_time_source, sample_times
 
 
+MAX_POSITION_M = 1.0e7
+"""Largest truth coordinate (m) a local frame about a point on the Earth can hold: beyond it a
+cell is a corrupt number (or another unit), refused with its line."""
+
+
+def check_truth_positions(where: str, name: str, pos: np.ndarray, lines: np.ndarray | None) -> None:
+    """Refuse (:class:`~bodyfusion.base.errors.InputError` naming the file and line, or the row) a
+    truth position of ``name`` (N, 3; m, NaN for a missing height) beyond :data:`MAX_POSITION_M`."""
+    bad = np.flatnonzero(np.nanmax(np.abs(pos), axis=1, initial=0.0) > MAX_POSITION_M)
+    if bad.size:
+        k = int(bad[0])
+        at = f"line {int(lines[k])}" if lines is not None else f"row {k}"
+        raise InputError(where, f"{at}: {name}'s truth position {pos[k].tolist()} m lies beyond "
+                                f"{MAX_POSITION_M:.0e} m of the frame's origin ({bad.size} such row(s)): a corrupt "
+                                "number, or a unit other than metres")
+
+
 def read_truth_csv(
     source: str | Path | TableSection,
     *,
@@ -80,6 +97,7 @@ def read_truth_csv(
                         f"line {int(line_no[first])}" if line_no is not None else f"row {first}")
         if pos.shape[1] == 2:
             pos = np.column_stack([pos, np.full(len(pos), np.nan)])
+        check_truth_positions(where, name, pos[ok], None if line_no is None else line_no[kept][ok])
         out[name] = TruthTrack(
             t=np.ascontiguousarray(t_kept[ok]), pos_n=np.ascontiguousarray(pos[ok]), sparse=sparse
         )
@@ -144,5 +162,6 @@ def read_truth_long_csv(source: str | Path | TableSection, *, sparse: bool = Fal
         pos = np.empty((rows.size, 3))
         for k, col in enumerate(LONG_TRUTH_COLUMNS[2:]):
             pos[:, k] = columns[col][sel]
+        check_truth_positions(where, name, pos, None if line_no is None else line_no[rows])
         out[name] = TruthTrack(t=np.array(columns["t"][sel]), pos_n=pos, sparse=sparse)
     return out

@@ -16,7 +16,7 @@ import numpy as np
 import pymap3d
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.base.types import TruthTrack
+from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.core.layout import LENGTH_UNITS, TruthConfig
 from bodyfusion.io.phone_log import read_getsensordata
 from bodyfusion.io.truth import read_truth_csv, read_truth_long_csv
@@ -65,11 +65,22 @@ MIN_TRUTH_EPOCHS = 10
 (an alignment fitted to two points matches any track)."""
 
 
+TRUTH_COVERAGE = 0.9
+"""Least share of a system's run a dense truth track spans without a warning that the score is of
+a part only."""
+
+
 def check_truth_overlap(truths: Mapping[str, TruthTrack], spans: Mapping[str, tuple[float, float]],
                         layout: Path | None) -> None:
-    """Refuse (one line, naming the truth section) a dense truth with fewer than
-    :data:`MIN_TRUTH_EPOCHS` epochs inside its system's time span ``spans[name]`` (s): its score
-    would say nothing, or say 0.000."""
+    """Check the truth against the systems' time spans ``spans[name]`` (s) before scoring. Refuse
+    (one line, naming the truth section) a dense truth with fewer than :data:`MIN_TRUTH_EPOCHS`
+    epochs inside its system's span: its score would say nothing, or say 0.000. Warn (one line
+    each) of a system the truth has no track for (not scored), and of a dense track spanning less
+    than :data:`TRUTH_COVERAGE` of its system's run (scored on that part only): a truth file cut
+    short, or another recording's."""
+    unscored = [name for name in spans if name not in truths]
+    if truths and unscored:
+        LOG.warning("truth: no track for %s in the truth section's file: not scored", ", ".join(unscored))
     for name, track in truths.items():
         if track.sparse or name not in spans:
             continue
@@ -80,6 +91,10 @@ def check_truth_overlap(truths: Mapping[str, TruthTrack], spans: Mapping[str, tu
                                        f"truth spans {track.t[0]:.6g}–{track.t[-1]:.6g} s): a score needs at least "
                                        f"{MIN_TRUTH_EPOCHS} (check the truth's time column and time_scale)",
                               layout)
+        covered = (min(t1, track.t[-1]) - max(t0, track.t[0])) / (t1 - t0) if t1 > t0 else 1.0
+        if covered < TRUTH_COVERAGE:
+            LOG.warning("truth: %s: the truth spans t = %.6g–%.6g s, %.0f %% of its run (t = %.6g–%.6g s): scored on "
+                        "that part only", name, track.t[0], track.t[-1], 100 * covered, t0, t1)
 
 
 def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,
