@@ -173,3 +173,16 @@ def test_a_folder_holding_outputs_is_refused_before_the_run_unless_overwrite(tmp
     assert (mine / "trajectories.csv").read_bytes() == first
     replaced = fusion("run", config, "--out", str(mine), "--overwrite")  # replaced, and said
     assert replaced.returncode == 0 and "replaced" in replaced.stdout
+
+
+@pytest.mark.parametrize(("make", "said"), [
+    (lambda root: (root / "out").write_text("x"), "it is not a folder"),
+    (lambda root: (root / "parent").write_text("x"), "parent is not a folder"),
+    (lambda root: (root / "out").symlink_to(root / "missing"), "a link to the missing"),
+], ids=["a file", "under a file", "a dangling link"])
+def test_an_out_that_cannot_be_a_folder_is_refused_before_the_run(tmp_path, make, said):
+    make(tmp_path)
+    out = tmp_path / ("parent/out" if said.startswith("parent") else "out")
+    with pytest.raises(FusionError, match=said) as err:
+        write.check_output_folder(out)
+    assert str(out) in str(err.value)

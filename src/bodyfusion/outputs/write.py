@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -171,9 +172,14 @@ def check_output_folder(out_dir: Path, overwrite: bool = False) -> bool:
     file or folder a run writes (:func:`output_name`: an earlier run's outputs, or files of those
     names of the user's own), unless ``overwrite``: nothing is replaced that the user did not ask
     to replace. Other files there are never touched. Returns whether an earlier run's outputs
-    are there (replaced, with ``overwrite``)."""
+    are there (replaced, with ``overwrite``). A ``--out`` that cannot be a folder this process
+    writes in (a file, under a file, a dangling link, a folder it may not write) is refused as
+    well, before the run rather than after it."""
     if not out_dir.is_dir():
+        _check_creatable(out_dir)
         return False
+    if not os.access(out_dir, os.W_OK | os.X_OK):
+        raise FusionError(f"{out_dir}: cannot write the outputs: the folder is not writable")
     taken = [p.name for p in sorted(out_dir.iterdir()) if output_name(p.name)]
     earlier = earlier_run(out_dir)
     if taken and not overwrite:
@@ -181,6 +187,21 @@ def check_output_folder(out_dir: Path, overwrite: bool = False) -> bool:
         raise FusionError(f"{out_dir}: holds {held} ({', '.join(taken)}), which a run would replace; give another "
                           "--out, or --overwrite to replace them")
     return earlier
+
+
+def _check_creatable(out_dir: Path) -> None:
+    """Refuse (FusionError naming it) an output folder path that is not a folder and cannot be
+    made one: a file or device there, a dangling link, a file or an unwritable folder above it."""
+    if out_dir.is_symlink() or out_dir.exists():
+        what = "a link to the missing " + os.readlink(out_dir) if not out_dir.exists() else "not a folder"
+        raise FusionError(f"{out_dir}: cannot create output folder: it is {what}")
+    parent = out_dir.absolute().parent
+    while not parent.exists() and not parent.is_symlink():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise FusionError(f"{out_dir}: cannot create output folder: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise FusionError(f"{out_dir}: cannot create output folder: {parent} is not writable")
 
 
 def write_outputs(result: RunResult, out_dir: Path, config_label: str, total_wall_s: float,
