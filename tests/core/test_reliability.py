@@ -264,6 +264,21 @@ def test_a_truth_cut_short_is_scored_on_its_part_with_a_warning(write_yaml, tmp_
     assert len(warned) == 1 and "left_foot" in warned[0] and "50 % of its run" in warned[0], warned
 
 
+def test_truth_drop_outs_written_as_zeros_are_warned_of_as_jumps(write_yaml, tmp_path, caplog):
+    def drop_outs(df):
+        df.loc[300:302, [c for c in df.columns if c.startswith("pos_")]] = 0.0
+        return df
+
+    clean = _left_foot_layout(write_yaml, tmp_path)
+    with caplog.at_level("WARNING", logger="bodyfusion"):
+        run_layout(load_layout(clean))
+    assert not [r for r in caplog.records if "jump(s) faster than" in r.getMessage()]
+    with caplog.at_level("WARNING", logger="bodyfusion"):
+        run_layout(load_layout(_left_foot_layout(write_yaml, tmp_path, truth=drop_outs)))
+    jumps = [r.getMessage() for r in caplog.records if "jump(s) faster than" in r.getMessage()]
+    assert len(jumps) == 1 and "left_foot: 2 jump(s)" in jumps[0], jumps  # into the drop-out and out of it
+
+
 def test_a_system_the_truth_has_no_track_for_is_named_unscored(tmp_path, caplog):
     layouts = write_recording(tmp_path)
     truth = tmp_path / "truth.csv"

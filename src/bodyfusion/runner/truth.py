@@ -65,6 +65,13 @@ MIN_TRUTH_EPOCHS = 10
 (an alignment fitted to two points matches any track)."""
 
 
+MAX_TRUTH_SPEED_MPS = 30.0
+"""Fastest a dense truth track may move between two epochs (m/s, horizontal; a human foot in a
+sprint's swing stays under ~20 m/s) when the step is longer than :data:`TRUTH_JUMP_M`: faster is
+a drop-out written as a number, a marker glitch, or another track's rows."""
+TRUTH_JUMP_M = 0.2
+"""Shortest horizontal step (m) between two truth epochs judged against :data:`MAX_TRUTH_SPEED_MPS`
+(below it a motion-capture track's noise over a short interval)."""
 TRUTH_COVERAGE = 0.9
 """Least share of a system's run a dense truth track spans without a warning that the score is of
 a part only."""
@@ -75,9 +82,9 @@ def check_truth_overlap(truths: Mapping[str, TruthTrack], spans: Mapping[str, tu
     """Check the truth against the systems' time spans ``spans[name]`` (s) before scoring. Refuse
     (one line, naming the truth section) a dense truth with fewer than :data:`MIN_TRUTH_EPOCHS`
     epochs inside its system's span: its score would say nothing, or say 0.000. Warn (one line
-    each) of a system the truth has no track for (not scored), and of a dense track spanning less
-    than :data:`TRUTH_COVERAGE` of its system's run (scored on that part only): a truth file cut
-    short, or another recording's."""
+    each) of a system the truth has no track for (not scored), of a dense track spanning less
+    than :data:`TRUTH_COVERAGE` of its system's run (scored on that part only: a truth file cut
+    short, or another recording's), and of its jumps (:func:`_warn_of_jumps`)."""
     unscored = [name for name in spans if name not in truths]
     if truths and unscored:
         LOG.warning("truth: no track for %s in the truth section's file: not scored", ", ".join(unscored))
@@ -91,10 +98,26 @@ def check_truth_overlap(truths: Mapping[str, TruthTrack], spans: Mapping[str, tu
                                        f"truth spans {track.t[0]:.6g}–{track.t[-1]:.6g} s): a score needs at least "
                                        f"{MIN_TRUTH_EPOCHS} (check the truth's time column and time_scale)",
                               layout)
+        _warn_of_jumps(name, track)
         covered = (min(t1, track.t[-1]) - max(t0, track.t[0])) / (t1 - t0) if t1 > t0 else 1.0
         if covered < TRUTH_COVERAGE:
             LOG.warning("truth: %s: the truth spans t = %.6g–%.6g s, %.0f %% of its run (t = %.6g–%.6g s): scored on "
                         "that part only", name, track.t[0], track.t[-1], 100 * covered, t0, t1)
+
+
+def _warn_of_jumps(name: str, track: TruthTrack) -> None:
+    """Warn (one line) of a dense truth track's steps between consecutive epochs faster than
+    :data:`MAX_TRUTH_SPEED_MPS` over more than :data:`TRUTH_JUMP_M`: the score counts them."""
+    step = np.hypot(*np.diff(track.pos_n[:, :2], axis=0).T)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = step / np.diff(track.t)
+    jumps = np.flatnonzero((step > TRUTH_JUMP_M) & ~(speed <= MAX_TRUTH_SPEED_MPS))
+    if jumps.size:
+        LOG.warning("truth: %s: %d jump(s) faster than %g m/s between consecutive epochs (the first at t = %.6g s, "
+                    "%.3g m in %.3g s): a drop-out written as a number, a marker glitch or another track's rows; the "
+                    "score counts them",
+                    name, jumps.size, MAX_TRUTH_SPEED_MPS, track.t[jumps[0] + 1], step[jumps[0]],
+                    track.t[jumps[0] + 1] - track.t[jumps[0]])
 
 
 def read_truth(truth: TruthConfig, origin: tuple[float, float, float] | None,
