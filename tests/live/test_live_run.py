@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.core.layout import load_layout
 from bodyfusion.live.engine import LiveRun
 from bodyfusion.live.sinks import JsonLinesSink
@@ -107,6 +107,18 @@ def test_rows_out_of_time_order_are_dropped_and_counted(batch):
         run.push(name, row)
     _same_tracks(run.close(), batch)
     assert sum(b.dropped for b in run.buffers.values()) == 10
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), "abc", None])
+def test_a_row_holding_no_finite_number_is_refused_naming_the_system_row_and_column(value):
+    run = LiveRun(load_layout(VICON))
+    rows = list(replay_rows(run))
+    for t, name, row in rows[:99]:
+        run.push(name, row)
+    t, name, row = rows[99]
+    with pytest.raises(InputError, match=rf"systems\.{name}\.data: row {sum(n == name for _, n, _ in rows[:100])}: "
+                                         r"gyro_x is .*, not a finite number"):
+        run.push(name, {**row, "gyro_x": value})
 
 
 def test_a_layout_with_a_smoother_is_refused_live():

@@ -28,7 +28,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from bodyfusion.base.errors import ConfigError, NotReady
+from bodyfusion.base.errors import ConfigError, InputError, NotReady
 from bodyfusion.base.sections import TableSection
 from bodyfusion.core.capabilities import Streaming
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
@@ -54,6 +54,15 @@ OUTPUT_INTERVAL_S = 0.1
 """Spacing (s) of the output epochs."""
 
 
+def _finite(value: object) -> float | None:
+    """``value`` as a finite float, or None (not a number, NaN or infinite)."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
 class RowBuffer:
     """One system's rows as they arrive: the columns its data section reads, in growing arrays
     (capacity doubling), and each row's time (s) as the section defines it."""
@@ -77,14 +86,20 @@ class RowBuffer:
         missing = [c for c in self.columns if c not in row]
         if missing:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
-        t = float(self._time(row[self._time_column] if self._time_column is not None else 0.0, self.rows))
+        values = [_finite(row[c]) for c in self.columns]
+        bad = [c for c, v in zip(self.columns, values) if v is None]
+        if bad:  # refused as the batch reader refuses a bad cell, here with the system's row number
+            raise InputError(f"{self.key}: row {self.rows + self.dropped + 1}",
+                             f"{bad[0]} is {row[bad[0]]!r}, not a finite number")
+        time_value = values[self.columns.index(self._time_column)] if self._time_column is not None else 0.0
+        t = float(self._time(time_value, self.rows))
         if not t > self.newest_t:
             self.dropped += 1
             return False
         if self.rows == self._data.shape[0]:
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
             self.t = np.concatenate([self.t, np.empty_like(self.t)])
-        self._data[self.rows] = [float(row[c]) for c in self.columns]
+        self._data[self.rows] = values
         self.t[self.rows] = t
         self.rows += 1
         return True
