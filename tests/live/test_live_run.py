@@ -86,6 +86,36 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
     _same_tracks(run.close(), batch)
 
 
+@pytest.mark.parametrize(("bad", "said"), [
+    (b"\xff\xfe not text\n", "line 3: not UTF-8 text"),
+    (b"[1, 2]\n", "line 3: not a JSON object"),
+    (b'{"system": "left_foot", "acc_x": NaN}\n', "line 3: left_foot needs finite numbers"),
+    (b'{"system": "head"}\n', "line 3: system 'head' is none of this layout's"),
+], ids=["bytes", "array", "nan", "system"])
+def test_a_bad_line_on_the_stream_is_refused_naming_it(bad, said):
+    run = LiveRun(load_layout(VICON), [])
+    rows = list(replay_rows(run))[:2]
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+
+    def send():
+        for _ in range(100):
+            try:
+                client = socket.create_connection(("127.0.0.1", port))
+                break
+            except OSError:
+                threading.Event().wait(0.05)
+        with client:
+            client.sendall(b"".join(json.dumps({"system": name, **row}).encode() + b"\n" for _, name, row in rows) + bad)
+
+    sender = threading.Thread(target=send)
+    sender.start()
+    with pytest.raises(InputError, match=said):
+        replay(run, line_rows(run, f"tcp://127.0.0.1:{port}", timeout_s=30))
+    sender.join()
+
+
 def test_a_run_never_ready_starts_at_the_close_on_the_whole_recording(batch, tmp_path):
     path = tmp_path / "states.jsonl"
     run = LiveRun(load_layout(VICON), [JsonLinesSink(open(path, "w"))], warmup_s=1000.0)

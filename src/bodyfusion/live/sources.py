@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import math
 import socket
 import time
 from collections.abc import Callable, Iterator
@@ -60,8 +61,13 @@ def replay(run: LiveRun, rows: Iterator[Row], speed: float | None = None,
             status(run, t)
 
 
-def _parse(line: str, number: int, where: str) -> dict | None:
-    line = line.strip()
+def _parse(raw: bytes, number: int, where: str) -> dict | None:
+    """Line ``number`` of the stream ``where`` as a JSON object (None when blank); anything else is
+    refused naming the line."""
+    try:
+        line = raw.decode("utf-8").strip()
+    except UnicodeDecodeError:
+        raise InputError(f"{where}: line {number}", "not UTF-8 text") from None
     if not line:
         return None
     try:
@@ -90,10 +96,9 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
             server.listen(1)
             connection, _ = server.accept()
             connection.settimeout(timeout_s)
-            lines = (line for line in connection.makefile("r", encoding="utf-8"))
+            lines = iter(connection.makefile("rb"))
         else:
-            lines = (line for packet in iter(lambda: server.recv(65536), b"")
-                     for line in packet.decode("utf-8").splitlines())
+            lines = (line for packet in iter(lambda: server.recv(65536), b"") for line in packet.splitlines())
         for number, line in enumerate(lines, start=1):
             obj = _parse(line, number, address)
             if obj is None:
@@ -108,8 +113,10 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
             try:
                 row = {c: float(obj[c]) for c in buffer.columns}
             except (KeyError, TypeError, ValueError):
-                raise InputError(f"{address}: line {number}", f"{name} needs numbers in columns "
-                                                              f"{', '.join(buffer.columns)}") from None
+                row = {}
+            if len(row) < len(buffer.columns) or not all(map(math.isfinite, row.values())):
+                raise InputError(f"{address}: line {number}", f"{name} needs finite numbers in columns "
+                                                              f"{', '.join(buffer.columns)}")
             yield float("nan"), name, row
     except socket.timeout:
         raise InputError(address, f"nothing arrived for {timeout_s:g} s") from None
