@@ -141,7 +141,7 @@ def run_seed(seed: int, minutes: int, cases: list[str], out: Path, keep: bool,
              table: dict[tuple[str, int, str], Runs]) -> None:
     """Simulate one walk and run every case on it; add the runs to ``table``."""
     sim_dir = out / "sim" / f"{minutes}min_seed{seed}"
-    sim = simulate(SCENARIO, sim_dir, seed=seed, overrides=[f"path.laps={minutes}"])
+    sim = simulate(SCENARIO, sim_dir, seed=seed, overrides=[f"path.laps={minutes}"], overwrite=True)
     config = yaml.safe_load(sim.config_path.read_text())
     grid = np.arange(0.0, sim.duration_s, GRID_S)
     line = []

@@ -56,7 +56,7 @@ def run_seed(seed: int, out: Path, overrides: list[str]) -> dict:
     """One seed: per algorithm the (mean, RMSE, max) horizontal error (m) and the σ ratio
     to the filter's (max, median over the run, median over the last minute); the FB-RTS
     latency."""
-    sim = simulate(SCENARIO, out / f"seed{seed}", seed=seed, overrides=overrides)
+    sim = simulate(SCENARIO, out / f"seed{seed}", seed=seed, overrides=overrides, overwrite=True)
     result = run_layout(load_layout(sim.config_path, ["smoother.kind=none"]))
     system, truth = result.systems["foot"], result.truths["foot"]
     rec = system.smoothing_record()

@@ -76,7 +76,8 @@ def anchors(seeds: int, out: Path, console: Console) -> None:
     totals = np.zeros(4, dtype=int)
     with_tag = []
     for seed in range(seeds):
-        config = simulate(CONFIGS / "foot_uwb_sim.yaml", out / f"foot_uwb_{seed}", seed=seed).config_path
+        config = simulate(CONFIGS / "foot_uwb_sim.yaml", out / f"foot_uwb_{seed}", seed=seed,
+                          overwrite=True).config_path
         alone = run_layout(load_layout(variant(config, False, "left_tag")), seed=seed)
         fused = run_layout(load_layout(config), seed=seed)
         gate = fused.aiding["left_tag"].diagnostics()["gate_vs_truth"]
@@ -96,7 +97,8 @@ def feet(seeds: int, out: Path, console: Console) -> None:
         table.add_column(col, justify="right")
     results: dict[str, list] = {case: [] for case in DUAL_CASES}
     for seed in range(seeds):
-        config = simulate(CONFIGS / "sim_dual_foot_uwb.yaml", out / f"dual_foot_uwb_{seed}", seed=seed).config_path
+        config = simulate(CONFIGS / "sim_dual_foot_uwb.yaml", out / f"dual_foot_uwb_{seed}", seed=seed,
+                          overwrite=True).config_path
         for case, (keep, overrides) in DUAL_CASES.items():
             res = run_layout(load_layout(variant(config, keep, "feet_tags"), overrides), seed=seed)
             diag = res.aiding["feet_tags"].diagnostics()["peer_ranges"] if keep else None

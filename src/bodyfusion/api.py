@@ -151,10 +151,12 @@ class Simulation:
 
 
 def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = None, *, seed: int = 0,
-             out_dir: str | Path | None = None, progress: bool | ProgressCallback = False) -> Simulation:
+             out_dir: str | Path | None = None, overwrite: bool = False,
+             progress: bool | ProgressCallback = False) -> Simulation:
     """Simulate a scenario (a YAML file or a scenario dict; ``overrides`` as for layouts) and
     hand its streams over in memory with a layout that reads them (:class:`Simulation`). With
-    ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte.
+    ``out_dir`` the files ``fusion simulate`` writes are written there too, byte for byte (a
+    folder holding files of those names refused unless ``overwrite``).
     ``progress``: ``True`` for a bar on stderr, or a callable told (systems simulated, systems)."""
     import pandas as pd
 
@@ -171,7 +173,7 @@ def simulate(scenario: str | Path | Mapping[str, Any], overrides: Overrides = No
         if key != "truth":
             _, system, section = key.split(".", 2)
             data.setdefault(system, {})[section] = frame
-    written = sim.write(out_dir) if out_dir is not None else None
+    written = sim.write(out_dir, overwrite) if out_dir is not None else None
     return Simulation(layout, data, frames["truth"], sim.plan.distance_m, float(sim.plan.t[-1]), written)
 
 

@@ -261,12 +261,16 @@ def counted_policies(doc: dict) -> list[str]:
 def simulate(scenario: Annotated[Path, typer.Argument(help="Scenario YAML file.")],
              out: Annotated[Path, typer.Option("--out", help="Output folder.")],
              seed: Annotated[int, typer.Option("--seed")] = 0,
-             set_: SetOption = None) -> None:
+             set_: SetOption = None,
+             overwrite: Annotated[bool, typer.Option(
+                 "--overwrite", help="Replace files of the names it writes in --out (refused otherwise).")] = False
+             ) -> None:
     """Simulate a walk: sensor files, truth.csv and a ready config.yaml."""
     from bodyfusion.sim import simulate as simulate_scenario
 
     with _bar("simulating", "systems") as progress:
-        result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [], progress=progress)
+        result = simulate_scenario(scenario, out, seed=seed, overrides=set_ or [], progress=progress,
+                                   overwrite=overwrite)
     say(f"wrote {result.config_path}")
 
 

@@ -107,7 +107,8 @@ def test_a_bad_line_on_the_stream_is_refused_naming_it(bad, said):
             except OSError:
                 threading.Event().wait(0.05)
         with client:
-            client.sendall(b"".join(json.dumps({"system": name, **row}).encode() + b"\n" for _, name, row in rows) + bad)
+            lines = [json.dumps({"system": name, **row}).encode() + b"\n" for _, name, row in rows]
+            client.sendall(b"".join(lines) + bad)
 
     sender = threading.Thread(target=send)
     sender.start()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.core.layout import Layout
 from bodyfusion.core.layout_io import validate_section
 from bodyfusion.base.seeding import stable_hash
@@ -260,6 +260,12 @@ def test_gait_config_checks():
     with pytest.raises(ConfigError) as err:
         plan_gait(path, GaitConfig(swing_s=0.02, stance_s=0.5), 100.0)
     assert err.value.key == "gait"
+    for absurd in ({"stride_m": 100.0}, {"lift_m": 50.0}, {"lateral_offset_m": 3.0},
+                   {"swing_s": 60.0, "stance_s": 1.0}):
+        with pytest.raises(ValueError):
+            GaitConfig(**absurd)
+    with pytest.raises(ValueError, match="faster than any person runs"):
+        GaitConfig(stride_m=5.0, cadence_steps_per_min=400.0)  # 16.7 m/s
 
 
 # --------------------------------------------------------------------------- error model
@@ -340,6 +346,22 @@ def test_same_seed_same_bytes_and_independent_systems(tmp_path):
     for f in ("left_foot_imu.csv", "right_foot_imu.csv"):
         assert (a.out_dir / f).read_bytes() == (d.out_dir / f).read_bytes()
     assert (d.out_dir / "spare_left_imu.csv").read_bytes() != (d.out_dir / "left_foot_imu.csv").read_bytes()
+
+
+def test_a_folder_holding_files_of_the_simulations_names_is_refused_unless_overwrite(tmp_path):
+    scn = _write_scenario(tmp_path, SHORT)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "truth.csv").write_text("my own\n")
+    (out / "notes.txt").write_text("kept\n")
+    with pytest.raises(FusionError, match=r"out: holds truth\.csv, which the simulation would replace"):
+        simulate(scn, out, seed=5)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "truth.csv"]
+    assert (out / "truth.csv").read_text() == "my own\n"
+    written = simulate(scn, out, seed=5, overwrite=True)
+    assert (out / "truth.csv").read_bytes() == simulate(scn, tmp_path / "fresh", seed=5).truth_path.read_bytes()
+    assert (out / "notes.txt").read_text() == "kept\n" and written.config_path.is_file()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging or lock left
 
 
 # --------------------------------------------------------------------------- scenarios and files

@@ -91,6 +91,10 @@ GAIT_KINDS: dict[str, dict[str, Any]] = {
 """``gait.kind`` → the defaults it sets (keys the scenario gives win; ``walk``: the field defaults)."""
 
 
+MAX_SPEED_MPS = 13.0
+"""Fastest walk or run a gait may describe (m/s; the fastest sprinters peak near 12.4 m/s)."""
+
+
 class GaitConfig(StrictModel):
     """The scenario's ``gait`` section (defaults: an ordinary walk at ≈ 1.26 m/s; other
     ``kind`` values change the defaults, :data:`GAIT_KINDS`).
@@ -103,14 +107,14 @@ class GaitConfig(StrictModel):
     """
 
     kind: GaitKind = "walk"
-    stride_m: float = Field(default=1.4, gt=0)
+    stride_m: float = Field(default=1.4, gt=0, le=6.0)  # a sprinter's stride is ~5 m
     cadence_steps_per_min: float = Field(default=108.0, gt=0, le=400.0)
     stance_fraction: float = Field(default=0.6, gt=0, lt=1)
-    swing_s: float | None = Field(default=None, gt=0)
-    stance_s: float | None = Field(default=None, gt=0)
-    lift_m: float = Field(default=0.1, ge=0)
+    swing_s: float | None = Field(default=None, gt=0, le=10.0)
+    stance_s: float | None = Field(default=None, gt=0, le=600.0)
+    lift_m: float = Field(default=0.1, ge=0, le=1.0)
     pitch_amplitude_deg: float = Field(default=30.0, ge=0, lt=90)
-    lateral_offset_m: float = Field(default=0.1, ge=0)
+    lateral_offset_m: float = Field(default=0.1, ge=0, le=0.5)
     start_still_s: float = Field(default=3.0, gt=0)
     end_still_s: float = Field(default=2.0, ge=0)
     first_foot: Foot = "left"
@@ -132,6 +136,10 @@ class GaitConfig(StrictModel):
     def _cycle(self) -> "GaitConfig":
         if (self.swing_s is None) != (self.stance_s is None):
             raise ValueError("give swing_s and stance_s together (or neither, to use cadence and stance_fraction)")
+        cycle_s = self.swing_s + self.stance_s if self.swing_s is not None else 120.0 / self.cadence_steps_per_min
+        if self.stride_m / cycle_s > MAX_SPEED_MPS:
+            raise ValueError(f"a stride of {self.stride_m:g} m every {cycle_s:.3g} s is {self.stride_m / cycle_s:.3g} m/s, "
+                             f"faster than any person runs ({MAX_SPEED_MPS:g} m/s)")
         return self
 
     def cycle_s(self) -> tuple[float, float]:

@@ -60,7 +60,8 @@ import yaml
 from pydantic import Field
 
 from bodyfusion.core import registry as plugin_registry
-from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.errors import ConfigError, FusionError
+from bodyfusion.base.files import sole_writer, staged_outputs
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.sections import GeodeticPoint, StrictModel
 from bodyfusion.core.layout import Layout
@@ -229,33 +230,48 @@ class Simulated:
             for start, duration in outages[name]]) for name, out in self.outputs.items()}
         return _assembled(loaded, self.seed, overrides, self.plan, outputs)
 
-    def write(self, out_dir: str | Path) -> SimulationResult:
+    def write(self, out_dir: str | Path, overwrite: bool = False) -> SimulationResult:
         """Write the sensor files, ``truth.csv`` and ``config.yaml`` into ``out_dir`` (created if
-        needed): what ``fusion simulate`` writes."""
+        needed): what ``fusion simulate`` writes. A folder already holding a file of those names
+        is refused (:class:`~bodyfusion.base.errors.FusionError` naming them) unless
+        ``overwrite``; the set is written into a staging folder and put in place together
+        (:func:`~bodyfusion.base.files.staged_outputs`), so a write that fails keeps every earlier file."""
         out_dir = Path(out_dir)
+        names = [f.name for out in self.outputs.values() for f in out.files] + [TRUTH_FILE, CONFIG_FILE]
+        taken = sorted(name for name in names if (out_dir / name).exists()) if out_dir.is_dir() else []
+        if taken and not overwrite:
+            raise FusionError(f"{out_dir}: holds {', '.join(taken)}, which the simulation would replace; give another "
+                              "--out, or --overwrite to replace them")
         log.info("writing the sensor files, %s and %s to %s", TRUTH_FILE, CONFIG_FILE, out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        files: dict[str, list[Path]] = {}
-        for name, out in self.outputs.items():
-            files[name] = [out_dir / f.name for f in out.files]
-            for f, path in zip(out.files, files[name]):
-                f.write(path)
-        truth_path = out_dir / TRUTH_FILE
-        with truth_path.open("w", newline="") as fh:
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            with sole_writer(out_dir), staged_outputs(out_dir, last=(CONFIG_FILE,)) as staging:
+                self._write_files(staging)
+        except OSError as err:
+            raise FusionError(f"{out_dir}: cannot write the simulation: {err.strerror or err} (the files there "
+                              "are kept whole)") from None
+        files = {name: [out_dir / f.name for f in out.files] for name, out in self.outputs.items()}
+        return SimulationResult(out_dir=out_dir, config_path=out_dir / CONFIG_FILE, truth_path=out_dir / TRUTH_FILE,
+                                samples={n: out.samples for n, out in self.outputs.items()},
+                                distance_m=self.plan.distance_m, duration_s=float(self.plan.t[-1]), files=files)
+
+    def _write_files(self, folder: Path) -> None:
+        """Every file of :meth:`write` into ``folder``."""
+        for out in self.outputs.values():
+            for f in out.files:
+                f.write(folder / f.name)
+        with (folder / TRUTH_FILE).open("w", newline="") as fh:
             fh.write(",".join(TRUTH_COLUMNS) + "\n")
             for name, out in self.outputs.items():
                 fmt = name.replace("%", "%%") + "," + ",".join([FLOAT_FORMAT] * 4)
                 savetxt_rows(fh, [out.truth_t, out.truth_pos], fmt)
-        config_path = out_dir / CONFIG_FILE
         source = self.loaded.file.name if self.loaded.file is not None else "a scenario"
         header = (f"# Simulated by `fusion simulate` from {source} (seed {self.seed}"
                   + (f", overrides: {' '.join(self.overrides)}" if self.overrides else "") + ").\n"
                   f"# {self.plan.distance_m:.2f} m walked in {self.plan.t[-1]:.2f} s; truth in {TRUTH_FILE}, "
                   "no alignment.\n")
-        config_path.write_text(header + yaml.safe_dump(self.layout, sort_keys=False, default_flow_style=None))
-        return SimulationResult(out_dir=out_dir, config_path=config_path, truth_path=truth_path,
-                                samples={n: out.samples for n, out in self.outputs.items()},
-                                distance_m=self.plan.distance_m, duration_s=float(self.plan.t[-1]), files=files)
+        (folder / CONFIG_FILE).write_text(header + yaml.safe_dump(self.layout, sort_keys=False,
+                                                                   default_flow_style=None))
 
 
 def simulated(scenario: str | Path | Mapping[str, Any], seed: int = 0,
@@ -327,9 +343,10 @@ def _override_texts(overrides: Sequence[str] | Mapping[str, Any] | None) -> list
 
 
 def simulate(scenario_path: Path, out_dir: Path, seed: int = 0, overrides: list[str] | None = None,
-             progress: ProgressCallback | None = None) -> SimulationResult:
-    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed); ``progress``
-    as :func:`simulated` takes it.
+             progress: ProgressCallback | None = None, overwrite: bool = False) -> SimulationResult:
+    """Simulate the scenario at ``scenario_path`` into ``out_dir`` (created if needed; files of
+    the names it writes there refused unless ``overwrite``: :meth:`Simulated.write`);
+    ``progress`` as :func:`simulated` takes it.
 
     Same scenario, overrides and seed → the same bytes in every file."""
-    return simulated(scenario_path, seed, overrides, progress).write(out_dir)
+    return simulated(scenario_path, seed, overrides, progress).write(out_dir, overwrite)

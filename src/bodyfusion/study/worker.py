@@ -102,7 +102,7 @@ def _write_run(spec: RunSpec, result: Any, sim: Simulated | None, wall_s: float)
     scenario), then what ``fusion run`` writes (trajectories, metrics.json, plots)."""
     run_dir = Path(spec.run_dir or ".")
     if sim is not None:
-        sim.write(run_dir)
+        sim.write(run_dir, overwrite=True)  # the study's own run folder: a resumed run writes it again
     write_outputs(result, run_dir, spec.label, wall_s)
 
 
