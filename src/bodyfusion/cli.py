@@ -295,11 +295,14 @@ def study(study_file: Annotated[Path, typer.Argument(metavar="STUDY", help="Stud
 def reproduce(paper: Annotated[str, typer.Argument(metavar="PAPER", help="s000, s001, s002, s004 or all.")],
               out: Annotated[Path, typer.Option("--out", help="Output folder: table.csv and README.md.")],
               seeds: Annotated[int, typer.Option("--seeds", help="Seeds per experiment.")] = 10,
-              jobs: Annotated[int, typer.Option("--jobs", help="Processes.")] = 1) -> None:
+              jobs: Annotated[int, typer.Option("--jobs", help="Processes.")] = 1,
+              overwrite: Annotated[bool, typer.Option(
+                  "--overwrite", help="Replace table.csv and README.md in --out (refused otherwise).")] = False
+              ) -> None:
     """Reproduce a source paper's table where its mechanism acts: the paper's figures beside ours."""
     from bodyfusion.reproduce import reproduce as reproduce_paper
 
-    cells = reproduce_paper(paper, out, seeds, jobs)
+    cells = reproduce_paper(paper, out, seeds, jobs, overwrite)
     say(f"{len(cells)} cells -> {out / 'table.csv'}, {out / 'README.md'}")
 
 

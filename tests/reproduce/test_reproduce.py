@@ -78,6 +78,9 @@ def test_s001_from_the_command_line_writes_the_papers_cases_beside_ours(tmp_path
     assert all(r["n_seeds"] == "2" and float(r["our_value"]) > 0 for r in rows)
     readme = (tmp_path / "README.md").read_text()
     assert "MDC-KF → MDC-cKF" in readme and "| MDC-cKF | mean_rmse_m | 6.183 |" in readme
+    again = fusion_here("reproduce", "s001", "--out", tmp_path, "--seeds", "1")  # refused before the work
+    assert again.returncode == 2 and "holds README.md, table.csv" in again.stderr
+    assert (tmp_path / "README.md").read_text() == readme
 
 
 @pytest.mark.slow

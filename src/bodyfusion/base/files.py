@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import shutil
 import stat
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -32,6 +32,16 @@ def file_problem(path: Path) -> str | None:
         kind = "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "a device"
         return f"is {kind}, not a regular file: a recording must be a file on disk"
     return None
+
+
+def refuse_to_replace(folder: Path, names: Collection[str], overwrite: bool, writer: str) -> None:
+    """Refuse (:class:`FusionError` naming ``folder`` and the files) a ``folder`` that holds any of
+    the ``names`` the ``writer`` (e.g. "the simulation") writes, unless ``overwrite``: nothing
+    is replaced that the user did not ask to replace."""
+    taken = sorted(name for name in names if (folder / name).exists()) if folder.is_dir() else []
+    if taken and not overwrite:
+        raise FusionError(f"{folder}: holds {', '.join(taken)}, which {writer} would replace; give another --out, "
+                          "or --overwrite to replace them")
 
 
 @contextmanager

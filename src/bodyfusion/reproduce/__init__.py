@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 
 from bodyfusion.base.errors import ConfigError
-from bodyfusion.reproduce.table import Cell, write_reproduction
+from bodyfusion.base.files import refuse_to_replace
+from bodyfusion.reproduce.table import REPRODUCTION_FILES, Cell, write_reproduction
 
 PAPERS = ("s000", "s001", "s002", "s004")
 MAX_SEEDS = 1000
@@ -35,15 +36,17 @@ def reproduce_paper(paper: str, seeds: int = 10, jobs: int = 1) -> tuple[list[Ce
     return reproduce(seeds, jobs)
 
 
-def reproduce(paper: str, out: str | Path, seeds: int = 10, jobs: int = 1) -> list[Cell]:
+def reproduce(paper: str, out: str | Path, seeds: int = 10, jobs: int = 1, overwrite: bool = False) -> list[Cell]:
     """Reproduce ``paper`` (one of :data:`PAPERS`, or ``all``: each in turn) into ``out``:
-    table.csv and README.md (:func:`~bodyfusion.reproduce.table.write_reproduction`). Returns the cells."""
+    table.csv and README.md (:func:`~bodyfusion.reproduce.table.write_reproduction`; a folder
+    holding either refused before the work unless ``overwrite``). Returns the cells."""
     if paper != "all" and paper not in PAPERS:
         raise ConfigError("PAPER", f"must be one of {', '.join(PAPERS)} or all, got {paper!r}")
     if not 1 <= seeds <= MAX_SEEDS:
         raise ConfigError("--seeds", f"must be 1 to {MAX_SEEDS}, got {seeds}")
     if jobs < 1:
         raise ConfigError("--jobs", f"must be at least 1, got {jobs}")
+    refuse_to_replace(Path(out), REPRODUCTION_FILES, overwrite, "the reproduction")
     cells: list[Cell] = []
     texts = []
     for name in PAPERS if paper == "all" else (paper,):

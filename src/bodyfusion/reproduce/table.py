@@ -20,6 +20,8 @@ import numpy as np
 from bodyfusion.base.files import replaced_atomically
 
 COLUMNS = ("paper", "case", "metric", "paper_value", "our_value", "our_sd", "n_seeds")
+REPRODUCTION_FILES = ("table.csv", "README.md")
+"""What :func:`write_reproduction` writes into its folder."""
 
 
 def seed_sd(values: Sequence[float]) -> float:
@@ -71,9 +73,10 @@ def write_reproduction(out: Path, cells: Sequence[Cell], text: str) -> None:
     """``out``/table.csv and ``out``/README.md (``text``, then the table), each written whole
     then put in place."""
     out.mkdir(parents=True, exist_ok=True)
-    with replaced_atomically(out / "table.csv") as path, path.open("w", newline="") as fh:
+    table, readme = (out / name for name in REPRODUCTION_FILES)
+    with replaced_atomically(table) as path, path.open("w", newline="") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(COLUMNS)
         writer.writerows(c.row() for c in cells)
-    with replaced_atomically(out / "README.md") as path:
+    with replaced_atomically(readme) as path:
         path.write_text(text.rstrip() + "\n\n" + markdown_table(cells) + "\n")

@@ -61,7 +61,7 @@ from pydantic import Field
 
 from bodyfusion.core import registry as plugin_registry
 from bodyfusion.base.errors import ConfigError, FusionError
-from bodyfusion.base.files import sole_writer, staged_outputs
+from bodyfusion.base.files import refuse_to_replace, sole_writer, staged_outputs
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.sections import GeodeticPoint, StrictModel
 from bodyfusion.core.layout import Layout
@@ -238,10 +238,7 @@ class Simulated:
         (:func:`~bodyfusion.base.files.staged_outputs`), so a write that fails keeps every earlier file."""
         out_dir = Path(out_dir)
         names = [f.name for out in self.outputs.values() for f in out.files] + [TRUTH_FILE, CONFIG_FILE]
-        taken = sorted(name for name in names if (out_dir / name).exists()) if out_dir.is_dir() else []
-        if taken and not overwrite:
-            raise FusionError(f"{out_dir}: holds {', '.join(taken)}, which the simulation would replace; give another "
-                              "--out, or --overwrite to replace them")
+        refuse_to_replace(out_dir, names, overwrite, "the simulation")
         log.info("writing the sensor files, %s and %s to %s", TRUTH_FILE, CONFIG_FILE, out_dir)
         try:
             out_dir.mkdir(parents=True, exist_ok=True)
