@@ -148,7 +148,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
                             ".parquet or .mcap file; repeatable.")] = None,
          out: Annotated[Path | None, typer.Option("--out", help="Also write the finished run's outputs here.")] = None,
          overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace the outputs (an earlier run's, or "
-                                                                     "files of their names) in --out.")] = False,
+                                                                     "files of their names) in --out, and sink "
+                                                                     "files that exist.")] = False,
          interval: Annotated[float, typer.Option("--interval", help="Seconds of data between states.")] = 0.1,
          lookahead: Annotated[float, typer.Option("--lookahead", help="Seconds behind the newest sample at "
                                                                       "which decisions are final.")] = 2.0,
@@ -174,7 +175,7 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
     sinks = []
     try:
         for target in sink or ["-"]:
-            sinks.append(open_sink(target))
+            sinks.append(open_sink(target, overwrite))
     except FusionError:
         for opened in sinks:
             opened.close()

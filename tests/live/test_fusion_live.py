@@ -74,3 +74,15 @@ def test_an_unknown_sink_is_refused_in_one_line(tmp_path):
     proc = _fusion("live", str(VICON), "--sink", str(tmp_path / "x.txt"))
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 2 and err.strip().splitlines() == [err.strip()] and "--sink" in err
+
+
+def test_a_sink_file_that_exists_is_refused_unless_overwrite(tmp_path):
+    mine = tmp_path / "states.jsonl"
+    mine.write_text("my own\n")
+    proc = _fusion("live", str(VICON), "--speed", "max", "--sink", str(mine))
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2 and "--sink" in err and "exists" in err and mine.read_text() == "my own\n"
+    proc = _fusion("live", str(VICON), "--speed", "max", "--sink", str(mine), "--overwrite")
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert json.loads(mine.read_text().splitlines()[0])["systems"]

@@ -171,10 +171,11 @@ class EverySink:
             sink.close()
 
 
-def open_sink(target: str) -> EpochSink:
+def open_sink(target: str, overwrite: bool = False) -> EpochSink:
     """A sink by its target: ``-`` (JSON lines on stdout), ``tcp://HOST:PORT`` (JSON lines to a
     listening socket), else a file by its suffix: ``.jsonl``, ``.csv``, ``.parquet``, ``.mcap``.
-    A target it cannot open is refused (ConfigError naming ``--sink``)."""
+    A target it cannot open, or a file that exists already (unless ``overwrite``), is refused
+    (ConfigError naming ``--sink``)."""
     if target == "-":
         return JsonLinesSink(sys.stdout, owns=False)
     if target.startswith("tcp://"):
@@ -193,6 +194,8 @@ def open_sink(target: str) -> EpochSink:
                                     + ", ".join(kinds))
     if not path.parent.is_dir():
         raise ConfigError("--sink", f"{target}: no folder {path.parent}")
+    if path.is_file() and not overwrite:
+        raise ConfigError("--sink", f"{target}: exists; give another file, or --overwrite to replace it")
     try:
         return make(path)
     except OSError as err:
