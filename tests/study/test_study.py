@@ -16,7 +16,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from bodyfusion.base.errors import ConfigError
+from bodyfusion.base.errors import ConfigError, FusionError
 from bodyfusion.base.types import Trajectory, TruthTrack
 from bodyfusion.evaluation.metrics import PlanarTransform, outage_errors
 from bodyfusion.study import (
@@ -238,6 +238,17 @@ def test_results_are_typed_and_the_per_system_view_has_one_row_per_run_and_syste
         assert row["horizontal_error_m.rmse"] == by_run[row["run_key"]][f"systems.{row['system']}.horizontal_error_m.rmse"]
     groups = tidy.group_by(["system", "outage.duration_s"]).aggregate([("horizontal_error_m.rmse", "mean")])
     assert groups.num_rows == 2 * 3
+
+
+@pytest.mark.parametrize("name", ["summary.csv", "results_by_system.parquet", "max_error_vs_outage.png", "runs"])
+def test_a_folder_with_no_study_but_a_studys_file_names_is_refused(tmp_path, name):
+    (tmp_path / name).write_text("mine\n")
+    (tmp_path / "notes.txt").write_text("kept\n")
+    with pytest.raises(FusionError, match=rf"holds {name} but no study to resume"):
+        ResultStore(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name, "notes.txt"])
+    (tmp_path / "parts").mkdir()  # a study's folder: resumed, its files its own
+    ResultStore(tmp_path)
 
 
 def test_list_parameters_are_list_cells_and_summarised_by_their_value(tmp_path):

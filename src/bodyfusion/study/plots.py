@@ -8,6 +8,7 @@ from typing import Any
 
 from bodyfusion.base.sections import FiguresConfig
 from bodyfusion.evaluation.plots import plot_against_outage_duration, save_figure
+from bodyfusion.study.results import PLOT_SUFFIX
 
 
 def write_plots(out_dir: Path, rows: list[dict[str, Any]], params: list[str],
@@ -26,7 +27,7 @@ def write_plots(out_dir: Path, rows: list[dict[str, Any]], params: list[str],
             label = " ".join([row["layout"], *(f"{p[len('param.'):]}={row.get(p)}" for p in params)])
             curves.setdefault(label, {}).setdefault(float(row["outage.duration_s"]), []).append(float(row[metric]))
         if curves:
-            name = f"{metric.split('.', 1)[1].removesuffix('_m')}_vs_outage"
+            name = f"{metric.split('.', 1)[1].removesuffix('_m')}{PLOT_SUFFIX}"
             system = next(r["outage.system"] for r in rows if r.get("outage.system"))
             fig = plot_against_outage_duration(curves, f"{title} ({system})")
             written += save_figure(fig, out_dir / name, figures.formats, figures.dpi)

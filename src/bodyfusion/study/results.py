@@ -64,6 +64,11 @@ RESULTS_FILE = "results.parquet"
 BY_SYSTEM_FILE = "results_by_system.parquet"
 SUMMARY_FILE = "summary.csv"
 PARTS_DIR = "parts"
+STUDY_NAMES = frozenset({BY_SYSTEM_FILE, SUMMARY_FILE, "runs", "report.html"})
+"""What a study writes into its folder, beside its plots, results.parquet and parts/ (which make
+the folder a study's)."""
+PLOT_SUFFIX = "_vs_outage"
+"""The end of a study plot's file stem (:mod:`bodyfusion.study.plots`)."""
 
 
 def is_timing_column(name: str) -> bool:
@@ -181,10 +186,22 @@ class ResultStore:
         self.results_path = self.out_dir / RESULTS_FILE
         self.by_system_path = self.out_dir / BY_SYSTEM_FILE
         self._seq = 0
+        self._check_folder()
         try:
             self.parts_dir.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise FusionError(f"{self.out_dir}: cannot create output folder: {err.strerror}") from None
+
+    def _check_folder(self) -> None:
+        """Refuse (FusionError naming them) a folder that holds no study (no ``results.parquet``, no
+        ``parts/``: nothing to resume) but files of the names a study writes: they are the user's,
+        and a study would replace them."""
+        if not self.out_dir.is_dir() or self.parts_dir.is_dir() or self.results_path.is_file():
+            return
+        taken = sorted(p.name for p in self.out_dir.iterdir() if p.name in STUDY_NAMES or p.stem.endswith(PLOT_SUFFIX))
+        if taken:
+            raise FusionError(f"{self.out_dir}: holds {', '.join(taken)} but no study to resume (no {RESULTS_FILE}, no "
+                              f"{PARTS_DIR}/), and a study would replace them; give another --out")
 
     def _files(self) -> list[Path]:
         """Saved files, oldest first: results.parquet, then the parts by name (time-stamped)."""
