@@ -9,13 +9,16 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from bodyfusion.base.errors import FusionError
+from bodyfusion.base.errors import FusionError, InputError
 from bodyfusion.runner import run
 from bodyfusion.evaluation.report import write_report
 from bodyfusion.evaluation.report_data import RunFolder, read_folder
@@ -270,3 +273,46 @@ def test_a_geo_referenced_run_has_a_map_in_longitude_and_latitude_and_one_withou
         assert console == [] and "plot-map" in dom.drawn
     assert map_view(read_folder(walkers_run(tmp_path / "walkers")).tracks) is None
     assert 'id="plot-map"' not in write_report(tmp_path / "walkers").read_text()
+
+
+@pytest.fixture(scope="module")
+def vicon_run_folder(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("vicon_run")
+    run(ROOT / "configs" / "dual_foot_vicon.yaml", ["output.plots=false"], out_dir=folder)
+    return folder
+
+
+def _key_paths(doc: object, path: tuple = ()) -> list[tuple]:
+    """Every key path of a JSON document (a list by its first item)."""
+    found = [path] if path else []
+    if isinstance(doc, dict):
+        for key, value in doc.items():
+            found += _key_paths(value, (*path, key))
+    elif isinstance(doc, list) and doc:
+        found += _key_paths(doc[0], (*path, 0))
+    return found
+
+
+@pytest.mark.slow
+@settings(max_examples=60, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_metrics_json_of_another_shape_is_one_error_naming_it(vicon_run_folder, data):
+    """Any value of metrics.json replaced by a JSON value of another kind: the report is written
+    or refused naming metrics.json (an InputError), never another exception."""
+    doc = json.loads((vicon_run_folder / "metrics.json").read_text())
+    path = data.draw(st.sampled_from(_key_paths(doc)))
+    value = data.draw(st.sampled_from([None, 5, -1.0, 1e308, "x", True, [], [1, "a"], {}, {"k": 1}]))
+    *head, last = path
+    parent = doc
+    for key in head:
+        parent = parent[key]
+    parent[last] = value
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "run"
+        shutil.copytree(vicon_run_folder, folder)
+        (folder / "metrics.json").write_text(json.dumps(doc))
+        try:
+            write_report(folder)
+        except InputError as err:
+            assert err.path.endswith("metrics.json"), err

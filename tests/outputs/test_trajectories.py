@@ -15,6 +15,7 @@ import pymap3d
 import pytest
 
 import bodyfusion
+from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
 from bodyfusion.outputs import trajectories as exports
 from bodyfusion.io.trajectory_files import MOTION_COLUMNS, MOTION_SD_COLUMNS, TRAJECTORY_COLUMNS, read_trajectories
@@ -313,3 +314,12 @@ def test_a_foot_runs_files_carry_its_filters_velocity_and_attitude_and_their_sig
     np.testing.assert_array_equal(sd[:, :3], np.sqrt(cov[:, :3]))  # the filter's own velocity σ
     hand = table.filter(pa.compute.equal(table.column("system"), "hand_phone"))
     assert all(hand.column(c).null_count == hand.num_rows for c in MOTION_SD_COLUMNS)
+
+
+@pytest.mark.parametrize("content", [b"garbage\x00\xff\n", b"system,t\xff\n", b"", b"\xff\xfe\x00"],
+                         ids=["bytes", "header", "empty", "utf16-bom"])
+def test_a_trajectory_file_that_is_not_one_is_an_input_error(tmp_path, content):
+    for name in ("t.csv", "t.parquet"):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(InputError, match=name):
+            read_trajectories(tmp_path / name)

@@ -21,7 +21,7 @@ from typing import Any
 import plotly.graph_objects as go
 from plotly.offline import get_plotlyjs
 
-from bodyfusion.base.errors import FusionError
+from bodyfusion.base.errors import FusionError, InputError
 from bodyfusion.evaluation import report_figures as figures
 from bodyfusion.evaluation.report_data import RunFolder, StudyFolder, read_folder
 
@@ -207,13 +207,26 @@ def study_page(study: StudyFolder) -> str:
 # --------------------------------------------------------------------------- entry point
 
 
+MALFORMED = (AttributeError, IndexError, KeyError, TypeError, ValueError)
+"""What reading a folder's documents raises where a value is of another type or shape than the
+writers give (an object where a number was, a list cut short...)."""
+
+
 def write_report(folder: str | Path) -> Path:
     """Write ``report.html`` into a run folder (``fusion run``) or a study folder (``fusion
     study``) from the folder's files only; returns its path. A folder that is neither, or whose
     files are unreadable, raises :class:`~bodyfusion.base.errors.FusionError` naming it."""
     folder = Path(folder)
-    content = read_folder(folder)
-    page = run_page(content) if isinstance(content, RunFolder) else study_page(content)
+    try:
+        content = read_folder(folder)
+        page = run_page(content) if isinstance(content, RunFolder) else study_page(content)
+    except MALFORMED as err:  # a document of another shape than the writer's: edited, or another tool's
+        run = (folder / "metrics.json").is_file()
+        detail = str(err).strip().splitlines()[0][:160] if str(err).strip() else ""
+        raise InputError(folder / "metrics.json" if run else folder,
+                         ("" if run else "study.json or summary.csv: ") + f"not as bodyfusion writes it "
+                         f"({type(err).__name__}: {detail}); write the folder again with the command that made it"
+                         ) from None
     path = folder / REPORT_FILE
     try:
         path.write_text(page, encoding="utf-8")

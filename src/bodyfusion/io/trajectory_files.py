@@ -47,10 +47,13 @@ def _read_table(path: Path) -> pa.Table:
     """The file as an Arrow table, numbers float64 (an empty CSV cell is null)."""
     try:
         if path.suffix == ".parquet":
-            return pq.read_table(path)
-        types = {c: pa.string() if c == "system" else pa.float64() for c in (*TRAJECTORY_COLUMNS, COV_EN_COLUMN)}
-        return pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(column_types=types))
-    except (OSError, pa.ArrowInvalid) as err:
+            table = pq.read_table(path)
+        else:
+            types = {c: pa.string() if c == "system" else pa.float64() for c in (*TRAJECTORY_COLUMNS, COV_EN_COLUMN)}
+            table = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(column_types=types))
+        _ = table.column_names  # decoded here: a header that is not UTF-8 raises
+        return table
+    except (OSError, pa.ArrowInvalid, UnicodeDecodeError) as err:
         raise InputError(path, f"not a trajectory file ({','.join(POSITION_COLUMNS)}, ...): "
                                f"{str(err).splitlines()[0]}") from None
 
