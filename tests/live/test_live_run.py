@@ -172,3 +172,16 @@ def test_a_start_too_early_waits_for_the_walk_and_gives_the_same_run(batch):
     replay(run, replay_rows(run))
     assert run.not_started is not None and "yet" in str(run.not_started)
     _same_tracks(run.close(), batch)
+
+
+@pytest.mark.parametrize(("key", "value"), [("output_interval_s", 1e-9), ("lookahead_s", 1e9), ("warmup_s", 0.0),
+                                            ("replan_s", float("nan"))])
+def test_a_timing_beyond_sense_is_refused_naming_it(key, value):
+    with pytest.raises(ConfigError, match=rf"{key} \(.*\): {value!r} s: give"):
+        LiveRun(load_layout(VICON), **{key: value})
+
+
+def test_a_stream_address_that_cannot_be_listened_on_is_one_error():
+    for address in ("tcp://127.0.0.1:99999", "udp://name.invalid:5000"):
+        with pytest.raises(InputError, match="cannot listen there"):
+            next(line_rows(LiveRun(load_layout(VICON)), address, timeout_s=1))

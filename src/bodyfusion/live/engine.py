@@ -52,6 +52,12 @@ RETRY_S = 2.0
 """Data (s) between two tries to start on a recording not ready yet."""
 OUTPUT_INTERVAL_S = 0.1
 """Spacing (s) of the output epochs."""
+LIVE_BOUNDS = {"lookahead_s": ("fusion live --lookahead", 0.01, 600.0),
+               "warmup_s": ("fusion live --warmup", 0.01, 3600.0),
+               "replan_s": ("LiveRun's replan_s", 0.01, 600.0),
+               "output_interval_s": ("fusion live --interval", 1e-3, 3600.0)}
+"""A live run's timing parameter → (its command-line option, least and most value, s): an output
+epoch every millisecond at the most; decisions, warm-up and passes within minutes."""
 
 
 def _finite(value: object) -> float | None:
@@ -142,6 +148,11 @@ class LiveRun:
     def __init__(self, loaded: LoadedLayout, sinks: Sequence[EpochSink] = (), *, lookahead_s: float = LOOKAHEAD_S,
                  warmup_s: float = WARMUP_S, replan_s: float = REPLAN_S, output_interval_s: float = OUTPUT_INTERVAL_S,
                  seed: int = 0) -> None:
+        for key, value in (("lookahead_s", lookahead_s), ("warmup_s", warmup_s), ("replan_s", replan_s),
+                           ("output_interval_s", output_interval_s)):
+            option, least, most = LIVE_BOUNDS[key]
+            if not least <= value <= most:
+                raise ConfigError(f"{key} ({option})", f"{value!r} s: give {least:g} to {most:g} s")
         self.loaded = loaded.checked()
         layout = self.loaded.layout
         if layout.smoother.kind != "none":

@@ -90,7 +90,11 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
     server = socket.socket(socket.AF_INET, kind)
     server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     server.settimeout(timeout_s)
-    server.bind((host or "127.0.0.1", int(port)))
+    try:
+        server.bind((host or "127.0.0.1", int(port)))
+    except (OSError, OverflowError) as err:  # a name that does not resolve, a port beyond 65535, one taken
+        server.close()
+        raise InputError(address, f"cannot listen there ({err})") from None
     try:
         if scheme == "tcp":
             server.listen(1)
