@@ -88,7 +88,7 @@ def _no_constant(name: str) -> float:
 
 def recorded(target: str, edits: list) -> contextlib.AbstractContextManager:
     """The case's outcome appended to the table at ``BODYFUSION_FUZZ_TABLE`` (CSV: target, classes,
-    outcome, detail, case) when that is set (the long mode, ``benchmarks/fuzz_long.py``):
+    outcome, detail, case, and what ``fusion validate`` said: ok or refused) when that is set (the long mode, ``benchmarks/fuzz_long.py``):
     ``refused`` (exit 2, one line), ``ran`` (exit 0, finite outputs), ``silent`` (a silent wrong
     result, :func:`silent_change`) or ``defect`` (anything else); the test fails on the last two."""
     table = os.environ.get("BODYFUSION_FUZZ_TABLE")
@@ -98,10 +98,11 @@ def recorded(target: str, edits: list) -> contextlib.AbstractContextManager:
 @contextlib.contextmanager
 def _recording(table: Path, target: str, edits: list) -> Iterator[None]:
     classes = "+".join(sorted({type(e).__name__ for e in edits})) or "none"
-    outcome, detail = "ran", ""
+    outcome, detail, validated = "ran", "", ""
     try:
         yield
         outcome = CASE_OUTCOME.pop("outcome", "ran")
+        validated = CASE_OUTCOME.pop("validate", "")
     except BaseException as err:
         first = str(err).splitlines()[0][:160] if str(err) else ""
         outcome = "silent" if first.startswith("silent wrong result") else "defect"
@@ -112,8 +113,8 @@ def _recording(table: Path, target: str, edits: list) -> Iterator[None]:
         with table.open("a", newline="") as f:
             writer = csv.writer(f)
             if new:
-                writer.writerow(["target", "classes", "outcome", "detail", "case"])
-            writer.writerow([target, classes, outcome, detail, repr(edits)[:300]])
+                writer.writerow(["target", "classes", "outcome", "detail", "case", "validate"])
+            writer.writerow([target, classes, outcome, detail, repr(edits)[:300], validated])
 
 
 CASE_OUTCOME: dict[str, str] = {}
@@ -148,6 +149,7 @@ def check_outcome(layout: Path, out: Path, clean: dict | None = None) -> None:
     did not change a score past :data:`SILENT_FACTOR` without a warning."""
     code, err = fusion("validate", str(layout))
     assert code in (0, 2), f"validate exit {code}: {err}"
+    CASE_OUTCOME["validate"] = "refused" if code == 2 else "ok"
     code, err = fusion("run", str(layout), "--out", str(out))
     assert code in (0, 2), f"run exit {code}: {err}"
     if code == 2:
