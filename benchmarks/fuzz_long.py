@@ -1,16 +1,18 @@
 """The fuzzing suite's long mode: thousands of corrupted inputs, and a table of what became of each.
 
-Runs ``tests/fuzz/test_fuzz_inputs.py`` (every reader's file and the layout corrupted by
-Hypothesis's edits: truncations, garbage lines, non-finite or absurd numbers in a field or a
-column, scaled and swapped columns, duplicated, deleted or reversed lines, re-encodings, NMEA
-checksums redone, layout keys set wrong, deleted or added; each case through ``fusion validate``
-and ``fusion run``) with ``--examples`` per target (7 targets; default 300: 2,100 cases),
-derandomised (the same cases every time), and every case's outcome recorded: ``refused`` (exit
-2, one ``error:`` line), ``ran`` (exit 0, finite trajectories, strict JSON), ``silent`` (a score
-moved past the suite's margin with no warning: a silent wrong result) or ``defect`` (anything
-else: a traceback, a hang over 60 s, a non-finite output, a second error line).
+Runs ``tests/fuzz/test_fuzz_inputs.py`` and ``tests/fuzz/test_fuzz_live.py`` (every reader's
+file and the layout corrupted by Hypothesis's edits: truncations, garbage lines, non-finite or
+absurd numbers in a field or a column, scaled and swapped columns, duplicated, deleted or
+reversed lines, re-encodings, NMEA checksums redone, layout keys set wrong, deleted or added;
+each case through ``fusion validate`` and ``fusion run``; the live engine's rows edited likewise:
+bad cells, missing columns, unknown systems, late and reversed rows, time jumps) with
+``--examples`` per target (8 targets; default 300: 2,400 cases), derandomised (the same cases
+every time), and every case's outcome recorded: ``refused`` (exit 2, one ``error:`` line),
+``ran`` (exit 0, finite trajectories, strict JSON), ``silent`` (a score moved past the suite's
+margin with no warning: a silent wrong result) or ``defect`` (anything else: a traceback, a hang
+over 60 s, a non-finite output, a second error line).
 
-Writes ``--table`` (CSV: target, classes, outcome, detail, case) and prints the summary per
+Writes ``--table`` (CSV: target, classes, outcome, detail, case, validate) and prints the summary per
 target and per edit class; last line ``cases=… refused=… ran=… silent=… defects=…``.
 
 Run: python benchmarks/fuzz_long.py [--examples 300] [--table fuzz_cases.csv]
@@ -43,14 +45,14 @@ def summarise(table: Path) -> tuple[dict[tuple[str, str], collections.Counter], 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--examples", type=int, default=300, help="cases per target (7 targets)")
+    parser.add_argument("--examples", type=int, default=300, help="cases per target (8 targets)")
     parser.add_argument("--table", type=Path, default=Path("fuzz_cases.csv"))
     args = parser.parse_args(argv)
     args.table.unlink(missing_ok=True)
     env = {**os.environ, "BODYFUSION_FUZZ_EXAMPLES": str(args.examples), "BODYFUSION_FUZZ_TABLE": str(args.table.resolve()),
            "FUZZ_NO_SHRINK": "1"}
-    subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/fuzz/test_fuzz_inputs.py"],
-                   cwd=ROOT, env=env)
+    subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                    "tests/fuzz/test_fuzz_inputs.py", "tests/fuzz/test_fuzz_live.py"], cwd=ROOT, env=env)
     per, totals = summarise(args.table)
     print(f"{'target':<24} {'edit class':<16} {'cases':>6} {'refused':>8} {'ran':>6} {'silent':>7} {'defects':>8}")
     for (target, cls), counts in sorted(per.items()):

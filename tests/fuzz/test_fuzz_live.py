@@ -1,0 +1,95 @@
+"""Fuzzing the live engine: the Vicon walk's rows pushed into a :class:`~bodyfusion.live.engine.LiveRun`
+with hostile edits — a cell set to a bad value, a column missing, a row for a system of no such
+name, a row again (late), a block of rows reversed, a time jump. A run either refuses the row
+with one :class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks;
+never another exception.
+
+Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35, as the file fuzzing); derandomised; each
+case's outcome goes to the long mode's table as the file fuzzing's do (target ``live rows``)."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bodyfusion.base.errors import FusionError
+from bodyfusion.core.layout import load_layout
+from bodyfusion.live.engine import LiveRun
+from bodyfusion.live.sources import replay_rows
+from tests.fuzz.test_fuzz_inputs import CASE_OUTCOME, recorded
+from tests.paths import CONFIGS
+
+VICON = CONFIGS / "dual_foot_vicon.yaml"
+EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "35"))
+BAD_CELLS = [math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0, -1.0, 1e30, "abc", "", None, True, [], {}]
+"""Values a live row's cell may hold."""
+
+
+@dataclass(frozen=True)
+class RowEdit:
+    """One edit of the row stream at ``at`` (a fraction of the rows): ``how`` is set (a cell to
+    ``value``), drop (a column), system (an unknown name), again (the row once more, late),
+    reverse (the next 20 rows in reverse) or jump (every later time of the row's system shifted
+    by ``value`` s)."""
+    at: float
+    how: str
+    column: int
+    value: object
+
+    def __call__(self, rows: list[tuple[float, str, dict]]) -> list[tuple[float, str, dict]]:
+        k = min(int(self.at * len(rows)), len(rows) - 1)
+        t, name, row = rows[k]
+        column = sorted(row)[self.column % len(row)]
+        if self.how == "set":
+            return [*rows[:k], (t, name, {**row, column: self.value}), *rows[k + 1:]]
+        if self.how == "drop":
+            return [*rows[:k], (t, name, {c: v for c, v in row.items() if c != column}), *rows[k + 1:]]
+        if self.how == "system":
+            return [*rows[:k], (t, "head", row), *rows[k + 1:]]
+        if self.how == "again":
+            return [*rows[:k + 1], rows[max(k - 5, 0)], *rows[k + 1:]]
+        if self.how == "reverse":
+            return [*rows[:k], *rows[k:k + 20][::-1], *rows[k + 20:]]
+        shift = float(self.value) if isinstance(self.value, (int, float)) and math.isfinite(self.value) else 3600.0
+        time_column = "time_index" if "time_index" in row else column
+        return [*rows[:k], *((t2, n2, {**r2, time_column: r2[time_column] + shift} if n2 == name else r2)
+                             for t2, n2, r2 in rows[k:])]
+
+
+row_edits = st.lists(st.builds(RowEdit, st.floats(0.0, 1.0),
+                               st.sampled_from(["set", "set", "drop", "system", "again", "reverse", "jump"]),
+                               st.integers(0, 20), st.sampled_from(BAD_CELLS)), min_size=1, max_size=3)
+
+
+@pytest.fixture(scope="module")
+def vicon_rows() -> list[tuple[float, str, dict]]:
+    run = LiveRun(load_layout(VICON))
+    return [(t, name, dict(row)) for t, name, row in replay_rows(run)]
+
+
+@pytest.mark.slow
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(edits=row_edits)
+def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, edits):
+    rows = vicon_rows
+    for edit in edits:
+        rows = edit(rows)
+    with recorded("live rows", edits):
+        run = LiveRun(load_layout(VICON), lookahead_s=2.0)
+        try:
+            for _, name, row in rows:
+                run.push(name, row)
+            result = run.close()
+        except FusionError as err:
+            assert str(err) and "\n" not in str(err).strip(), err
+            CASE_OUTCOME["outcome"] = "refused"
+            return
+        for name, track in result.trajectories.items():
+            assert np.isfinite(track.pos_n).all() and np.isfinite(track.pos_sd).all(), name
