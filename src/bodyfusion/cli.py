@@ -154,6 +154,10 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
          lookahead: Annotated[float, typer.Option("--lookahead", help="Seconds behind the newest sample at "
                                                                       "which decisions are final.")] = 2.0,
          warmup: Annotated[float, typer.Option("--warmup", help="Seconds of data before the run starts.")] = 10.0,
+         keep: Annotated[float | None, typer.Option("--keep", help="Seconds of history held behind the decided "
+                                                                  "data (memory bounded for a run of any length; "
+                                                                  "the finished run covers the last of them). "
+                                                                  "Default: all of it.")] = None,
          set_: SetOption = None,
          seed: Annotated[int, typer.Option("--seed", help="Seed for every random choice of the run.")] = 0) -> None:
     """Fuse a layout live: replay its recordings at a pace or take a line stream, and emit states as they are made."""
@@ -182,7 +186,7 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
         raise
     replan = REPLAN_BATCH_S if source == "replay" and pace is None else REPLAN_S
     run = LiveRun(loaded, [EverySink(sinks)], lookahead_s=lookahead, warmup_s=warmup, replan_s=replan,
-                  output_interval_s=interval, seed=seed)
+                  output_interval_s=interval, seed=seed, keep_s=keep)
     wall0 = time.perf_counter()
 
     def status(r: LiveRun, t: float) -> None:

@@ -40,6 +40,14 @@ class GrowingArray:
         """Drop every row from n on."""
         self._n = min(self._n, max(int(n), 0))
 
+    def drop_first(self, d: int) -> None:
+        """Drop the first ``d`` rows (the others move to the front; the capacity stays, so that a
+        record that forgets as fast as it grows keeps its size)."""
+        d = min(max(int(d), 0), self._n)
+        if d:
+            self._data[:self._n - d] = self._data[d:self._n]
+            self._n -= d
+
     def pop(self) -> None:
         """Drop the last row."""
         if self._n == 0:

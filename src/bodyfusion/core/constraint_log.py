@@ -66,6 +66,21 @@ class ConstraintLog:
         lam[:self._n_active] = self._lam_active[:self._n_active]
         self._lam_active = lam
 
+    def forget_before(self, t: float) -> None:
+        """Drop the epochs before ``t`` (s): the later ones move to the front, the room stays (a
+        live run that keeps a bounded history)."""
+        d = int(np.searchsorted(self.t[:self.n], t))
+        if d == 0:
+            return
+        gone = int(np.count_nonzero(self.active[:d]))
+        for name in self._ROWS:
+            rows = getattr(self, name)
+            rows[:self.n - d] = rows[d:self.n]
+        self.active[self.n - d:self.n] = self.tail_truncated[self.n - d:self.n] = False  # rows a record fills in part
+        self._lam_active[:self._n_active - gone] = self._lam_active[gone:self._n_active]
+        self._n_active -= gone
+        self.n -= d
+
     def separations(self, p: np.ndarray) -> np.ndarray:
         """(..., K) separation (m) of every constraint at stacked positions p (..., 3n)."""
         pos = p.reshape(*p.shape[:-1], -1, 3)

@@ -296,6 +296,15 @@ class Fuser:
         self._wall_s += time.perf_counter() - t_begin
         return self.schedule.horizon
 
+    def forget_before(self, t: float) -> None:
+        """Drop what the fuser keeps of the epochs before ``t`` (s): the constraint log's rows and
+        the feet's sync times the limits have passed (a live run that keeps a bounded history;
+        the report's counts stay whole)."""
+        if self.report.constraint_log is not None:
+            self.report.constraint_log.forget_before(t)
+        if self.report.limits is not None:
+            self.report.limits.forget_passed()
+
     def finish(self) -> FuserReport:
         """Every remaining event, then every system to its last sample."""
         self.advance(math.inf)

@@ -77,6 +77,13 @@ class CovarianceMonitor:
         if not math.isfinite(decided):
             self._t_end = self.monitored.t_end
 
+    def forget_before(self, t: float) -> int:
+        """The system's ``forget_before(t)`` (:class:`~bodyfusion.core.capabilities.Streaming`),
+        and the stride times passed dropped."""
+        del self._stride_t[:self._next]
+        self._next = 0
+        return self.monitored.forget_before(t)
+
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split and checked at the stride times up to t, and checked
         at t when t is one of them or the system's end."""

@@ -107,6 +107,12 @@ class LimitGuard:
         if i in self.feet_sync and times.size:
             self.feet_sync[i] = np.concatenate([self.feet_sync[i], times]) if self.feet_sync[i].size else times
 
+    def forget_passed(self) -> None:
+        """Drop the feet's sync times the limits have passed (a live run that keeps a bounded history)."""
+        for i, k in self._next_sync.items():
+            self.feet_sync[i] = self.feet_sync[i][k:]
+            self._next_sync[i] = 0
+
     def stride_m(self) -> float | None:
         """The gait's stride (m): the smaller of the feet's medians of their last strides."""
         medians = [float(np.median(s)) for s in self._strides.values() if s]

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -50,12 +51,15 @@ REPLAN_BATCH_S = 5.0
 (a pass derives its context again whatever the data it adds)."""
 RETRY_S = 2.0
 """Data (s) between two tries to start on a recording not ready yet."""
+LATENCIES_KEPT = 1 << 16
+"""Passes whose latency a run keeps (the last ones: 9 h of passes every 0.5 s)."""
 OUTPUT_INTERVAL_S = 0.1
 """Spacing (s) of the output epochs."""
 LIVE_BOUNDS = {"lookahead_s": ("fusion live --lookahead", 0.01, 600.0),
                "warmup_s": ("fusion live --warmup", 0.01, 3600.0),
                "replan_s": ("LiveRun's replan_s", 0.01, 600.0),
-               "output_interval_s": ("fusion live --interval", 1e-3, 3600.0)}
+               "output_interval_s": ("fusion live --interval", 1e-3, 3600.0),
+               "keep_s": ("fusion live --keep", 10.0, 30 * 86400.0)}
 """A live run's timing parameter → (its command-line option, least and most value, s): an output
 epoch every millisecond at the most; decisions, warm-up and passes within minutes."""
 
@@ -84,6 +88,8 @@ class RowBuffer:
         self.t = np.empty(1024)
         self.dropped = 0
         """Rows dropped for a time not after the newest."""
+        self.forgotten = 0
+        """Rows forgotten from the front (:meth:`forget`): row k held is the stream's row k + forgotten."""
 
     def add(self, row: Mapping[str, float]) -> bool:
         """Append ``row`` (column → value; every column the section reads); a row whose time is not
@@ -95,10 +101,10 @@ class RowBuffer:
         values = [_finite(row[c]) for c in self.columns]
         bad = [c for c, v in zip(self.columns, values) if v is None]
         if bad:  # refused as the batch reader refuses a bad cell, here with the system's row number
-            raise InputError(f"{self.key}: row {self.rows + self.dropped + 1}",
+            raise InputError(f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}",
                              f"{bad[0]} is {row[bad[0]]!r}, not a finite number")
         time_value = values[self.columns.index(self._time_column)] if self._time_column is not None else 0.0
-        t = float(self._time(time_value, self.rows))
+        t = float(self._time(time_value, self.forgotten + self.rows))
         if not t > self.newest_t:
             self.dropped += 1
             return False
@@ -109,6 +115,14 @@ class RowBuffer:
         self.t[self.rows] = t
         self.rows += 1
         return True
+
+    def forget(self, d: int) -> None:
+        """Drop the first ``d`` rows held (their system forgot as many samples)."""
+        d = min(d, self.rows)
+        self._data[:self.rows - d] = self._data[d:self.rows]
+        self.t[:self.rows - d] = self.t[d:self.rows]
+        self.rows -= d
+        self.forgotten += d
 
     def times(self, columns: Mapping[str, np.ndarray], first: int = 0) -> np.ndarray:
         """Times (s) of rows ``columns`` (column → array), the first of them row ``first``
@@ -141,15 +155,19 @@ class RowBuffer:
 class LiveRun:
     """``loaded`` fused live (module docstring). ``sinks``: where the output epochs go;
     ``lookahead_s``, ``warmup_s``, ``replan_s``, ``output_interval_s`` (s); ``seed`` as a batch
-    run's. Results: ``fusion`` (None until started), ``emitted`` epochs, ``latency_s``: for every
-    pass, the wall time (s) from the arrival of the row that made it due to its last epoch
-    emitted (the data's own delay, the look-ahead and the replan interval, comes on top)."""
+    run's; ``keep_s``: the history (s) held behind the decided data (None: all of it), so that a
+    run of any length holds a bounded memory (module docstring). Results: ``fusion`` (None until
+    started), ``emitted`` epochs, ``latency_s``: for every pass, the wall time (s) from the
+    arrival of the row that made it due to its last epoch emitted (the data's own delay, the look-ahead and the replan interval, comes on top), for the
+    last :data:`LATENCIES_KEPT` passes."""
 
     def __init__(self, loaded: LoadedLayout, sinks: Sequence[EpochSink] = (), *, lookahead_s: float = LOOKAHEAD_S,
                  warmup_s: float = WARMUP_S, replan_s: float = REPLAN_S, output_interval_s: float = OUTPUT_INTERVAL_S,
-                 seed: int = 0) -> None:
+                 seed: int = 0, keep_s: float | None = None) -> None:
         for key, value in (("lookahead_s", lookahead_s), ("warmup_s", warmup_s), ("replan_s", replan_s),
-                           ("output_interval_s", output_interval_s)):
+                           ("output_interval_s", output_interval_s), ("keep_s", keep_s)):
+            if value is None:
+                continue
             option, least, most = LIVE_BOUNDS[key]
             if not least <= value <= most:
                 raise ConfigError(f"{key} ({option})", f"{value!r} s: give {least:g} to {most:g} s")
@@ -165,11 +183,18 @@ class LiveRun:
                 raise ConfigError(f"systems.{name}.plugin", f"{cfg.plugin} does not run live (it cannot take a "
                                                             "growing recording)", loaded.path)
             section = getattr(cfg, cls.data_section)
-            self.buffers[name] = RowBuffer(section, f"systems.{name}.{cls.data_section}")
+            key = f"systems.{name}.{cls.data_section}"
+            if keep_s is not None and getattr(section, "time_column", None) is None:
+                raise ConfigError(f"{key}.time_column", "a live run that keeps a bounded history (--keep) needs "
+                                                        "each row's time in a column, not a row count / rate_hz",
+                                  loaded.path)
+            self.buffers[name] = RowBuffer(section, key)
         self.output = EpochOutput(output_interval_s, sinks)
         self.lookahead_s, self.warmup_s, self.replan_s, self.seed = lookahead_s, warmup_s, replan_s, seed
+        self.keep_s = keep_s
+        self._forgot_at = -math.inf
         self.fusion: Fusion | None = None
-        self.latency_s: list[float] = []
+        self.latency_s: deque[float] = deque(maxlen=LATENCIES_KEPT)
         self._planned_t = -math.inf
         self._start_after_s = warmup_s
         self.not_started: NotReady | None = None
@@ -225,6 +250,21 @@ class LiveRun:
     def _advance(self, newest: float) -> None:
         self._planned_t = newest
         self.fusion.fuser.advance()
+        self._forget()
+
+    def _forget(self) -> None:
+        """With ``keep_s``: once the decided data have run ``keep_s`` past the last time forgotten,
+        every system forgets its samples more than ``keep_s`` before them and its buffer as many
+        rows (so each row is moved about once, and at most 2 × ``keep_s`` of rows are held)."""
+        if self.keep_s is None:
+            return
+        decided = min(s.decided_until() for s in self.fusion.systems.values())
+        if not math.isfinite(decided) or decided - self.keep_s < self._forgot_at + self.keep_s:
+            return
+        self._forgot_at = decided - self.keep_s
+        for name, buffer in self.buffers.items():
+            buffer.forget(self.fusion.systems[name].forget_before(self._forgot_at))
+        self.fusion.fuser.forget_before(self._forgot_at)
 
     def close(self) -> RunResult:
         """The recordings are complete: every system reads its whole table, the run finishes as a

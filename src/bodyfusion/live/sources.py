@@ -20,6 +20,8 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 
+import numpy as np
+
 from bodyfusion.base.errors import InputError
 from bodyfusion.io.tables import read_source
 from bodyfusion.live.engine import LiveRun
@@ -28,15 +30,23 @@ Row = tuple[float, str, dict[str, float]]
 """(t s, system, column → value)."""
 
 
+def _recording_rows(order: int, name: str, times: np.ndarray, table: np.ndarray,
+                    columns: list[str]) -> Iterator[tuple[float, int, str, dict[str, float]]]:
+    """One system's rows (t, order, name, column → value), made as they are asked for."""
+    for t, values in zip(times.tolist(), table):
+        yield t, order, name, dict(zip(columns, values.tolist()))
+
+
 def replay_rows(run: LiveRun) -> Iterator[Row]:
     """Every system's recording, row by row in time order (ties: the layout's system order).
-    Reads the files before any row is pushed (the run binds its tables to the same sections)."""
+    Reads the files before any row is pushed (the run binds its tables to the same sections);
+    each row is made as it is pushed, so a replay holds the recordings' numbers, not a row each."""
     streams = []
     for order, (name, buffer) in enumerate(run.buffers.items()):
         arrays, _, _ = read_source(buffer.section, buffer.columns)
-        times = buffer.times(arrays)
-        streams.append([(float(times[i]), order, name, {c: float(arrays[c][i]) for c in buffer.columns})
-                        for i in range(len(times))])
+        table = np.column_stack([np.asarray(arrays[c], dtype=float) for c in buffer.columns])
+        streams.append(_recording_rows(order, name, np.asarray(buffer.times(arrays), dtype=float), table,
+                                       list(buffer.columns)))
     for t, _, name, row in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
         yield t, name, row
 

@@ -127,16 +127,16 @@ class InitialState:
         return x0, P0
 
     def _initialisation_report(self) -> dict:
-        st, t = self.still, self.stream.t
+        st, (t_first, t_still, t_still_end) = self.still, self.still_span_s
         P0 = self._P0
-        report = {"still_interval_s": [float(t[st.start]), float(t[st.stop - 1])], "still": st.still,
+        report = {"still_interval_s": [t_still, t_still_end], "still": st.still,
                   "acc_spread_mps2": st.acc_spread_mps2, "gyro_spread_radps": st.gyro_spread_radps,
                   "heading_axis": self.heading_axis, **self._still_priors,
                   "first_sample_sd": {"level_deg": float(np.degrees(np.sqrt(max(P0[6, 6], P0[7, 7])))),
                                       "heading_deg": float(np.degrees(np.sqrt(P0[8, 8]))),
                                       "gyro_bias_radps": float(np.sqrt(np.max(np.diag(P0)[12:15])))}}
         if st.start > 0:
-            report["backward_s"] = float(t[st.start] - t[0])
+            report["backward_s"] = t_still - t_first
             report["backward_zupts"] = int(self.backward_counters[C_ZUPTS])
             report["backward_zupt_gated"] = int(self.backward_counters[C_GATED])
         return report

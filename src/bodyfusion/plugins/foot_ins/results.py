@@ -158,6 +158,15 @@ class CovarianceLog:
     def __len__(self) -> int:
         return len(self.idx)
 
+    def forgotten(self, d: int) -> CovarianceLog:
+        """The log of the covariances left at samples ``d`` and later, each index less ``d`` (a live
+        run forgetting its first ``d`` samples)."""
+        out = CovarianceLog(self.idx._block)
+        for i, P in zip(*self.covariances()):
+            if i >= d:
+                out.add(int(i) - d, P)
+        return out
+
     def covariances(self) -> tuple[np.ndarray, np.ndarray]:
         """(n,) sample indices and (n, 15, 15) covariances, in the order they were added."""
         P = np.empty((len(self.idx), 15, 15))

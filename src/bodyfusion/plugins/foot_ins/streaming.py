@@ -79,6 +79,11 @@ class LiveInputs:
         for array in self.arrays:
             array.keep(n)
 
+    def drop_first(self, d: int) -> None:
+        """Drop the first d rows."""
+        for array in self.arrays:
+            array.drop_first(d)
+
     def __len__(self) -> int:
         return len(self.t)
 
@@ -92,6 +97,10 @@ class StreamingFootIns(Streaming):
     _levelled_on: tuple[int, int] | None = None
     """Where the whole recording would have levelled (first sample, end), once the stream closed."""
     revised_inputs = 0
+    forgotten = 0
+    """Samples dropped from the front so far (:meth:`forget_before`); sample k now is the
+    recording's sample k + ``forgotten``."""
+    _t_first: float | None = None
     """Final samples whose inputs (stance, repaired IMU sample, navigation clock, a covariance
     increment) the whole recording would have given otherwise (counted when the stream closes)."""
 
@@ -108,11 +117,11 @@ class StreamingFootIns(Streaming):
     def live_findings(self) -> list[Finding]:
         """Where this live run departed from the batch run on the same recording: a levelling on
         another rest, inputs the whole recording would have made otherwise."""
-        if self._levelled_on is None or self._lookahead_s is not None:  # not live, or not closed yet
+        if self._t_first is None or self._lookahead_s is not None:  # not live, or not closed yet
             return []
         t = self.stream.t
         out = []
-        (a, b), (c, d) = (self.still.start, self.still.stop), self._levelled_on
+        (a, b), (c, d) = (self.still.start, self.still.stop), self._levelled_on or (self.still.start, self.still.stop)
         if (a, b) != (c, d):
             out.append(Finding(
                 "live_levelling", "info", self.name, float(t[a]), float(t[b - 1]),
@@ -136,8 +145,58 @@ class StreamingFootIns(Streaming):
         if self.config.position_fixes is not None:
             raise FusionError(f"systems.{self.name}.position_fixes: a live foot INS takes no position-fix file")
         self._lookahead_s = lookahead_s
+        self._t_first = float(self.stream.t[0])
         self._live = LiveInputs(self.stream, self.stance, clock_lag(self.stream))
         self._decide(float(self.stream.t[-1]) - lookahead_s)
+
+    @property
+    def t_start(self) -> float:
+        """The recording's first sample (s), also once it is forgotten (the fuser's epoch grid starts there)."""
+        return self._t_first if self._t_first is not None else float(self.stream.t[0])
+
+    def forget_before(self, t: float) -> int:
+        """Drop the samples before ``t`` (s) with their inputs and history rows, as far as the next
+        pass allows: it derives again from :data:`CONTEXT_S` before the first undecided sample, on
+        the stride period's grid (so the number dropped is a multiple of its hop), and the lockout
+        watch reads the stance the filter is in whole. Indices kept (the filter's sample, the gaps'
+        and corrections') lose the number dropped; the covariances kept for a smoother before it
+        are dropped with them (a live run does not smooth)."""
+        if self._lookahead_s is None:
+            return 0
+        hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
+        d = min(int(np.searchsorted(self.stream.t, t)), self._decided - int(CONTEXT_S * self._rate_hz) - hop, self._i)
+        starts, ends = self._stance_runs
+        r = int(np.searchsorted(starts, self._i, side="right")) - 1
+        if r >= 0 and ends[r] > self._i:
+            d = min(d, int(starts[r]))
+        d -= d % hop
+        if d <= 0:
+            return 0
+        self._live.drop_first(d)
+        data = self.run_data
+        for name in ("hist_x", "hist_cov", "hist_nis"):
+            rows = getattr(data, name)
+            rows[:rows.shape[0] - d] = rows[d:]
+        self._i -= d
+        self._decided -= d
+        self._input_increments = self._shifted(self._input_increments, d)
+        self._gap_index, self._gap_P = self._shifted((self._gap_index, self._gap_P), d)
+        gone = int(np.searchsorted(data.kept_idx.view(), d))  # the kept corrections, in time order
+        data.kept_idx.drop_first(gone)
+        data.kept_x.drop_first(gone)
+        data.kept_idx.view()[:] -= d
+        overrides = [self._shifted(pair, d) for pair in zip(data.override_idx, data.override_P)]
+        data.override_idx, data.override_P = [i for i, _ in overrides], [P for _, P in overrides]
+        self.corrections = self.corrections.forgotten(d)
+        self.forgotten += d
+        self._take_live()
+        return d
+
+    @staticmethod
+    def _shifted(indexed: tuple[np.ndarray, np.ndarray], d: int) -> tuple[np.ndarray, np.ndarray]:
+        """(sample indices, rows) of the samples ``d`` and later, each index less d."""
+        later = indexed[0] >= d
+        return indexed[0][later] - d, indexed[1][later]
 
     def decided_until(self) -> float:
         """The last final sample's time (s); ∞ when not live, or once the recording is complete."""
@@ -208,7 +267,9 @@ class StreamingFootIns(Streaming):
 
     def close_stream(self) -> None:
         """Derive the whole recording once more (what the batch run derives), keep what was final
-        (counting where it differs: ``revised_inputs``) and decide every sample."""
+        (counting where it differs: ``revised_inputs``) and decide every sample. After
+        :meth:`forget_before` the recording is what is left of it: its first :data:`CONTEXT_S` lack
+        the samples before them and are not counted, and the levelling is not compared."""
         live, n0 = self._live, self._decided
         whole = self._derive(read_imu(self.config.data))
         s = whole.stream
@@ -224,13 +285,16 @@ class StreamingFootIns(Streaming):
         for i in set(theirs) | set(mine):
             if i not in theirs or i not in mine or not np.array_equal(theirs[i], mine[i]):
                 differ[i] = True
+        if self.forgotten:
+            differ[:int(CONTEXT_S * self._rate_hz)] = False
         self.revised_inputs = int(np.count_nonzero(differ))
         self._splice(whole, 0)
         self.clipping, self.stance_detection = whole.clipping, whole.detection  # the findings of the whole recording
         self.stance_detection.stance = self.stance
         self.stream.report, self.stream.checks = s.report, s.checks
-        whole_still = self._find_still_interval()  # the whole recording's: the findings compare the live one
-        self._levelled_on = (whole_still.start, whole_still.stop)
+        if not self.forgotten:
+            whole_still = self._find_still_interval()  # the whole recording's: the findings compare the live one
+            self._levelled_on = (whole_still.start, whole_still.stop)
         self._decided = len(self.stream)
         self._lookahead_s = None
 

@@ -88,6 +88,10 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
                  self._rate_hz, config.detector.kind, 100 * float(np.mean(self.stance)))
         self._params = self._filter_params()
         self.still = self._find_still_interval()
+        t = self.stream.t
+        self.still_span_s = (float(t[0]), float(t[self.still.start]), float(t[self.still.stop - 1]))
+        """The recording's first sample and the levelling interval's first and last (s): what a
+        live run that forgets its first samples still says of them."""
         self._check_ready()
         self._fix_index, self._fix_pos_n = self._read_position_fixes()
         fx = config.position_fixes
@@ -570,9 +574,8 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
                 "the recording's rate (or time_scale / rate_hz declaring it wrongly).",
                 "record at 100 Hz or more; check time_scale against the file's time column."))
         if not self.still.still:
-            t = self.stream.t
             out.append(Finding(
-                "no_rest", "warning", self.name, float(t[self.still.start]), float(t[self.still.stop - 1]),
+                "no_rest", "warning", self.name, *self.still_span_s[1:],
                 f"the IMU never rested for {self.config.initial.stationary_s:g} s; it was levelled and its gyro bias "
                 f"taken on its quietest window (spreads {self.still.acc_spread_mps2:.2g} m/s^2, "
                 f"{self.still.gyro_spread_radps:.2g} rad/s), so its initial attitude and heading drift are uncertain.",

@@ -1,0 +1,151 @@
+"""Memory of a long live run that keeps a bounded history (``fusion live --keep``).
+
+The walk of ``benchmarks/soak.py`` without the phone (the hand's PDR does not run live): both
+feet with ICM-20948-class IMUs at 100 Hz, the feet's maximum-separation constraint, projection
+with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion simulate``, its
+own process). A second process replays it through :class:`~bodyfusion.live.engine.LiveRun` as
+fast as it runs (a pass every 5 s of data, a state every 0.1 s to a sink that counts them),
+keeping ``--keep`` s of history (default 60); its rows are read from the CSV files a block at a
+time (``pyarrow.csv.open_csv``) and merged in time order, so the source holds no recording. The
+resident memory (``VmRSS``) is sampled every half hour of data. With ``--no-truth`` the layout's
+truth is left out, as in the field (a day's truth track alone holds several hundred MB).
+
+Prints the samples; last line ``peak_rss_mb=<MB> first_half_growth_mb=<MB> last_half_growth_mb=<MB>
+hours=<h> wall_s=<s>`` (growth: resident memory at the half-way sample to the last, and from the
+first sample after warm-up to the half-way one).
+
+Run: python benchmarks/live_memory.py [--hours 24] [--keep 60] [--no-truth] [--keep-dir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import heapq
+import importlib.util
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import yaml
+
+HERE = Path(__file__).resolve().parent
+
+
+def scenario(hours: float) -> dict:
+    """The soak benchmark's scenario (``benchmarks/soak.py``) without the phone and its constraints."""
+    spec = importlib.util.spec_from_file_location("soak", HERE / "soak.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = module.scenario(hours)
+    out["name"] = f"live_memory_{hours:g}h"
+    del out["systems"]["hand_phone"]
+    out["layout"]["systems"] = {}
+    out["layout"]["constraints"] = [c for c in out["layout"]["constraints"] if "hand_phone" not in c["between"]]
+    return out
+
+
+def rss_mb() -> float:
+    """Resident memory of this process (MB)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return float(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def csv_rows(order: int, name: str, path: Path, columns: list[str], time_column: str
+             ) -> Iterator[tuple[float, int, str, dict[str, float]]]:
+    """The rows of ``path``, a block at a time: (t, order, name, column → value)."""
+    from pyarrow import csv
+
+    reader = csv.open_csv(path, read_options=csv.ReadOptions(block_size=1 << 20))
+    for batch in reader:
+        table = {c: batch.column(c).to_numpy().astype(float).tolist() for c in columns}
+        for values in zip(*(table[c] for c in columns)):
+            row = dict(zip(columns, values))
+            yield row[time_column], order, name, row
+
+
+class Counter:
+    """A sink that counts the states."""
+
+    def __init__(self) -> None:
+        self.states = 0
+
+    def write(self, state: object) -> None:
+        self.states += 1
+
+    def close(self) -> None:
+        pass
+
+
+def replay(config: Path, keep_s: float) -> None:
+    """The live replay, in this process (the child): prints a sample every half hour of data."""
+    from bodyfusion.core.layout import load_layout
+    from bodyfusion.live.engine import REPLAN_BATCH_S, LiveRun
+
+    sink = Counter()
+    run = LiveRun(load_layout(config), [sink], replan_s=REPLAN_BATCH_S, keep_s=keep_s)
+    rows = heapq.merge(*(csv_rows(k, name, config.parent / b.section.path, list(b.columns), b.section.time_column)
+                         for k, (name, b) in enumerate(run.buffers.items())), key=lambda r: (r[0], r[1]))
+    wall0 = time.perf_counter()
+    t0, next_sample = None, 0.0
+    for t, _, name, row in rows:
+        if t0 is None:
+            t0 = t
+        run.push(name, row)
+        if t - t0 >= next_sample:
+            print(f"sample data_h={(t - t0) / 3600:.2f} rss_mb={rss_mb():.1f} states={sink.states} "
+                  f"wall_s={time.perf_counter() - wall0:.0f}", flush=True)
+            next_sample += 1800.0
+    run.close()
+    print(f"sample data_h={(t - t0) / 3600:.2f} rss_mb={rss_mb():.1f} states={sink.states} "
+          f"wall_s={time.perf_counter() - wall0:.0f} closed", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=24.0, help="walk duration, hours")
+    parser.add_argument("--keep", type=float, default=60.0, help="history kept, s (fusion live --keep)")
+    parser.add_argument("--keep-dir", type=Path, help="keep the simulated walk in this folder")
+    parser.add_argument("--no-truth", action="store_true", help="run the layout without its truth")
+    parser.add_argument("--replay", type=Path, help=argparse.SUPPRESS)  # the child: replay this config
+    args = parser.parse_args()
+    if args.replay is not None:
+        replay(args.replay, args.keep)
+        return
+    work = args.keep_dir or Path(tempfile.mkdtemp(prefix="live_memory_"))
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+        scenario_path = work / "scenario.yaml"
+        scenario_path.write_text(yaml.safe_dump(scenario(args.hours)))
+        walk = work / "walk"
+        subprocess.run(["fusion", "simulate", str(scenario_path), "--out", str(walk), "--overwrite"], check=True,
+                       stdout=subprocess.DEVNULL)
+        if args.no_truth:
+            config = yaml.safe_load((walk / "config.yaml").read_text())
+            config.pop("truth", None)
+            (walk / "config.yaml").write_text(yaml.safe_dump(config))
+        wall0 = time.perf_counter()
+        child = subprocess.run([sys.executable, __file__, "--replay", str(walk / "config.yaml"), "--keep",
+                                str(args.keep)], check=True, capture_output=True, text=True)
+        wall = time.perf_counter() - wall0
+        print(child.stdout, end="")
+        samples = [dict(kv.split("=") for kv in line.split()[1:5]) for line in child.stdout.splitlines()
+                   if line.startswith("sample")]
+        hours = [float(s["data_h"]) for s in samples]
+        rss = [float(s["rss_mb"]) for s in samples]
+        warm = next(k for k, h in enumerate(hours) if h >= 0.5)  # after the first half hour
+        half = min(range(len(hours)), key=lambda k: abs(hours[k] - hours[-1] / 2))
+        print(f"peak_rss_mb={max(rss):.1f} first_half_growth_mb={rss[half] - rss[warm]:.1f} "
+              f"last_half_growth_mb={rss[-1] - rss[half]:.1f} hours={hours[-1]:.2f} wall_s={wall:.0f}")
+    finally:
+        if args.keep_dir is None:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
