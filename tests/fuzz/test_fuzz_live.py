@@ -1,6 +1,7 @@
 """Fuzzing the live engine: the Vicon walk's rows pushed into a :class:`~bodyfusion.live.engine.LiveRun`
 with hostile edits — a cell set to a bad value, a column missing, a row for a system of no such
-name, a row again (late), a block of rows reversed, a time jump. A run either refuses the row
+name, a row again (late), a block of rows reversed, a time jump — into a run keeping all its
+history or a bounded part of it (``keep_s``). A run either refuses the row
 with one :class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks;
 never another exception.
 
@@ -76,13 +77,13 @@ def vicon_rows() -> list[tuple[float, str, dict]]:
 @pytest.mark.slow
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-@given(edits=row_edits)
-def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, edits):
+@given(edits=row_edits, keep_s=st.sampled_from([None, 15.0, 40.0]))
+def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, edits, keep_s):
     rows = vicon_rows
     for edit in edits:
         rows = edit(rows)
     with recorded("live rows", edits):
-        run = LiveRun(load_layout(VICON), lookahead_s=2.0)
+        run = LiveRun(load_layout(VICON), lookahead_s=2.0, keep_s=keep_s)
         try:
             for _, name, row in rows:
                 run.push(name, row)

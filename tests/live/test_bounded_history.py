@@ -51,6 +51,13 @@ def test_a_run_keeping_20_s_emits_every_state_of_a_run_keeping_all(whole, bounde
     assert bounded[2] == whole[2] and len(whole[2]) == 1200
 
 
+@pytest.mark.parametrize("keep_s", [10.0, 47.3])
+def test_any_history_kept_emits_the_same_states(whole, keep_s):
+    """Forgetting at other points of the gait (a stance, the stride period's grid) changes nothing."""
+    run, _, states, _ = _replay(keep_s)
+    assert states == whole[2] and all(s.forgotten > 0 for s in run.fusion.systems.values())
+
+
 def test_it_holds_a_bounded_part_of_the_recording(whole, bounded):
     run, _, _, held = bounded
     rows = whole[0].buffers["left_foot"].rows  # 120 s at 60 Hz
