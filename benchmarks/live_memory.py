@@ -5,8 +5,9 @@ feet with ICM-20948-class IMUs at 100 Hz, the feet's maximum-separation constrai
 with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion simulate``, its
 own process). A second process replays it through :class:`~bodyfusion.live.engine.LiveRun` as
 fast as it runs (a pass every 5 s of data, a state every 0.1 s to a sink that counts them),
-keeping ``--keep`` s of history (default 60); its rows are read from the CSV files a block at a
-time (``pyarrow.csv.open_csv``) and merged in time order, so the source holds no recording. The
+keeping ``--keep`` s of history (default 60); its rows come from ``fusion live``'s replay
+(:func:`~bodyfusion.live.sources.replay_rows`: each file read a chunk of lines at a time and
+merged in time order), so the source holds no recording. The
 resident memory (``VmRSS``) is sampled every half hour of data. With ``--no-truth`` the layout's
 truth is left out, as in the field (a day's truth track alone holds several hundred MB).
 
@@ -20,14 +21,12 @@ Run: python benchmarks/live_memory.py [--hours 24] [--keep 60] [--no-truth] [--k
 from __future__ import annotations
 
 import argparse
-import heapq
 import importlib.util
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import yaml
@@ -56,19 +55,6 @@ def rss_mb() -> float:
     return float("nan")
 
 
-def csv_rows(order: int, name: str, path: Path, columns: list[str], time_column: str
-             ) -> Iterator[tuple[float, int, str, dict[str, float]]]:
-    """The rows of ``path``, a block at a time: (t, order, name, column → value)."""
-    from pyarrow import csv
-
-    reader = csv.open_csv(path, read_options=csv.ReadOptions(block_size=1 << 20))
-    for batch in reader:
-        table = {c: batch.column(c).to_numpy().astype(float).tolist() for c in columns}
-        for values in zip(*(table[c] for c in columns)):
-            row = dict(zip(columns, values))
-            yield row[time_column], order, name, row
-
-
 class Counter:
     """A sink that counts the states."""
 
@@ -86,14 +72,13 @@ def replay(config: Path, keep_s: float) -> None:
     """The live replay, in this process (the child): prints a sample every half hour of data."""
     from bodyfusion.core.layout import load_layout
     from bodyfusion.live.engine import REPLAN_BATCH_S, LiveRun
+    from bodyfusion.live.sources import replay_rows
 
     sink = Counter()
     run = LiveRun(load_layout(config), [sink], replan_s=REPLAN_BATCH_S, keep_s=keep_s)
-    rows = heapq.merge(*(csv_rows(k, name, config.parent / b.section.path, list(b.columns), b.section.time_column)
-                         for k, (name, b) in enumerate(run.buffers.items())), key=lambda r: (r[0], r[1]))
     wall0 = time.perf_counter()
     t0, next_sample = None, 0.0
-    for t, _, name, row in rows:
+    for t, name, row in replay_rows(run):
         if t0 is None:
             t0 = t
         run.push(name, row)

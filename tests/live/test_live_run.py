@@ -185,3 +185,18 @@ def test_a_stream_address_that_cannot_be_listened_on_is_one_error():
     for address in ("tcp://127.0.0.1:99999", "udp://name.invalid:5000"):
         with pytest.raises(InputError, match="cannot listen there"):
             next(line_rows(LiveRun(load_layout(VICON)), address, timeout_s=1))
+
+
+def test_a_replay_reads_each_file_as_its_section_does(batch, tmp_path):
+    """A file with two lines before its header and ';' between cells: the replay reads it with the
+    section's skip_rows and delimiter (a chunk at a time), and the run is the batch run."""
+    data = CONFIGS.parent / "examples" / "data" / "dual_foot_vicon_hu2025"
+    sets = []
+    for foot, name in (("left_foot", "imuMeasLeft.csv"), ("right_foot", "imuMeasRight.csv")):
+        text = (data / name).read_text().replace(",", ";")
+        (tmp_path / name).write_text("recorded by hand\nsecond line of preamble\n" + text)
+        sets += [f"systems.{foot}.data.path={tmp_path / name}", f"systems.{foot}.data.skip_rows=2",
+                 f"systems.{foot}.data.delimiter=;"]
+    run = LiveRun(load_layout(VICON, sets))
+    replay(run, replay_rows(run))
+    _same_tracks(run.close(), batch)

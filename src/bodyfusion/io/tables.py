@@ -229,22 +229,13 @@ def read_table(
     return arrays, line_no
 
 
-def read_labelled_table(
-    path: str | Path,
-    columns: Sequence[str],
-    label: str | None,
-    *,
-    skip_rows: int = 0,
-    delimiter: str = ",",
-    allow_missing: Collection[str] = (),
-) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None]:
-    """:func:`read_table`, and with a ``label`` column (of names: the system of a long-format
-    row) its cells as ``(codes, names)``: (N,) int32 codes into the names, in order of first
-    appearance, each name stripped of surrounding whitespace and quotes. Errors about the
-    label column (missing from the header, a carriage return inside a row) come after those
-    about the numbers."""
-    path = Path(path)
-    columns = list(columns)
+def _table_body(path: Path, columns: list[str], skip_rows: int, delimiter: str
+                ) -> tuple[list[str], list[int], int, int, bool, tuple[list[str], np.ndarray],
+                           Iterator[tuple[list[str], np.ndarray]]]:
+    """A delimited file opened for its ``columns``: its header's names, the columns' places in
+    it, the header's line, the file's line count, whether its text is plain (Arrow can read it),
+    the first chunk of data rows (rows, their 1-based lines) and an iterator over the others.
+    Refuses a file without a header, a column, or data rows."""
     if skip_rows < 0:
         raise InputError(path, f"skip_rows must be >= 0, got {skip_rows}")
     if not delimiter:
@@ -289,6 +280,46 @@ def read_labelled_table(
         idx.append(hits[0])
     if pending is None:
         raise InputError(path, "no data rows after the header", header_line)
+
+    return header, idx, header_line, n_lines, plain, pending, rows
+
+
+def table_chunks(path: str | Path, columns: Sequence[str], *, skip_rows: int = 0,
+                 delimiter: str = ",") -> Iterator[dict[str, np.ndarray]]:
+    """:func:`read_table`'s columns a chunk of lines at a time (:data:`~bodyfusion.io.lines.CHUNK_BYTES`),
+    for a reader that streams a file of any length (a live replay); a chunk's first bad cell is
+    refused as :func:`read_table` refuses it, once the chunks before it are given."""
+    path = Path(path)
+    columns = list(columns)
+    allowed = np.zeros(len(columns), dtype=bool)
+    header, idx, _, _, _, pending, rows = _table_body(path, columns, skip_rows, delimiter)
+    while pending is not None:
+        chunk, lines_of = pending
+        pending = next(rows, None)
+        data = _parse_rows(path, chunk, lines_of, idx, columns, delimiter, (), len(header), pending is None)
+        bad = _non_finite(path, data, columns, allowed, lines_of)
+        if bad is not None:
+            raise bad
+        yield {name: data[:, c] for c, name in enumerate(columns)}
+
+
+def read_labelled_table(
+    path: str | Path,
+    columns: Sequence[str],
+    label: str | None,
+    *,
+    skip_rows: int = 0,
+    delimiter: str = ",",
+    allow_missing: Collection[str] = (),
+) -> tuple[dict[str, np.ndarray], np.ndarray, tuple[np.ndarray, list[str]] | None]:
+    """:func:`read_table`, and with a ``label`` column (of names: the system of a long-format
+    row) its cells as ``(codes, names)``: (N,) int32 codes into the names, in order of first
+    appearance, each name stripped of surrounding whitespace and quotes. Errors about the
+    label column (missing from the header, a carriage return inside a row) come after those
+    about the numbers."""
+    path = Path(path)
+    columns = list(columns)
+    header, idx, header_line, n_lines, plain, pending, rows = _table_body(path, columns, skip_rows, delimiter)
 
     deferred: InputError | None = None
     label_j = None
@@ -457,6 +488,17 @@ def read_source(source: str | Path | TableSection, columns: Sequence[str], *, sk
         source = source.path
     arrays, lines = read_table(source, columns, skip_rows=skip_rows, delimiter=delimiter, allow_missing=allow_missing)
     return arrays, lines, where
+
+
+def source_chunks(section: TableSection, columns: Sequence[str]) -> Iterator[dict[str, np.ndarray]]:
+    """:func:`read_source` of a table section (its ``skip_rows`` and ``delimiter`` as its reader
+    takes them) a chunk of rows at a time: a file's a chunk of lines at a time
+    (:func:`table_chunks`), an in-memory table, a topic or a group whole."""
+    if section.table is not None or section.topic is not None or section.group is not None:
+        yield read_source(section, columns)[0]
+        return
+    yield from table_chunks(section.path, columns, skip_rows=getattr(section, "skip_rows", 0),
+                            delimiter=getattr(section, "delimiter", ","))
 
 
 def source_name(source: str | Path | TableSection) -> str:

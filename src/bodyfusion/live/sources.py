@@ -23,30 +23,33 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from bodyfusion.base.errors import InputError
-from bodyfusion.io.tables import read_source
-from bodyfusion.live.engine import LiveRun
+from bodyfusion.io.tables import source_chunks
+from bodyfusion.live.engine import LiveRun, RowBuffer
 
 Row = tuple[float, str, dict[str, float]]
 """(t s, system, column → value)."""
 
 
-def _recording_rows(order: int, name: str, times: np.ndarray, table: np.ndarray,
-                    columns: list[str]) -> Iterator[tuple[float, int, str, dict[str, float]]]:
-    """One system's rows (t, order, name, column → value), made as they are asked for."""
-    for t, values in zip(times.tolist(), table):
-        yield t, order, name, dict(zip(columns, values.tolist()))
+def _recording_rows(order: int, name: str, buffer: RowBuffer) -> Iterator[tuple[float, int, str, dict[str, float]]]:
+    """System ``name``'s recording as its data section reads it, a chunk of the file at a time
+    (:func:`~bodyfusion.io.tables.source_chunks`): (t, order, name, column → value), each row made
+    as it is asked for."""
+    first = 0
+    for arrays in source_chunks(buffer.section, buffer.columns):
+        times = np.asarray(buffer.times(arrays, first), dtype=float)
+        table = np.column_stack([np.asarray(arrays[c], dtype=float) for c in buffer.columns])
+        columns = list(buffer.columns)
+        for t, values in zip(times.tolist(), table):
+            yield t, order, name, dict(zip(columns, values.tolist()))
+        first += len(times)
 
 
 def replay_rows(run: LiveRun) -> Iterator[Row]:
-    """Every system's recording, row by row in time order (ties: the layout's system order).
-    Reads the files before any row is pushed (the run binds its tables to the same sections);
-    each row is made as it is pushed, so a replay holds the recordings' numbers, not a row each."""
-    streams = []
-    for order, (name, buffer) in enumerate(run.buffers.items()):
-        arrays, _, _ = read_source(buffer.section, buffer.columns)
-        table = np.column_stack([np.asarray(arrays[c], dtype=float) for c in buffer.columns])
-        streams.append(_recording_rows(order, name, np.asarray(buffer.times(arrays), dtype=float), table,
-                                       list(buffer.columns)))
+    """Every system's recording, row by row in time order (ties: the layout's system order), read
+    as its data section reads it (its columns, units, delimiter and header rows) a chunk of the
+    file at a time: a replay of a recording of any length holds one chunk of each, not the
+    recording."""
+    streams = [_recording_rows(order, name, buffer) for order, (name, buffer) in enumerate(run.buffers.items())]
     for t, _, name, row in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
         yield t, name, row
 
