@@ -82,6 +82,10 @@ def test_its_finished_run_is_the_last_part_of_the_batch_run(bounded):
     assert 0 < log.n < batch.fuser.constraint_log.n
     np.testing.assert_array_equal(log.t[:log.n], batch.fuser.constraint_log.t[-log.n:])
     assert all(s.revised_inputs == 0 for s in live.systems.values())
+    # and it says so: one finding a foot, naming the span its result covers
+    windows = [f for f in live.findings if f.kind == "live_window"]
+    assert sorted(f.system for f in windows) == ["left_foot", "right_foot"]
+    assert all(f.t_start == live.trajectories[f.system].t[0] for f in windows)
 
 
 def test_a_section_timed_by_row_count_cannot_keep_a_bounded_history():

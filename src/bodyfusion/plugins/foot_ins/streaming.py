@@ -130,6 +130,16 @@ class StreamingFootIns(Streaming):
                 "run's from the start.",
                 "a live run levels on its first rest; a batch run on the first rest as still as the recording's "
                 "stillest.", "stand still for a second or two before walking, as still as at any rest later."))
+        if self.forgotten:
+            out.append(Finding(
+                "live_window", "info", self.name, float(t[0]), float(t[-1]),
+                f"the live run kept the last {t[-1] - t[0]:.0f} s of this system's recording (it forgot the "
+                f"{self.forgotten} samples before t = {t[0]:.1f} s as it went): its track, scores and findings here "
+                f"cover t = {t[0]:.1f}–{t[-1]:.1f} s of the {t[-1] - self._t_first:.0f} s run; the states sent to "
+                "the sinks cover all of it.",
+                "fusion live --keep bounds the history a run holds (and its memory).",
+                "score the whole track from a states sink (--sink states.parquet), or run fusion run on the "
+                "recording for whole-run figures."))
         if self.revised_inputs:
             out.append(Finding(
                 "live_revisions", "info", self.name, float(t[0]), float(t[-1]),
