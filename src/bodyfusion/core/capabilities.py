@@ -172,9 +172,10 @@ class Streaming(ABC):
         """The recording is complete: read it whole (what it still holds, after
         :meth:`forget_before`) and decide every sample."""
 
-    @abstractmethod
     def forget_before(self, t: float) -> int:
         """Drop the samples before ``t`` (s) and every history row of them, as far as what is still
         to decide allows; the data section's table loses as many first rows, and the samples left
         are numbered from 0 again. Returns the number of samples dropped (a live run that keeps a
-        bounded history, :mod:`bodyfusion.live`)."""
+        bounded history, :mod:`bodyfusion.live`). Default: forget nothing (0), so that a plugin
+        written before it runs live as it did, holding its whole history."""
+        return 0

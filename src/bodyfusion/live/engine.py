@@ -119,6 +119,8 @@ class RowBuffer:
     def forget(self, d: int) -> None:
         """Drop the first ``d`` rows held (their system forgot as many samples)."""
         d = min(d, self.rows)
+        if d <= 0:
+            return
         self._data[:self.rows - d] = self._data[d:self.rows]
         self.t[:self.rows - d] = self.t[d:self.rows]
         self.rows -= d
