@@ -86,3 +86,17 @@ def test_a_sink_file_that_exists_is_refused_unless_overwrite(tmp_path):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
     assert json.loads(mine.read_text().splitlines()[0])["systems"]
+
+
+def test_fusion_live_keep_bounds_the_history_and_says_what_its_result_covers(tmp_path):
+    jsonl = tmp_path / "states.jsonl"
+    proc = _fusion("live", str(VICON), "--speed", "max", "--keep", "20", "--sink", str(jsonl),
+                   "--out", str(tmp_path / "run"))
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert len(jsonl.read_text().splitlines()) == 1200  # the sink has the whole track
+    findings = json.loads((tmp_path / "run" / "metrics.json").read_text())["health"]["findings"]
+    assert {f["system"] for f in findings if f["kind"] == "live_window"} == {"left_foot", "right_foot"}
+    proc = _fusion("live", str(VICON), "--keep", "1")
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2 and err.strip().splitlines() == [err.strip()] and "--keep" in err
