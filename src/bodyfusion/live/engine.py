@@ -46,7 +46,7 @@ WARMUP_S = 10.0
 """Data (s) every system holds before the run starts: its levelling rest and first metres."""
 REPLAN_S = 0.5
 """Data (s) between two passes over the growing recordings, when they arrive at their pace."""
-REPLAN_BATCH_S = 5.0
+REPLAN_BATCH_S = 30.0
 """Data (s) between two passes of a replay as fast as it runs: fewer passes for the same data
 (a pass derives its context again whatever the data it adds)."""
 RETRY_S = 2.0
@@ -68,7 +68,7 @@ def _finite(value: object) -> float | None:
     """``value`` as a finite float, or None (not a number, NaN or infinite)."""
     try:
         number = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # an int beyond a float's range too
         return None
     return number if math.isfinite(number) else None
 
@@ -86,6 +86,9 @@ class RowBuffer:
         self._data = np.empty((1024, len(self.columns)))
         self.rows = 0
         self.t = np.empty(1024)
+        self._time_index = self.columns.index(self._time_column) if self._time_column is not None else None
+        self.newest_t = -math.inf
+        """Time (s) of the newest row (−∞ before the first)."""
         self.dropped = 0
         """Rows dropped for a time not after the newest."""
         self.forgotten = 0
@@ -95,16 +98,14 @@ class RowBuffer:
         """Append ``row`` (column → value; every column the section reads); a row whose time is not
         after the newest is dropped and counted (``dropped``): the rows of a live recording come
         in time order, so that row k is sample k for good. True when it was kept."""
-        missing = [c for c in self.columns if c not in row]
-        if missing:
-            raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
-        values = [_finite(row[c]) for c in self.columns]
-        bad = [c for c, v in zip(self.columns, values) if v is None]
-        if bad:  # refused as the batch reader refuses a bad cell, here with the system's row number
-            raise InputError(f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}",
-                             f"{bad[0]} is {row[bad[0]]!r}, not a finite number")
-        time_value = values[self.columns.index(self._time_column)] if self._time_column is not None else 0.0
-        t = float(self._time(time_value, self.forgotten + self.rows))
+        try:
+            values = [float(row[c]) for c in self.columns]
+        except (KeyError, TypeError, ValueError, OverflowError):
+            values = []
+        if len(values) < len(self.columns) or not all(map(math.isfinite, values)):
+            self._refuse(row)
+        t = float(self._time(values[self._time_index], self.forgotten + self.rows)
+                  if self._time_index is not None else self._time(0.0, self.forgotten + self.rows))
         if not t > self.newest_t:
             self.dropped += 1
             return False
@@ -112,9 +113,19 @@ class RowBuffer:
             self._data = np.concatenate([self._data, np.empty_like(self._data)])
             self.t = np.concatenate([self.t, np.empty_like(self.t)])
         self._data[self.rows] = values
-        self.t[self.rows] = t
+        self.t[self.rows] = self.newest_t = t
         self.rows += 1
         return True
+
+    def _refuse(self, row: Mapping[str, object]) -> None:
+        """The error for a row without a column the section reads, or with a cell that is no finite
+        number (refused as the batch reader refuses a bad cell, here with the system's row number)."""
+        missing = [c for c in self.columns if c not in row]
+        if missing:
+            raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
+        bad = next(c for c in self.columns if _finite(row[c]) is None)
+        raise InputError(f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}",
+                         f"{bad} is {row[bad]!r}, not a finite number")
 
     def forget(self, d: int) -> None:
         """Drop the first ``d`` rows held (their system forgot as many samples)."""
@@ -144,10 +155,6 @@ class RowBuffer:
     def span_s(self) -> float:
         """Time (s) from the first row to the newest."""
         return float(self.t[self.rows - 1] - self.t[0]) if self.rows else 0.0
-
-    @property
-    def newest_t(self) -> float:
-        return float(self.t[self.rows - 1]) if self.rows else -math.inf
 
     def table(self) -> dict[str, np.ndarray]:
         """The rows so far as an in-memory table (column → array)."""
@@ -199,6 +206,9 @@ class LiveRun:
         self.latency_s: deque[float] = deque(maxlen=LATENCIES_KEPT)
         self._planned_t = -math.inf
         self._start_after_s = warmup_s
+        self.started: tuple[float, float] | None = None
+        """When the run started: the data's time (s) and the wall time (s, :func:`time.perf_counter`)
+        at the end of its first pass (None: not yet, or only at the close)."""
         self.not_started: NotReady | None = None
         """Why the run could not start on the data so far (it tries again every :data:`RETRY_S` of data)."""
 
@@ -232,6 +242,7 @@ class LiveRun:
                     self._start_after_s += RETRY_S
                     return False
                 self._advance(newest)
+                self.started = (newest, time.perf_counter())
                 return True
             return False
         if newest >= self._planned_t + self.replan_s:
