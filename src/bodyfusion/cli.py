@@ -194,7 +194,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
             return
         lag = "" if r.fusion is None else f", {t - r.fusion.fuser.schedule.horizon:.1f} s behind the data"
         h = r.output.totals
-        print(f"live: {time.perf_counter() - wall0:.0f} s, {r.emitted} states{lag}; constraint active "
+        held = f", holding {r.held_s:.0f} s of data" if r.keep_s is not None else ""
+        print(f"live: {time.perf_counter() - wall0:.0f} s, {r.emitted} states{lag}{held}; constraint active "
               f"{h['constraint_active']}/{h['constraint_epochs']}, rejected {h['measurements_rejected']}, "
               f"fights {h['fights']}", file=sys.stderr)
 

@@ -30,10 +30,12 @@ class Collect:
 def _replay(keep_s: float | None):
     sink = Collect()
     run = LiveRun(load_layout(VICON), [sink], keep_s=keep_s)
-    held = 0
+    held = held_s = 0
     for _, name, row in replay_rows(run):
         run.push(name, row)
         held = max(held, max(b.rows for b in run.buffers.values()))
+        held_s = max(held_s, run.held_s)
+    assert held_s == pytest.approx((held - 1) / 60.0, abs=0.05)  # what the status line says it holds
     return run, run.close(), sink.states, held
 
 

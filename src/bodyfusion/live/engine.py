@@ -153,7 +153,7 @@ class RowBuffer:
 
     @property
     def span_s(self) -> float:
-        """Time (s) from the first row to the newest."""
+        """Time (s) from the first row held to the newest."""
         return float(self.t[self.rows - 1] - self.t[0]) if self.rows else 0.0
 
     def table(self) -> dict[str, np.ndarray]:
@@ -215,6 +215,12 @@ class LiveRun:
     @property
     def emitted(self) -> int:
         return self.output.emitted
+
+    @property
+    def held_s(self) -> float:
+        """The longest recording (s) a system's buffer holds now: with ``keep_s``, about ``keep_s``
+        to twice it plus what each pass derives again; without, the whole run so far."""
+        return max(b.span_s for b in self.buffers.values())
 
     def push(self, system: str, row: Mapping[str, float]) -> None:
         """A row of ``system``'s data (column → value, as its data section names them), then a pass
