@@ -139,7 +139,9 @@ def find_clipping(signal: np.ndarray, dt: float) -> Clipping:
             candidate = col >= level * (1.0 - RAIL_TOLERANCE)
             starts, stops = _runs(candidate)
             clipped = []
-            for a, b in zip(starts, stops):
+            for k, (a, b) in enumerate(zip(starts, stops)):
+                if len(clipped) + starts.size - k < MIN_CLIPPED_RUNS:  # too few runs left to make a rail
+                    break
                 fit = _flank_cubic(col, a, b, candidate)
                 if fit is not None and fit.max() > level * (1.0 + MIN_EXCESS):
                     beyond = np.maximum(fit, level)
