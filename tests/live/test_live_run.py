@@ -91,7 +91,8 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
     (b"[1, 2]\n", "line 3: not a JSON object"),
     (b'{"system": "left_foot", "acc_x": NaN}\n', "line 3: left_foot needs finite numbers"),
     (b'{"system": "head"}\n', "line 3: system 'head' is none of this layout's"),
-], ids=["bytes", "array", "nan", "system"])
+    (b'{"system": "left_foot", "acc_x": 1' + b"0" * 400 + b'}\n', "line 3: left_foot needs finite numbers"),
+], ids=["bytes", "array", "nan", "system", "beyond_float"])
 def test_a_bad_line_on_the_stream_is_refused_naming_it(bad, said):
     run = LiveRun(load_layout(VICON), [])
     rows = list(replay_rows(run))[:2]
@@ -140,7 +141,7 @@ def test_rows_out_of_time_order_are_dropped_and_counted(batch):
     assert sum(b.dropped for b in run.buffers.values()) == 10
 
 
-@pytest.mark.parametrize("value", [float("nan"), float("inf"), "abc", None])
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), "abc", None, 10**400])
 def test_a_row_holding_no_finite_number_is_refused_naming_the_system_row_and_column(value):
     run = LiveRun(load_layout(VICON))
     rows = list(replay_rows(run))

@@ -23,6 +23,7 @@ next replan has run. Each system must offer :class:`~bodyfusion.core.capabilitie
 from __future__ import annotations
 
 import math
+import reprlib
 import time
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -125,7 +126,7 @@ class RowBuffer:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
         bad = next(c for c in self.columns if _finite(row[c]) is None)
         raise InputError(f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}",
-                         f"{bad} is {row[bad]!r}, not a finite number")
+                         f"{bad} is {reprlib.repr(row[bad])}, not a finite number")
 
     def forget(self, d: int) -> None:
         """Drop the first ``d`` rows held (their system forgot as many samples)."""

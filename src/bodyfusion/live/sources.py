@@ -129,7 +129,7 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
             buffer = run.buffers[name]
             try:
                 row = {c: float(obj[c]) for c in buffer.columns}
-            except (KeyError, TypeError, ValueError):
+            except (KeyError, TypeError, ValueError, OverflowError):  # an integer beyond a float's range too
                 row = {}
             if len(row) < len(buffer.columns) or not all(map(math.isfinite, row.values())):
                 raise InputError(f"{address}: line {number}", f"{name} needs finite numbers in columns "
