@@ -97,12 +97,13 @@ class StreamingFootIns(Streaming):
     _levelled_on: tuple[int, int] | None = None
     """Where the whole recording would have levelled (first sample, end), once the stream closed."""
     revised_inputs = 0
+    """Final samples whose inputs (stance, repaired IMU sample, navigation clock, a covariance
+    increment) the whole recording would have given otherwise (counted when the stream closes)."""
     forgotten = 0
     """Samples dropped from the front so far (:meth:`forget_before`); sample k now is the
     recording's sample k + ``forgotten``."""
     _t_first: float | None = None
-    """Final samples whose inputs (stance, repaired IMU sample, navigation clock, a covariance
-    increment) the whole recording would have given otherwise (counted when the stream closes)."""
+    """The recording's first sample (s), once live."""
 
     def _check_ready(self) -> None:
         """On a live run's first part (:attr:`~bodyfusion.core.system.LayoutContext.growing`), refuse
@@ -116,13 +117,14 @@ class StreamingFootIns(Streaming):
 
     def live_findings(self) -> list[Finding]:
         """Where this live run departed from the batch run on the same recording: a levelling on
-        another rest, inputs the whole recording would have made otherwise."""
+        another rest, inputs the whole recording would have made otherwise, a history forgotten."""
         if self._t_first is None or self._lookahead_s is not None:  # not live, or not closed yet
             return []
         t = self.stream.t
         out = []
-        (a, b), (c, d) = (self.still.start, self.still.stop), self._levelled_on or (self.still.start, self.still.stop)
-        if (a, b) != (c, d):
+        a, b = self.still.start, self.still.stop
+        if self._levelled_on is not None and self._levelled_on != (a, b):  # None: forgotten, not compared
+            c, d = self._levelled_on
             out.append(Finding(
                 "live_levelling", "info", self.name, float(t[a]), float(t[b - 1]),
                 f"the live run levelled on t = {t[a]:.2f}–{t[b - 1]:.2f} s; the whole recording would have "
@@ -183,10 +185,10 @@ class StreamingFootIns(Streaming):
         if d <= 0:
             return 0
         self._live.drop_first(d)
-        data = self.run_data
+        data, n = self.run_data, self._i + 1
         for name in ("hist_x", "hist_cov", "hist_nis"):
             rows = getattr(data, name)
-            rows[:rows.shape[0] - d] = rows[d:]
+            rows[:n - d] = rows[d:n]  # the rows written so far
         self._i -= d
         self._decided -= d
         self._input_increments = self._shifted(self._input_increments, d)
