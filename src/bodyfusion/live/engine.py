@@ -15,6 +15,14 @@ has walked far enough to align its heading) is tried again every :data:`RETRY_S`
 at the close on the whole recording. :meth:`LiveRun.close` completes the recording and finishes the run as a batch run does
 (:func:`~bodyfusion.runner.batch.finish_fusion`): the same :class:`~bodyfusion.results.run_result.RunResult`.
 
+Bounded history (``keep_s``, ``fusion live --keep``): every ``keep_s`` of decided data each
+system forgets its samples more than ``keep_s`` behind its decided time, as far as what it still
+has to decide allows (:meth:`~bodyfusion.core.capabilities.Streaming.forget_before`), its buffer
+as many rows (:meth:`RowBuffer.forget`) and the fuser its older constraint epochs
+(:meth:`~bodyfusion.core.fuser.Fuser.forget_before`): a run of any length holds a bounded
+memory and emits the states of a run that keeps everything; its finished result covers the part
+kept.
+
 Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
 next replan has run. Each system must offer :class:`~bodyfusion.core.capabilities.Streaming`
 (the foot INS does); aiding sources and smoothers do not run live yet and are refused.
@@ -62,7 +70,8 @@ LIVE_BOUNDS = {"lookahead_s": ("fusion live --lookahead", 0.01, 600.0),
                "output_interval_s": ("fusion live --interval", 1e-3, 3600.0),
                "keep_s": ("fusion live --keep", 10.0, 30 * 86400.0)}
 """A live run's timing parameter → (its command-line option, least and most value, s): an output
-epoch every millisecond at the most; decisions, warm-up and passes within minutes."""
+epoch every millisecond at the most; decisions, warm-up and passes within minutes; a history
+kept of 10 s (less than a pass derives again) to 30 days."""
 
 
 def _finite(value: object) -> float | None:
@@ -168,8 +177,8 @@ class LiveRun:
     run's; ``keep_s``: the history (s) held behind the decided data (None: all of it), so that a
     run of any length holds a bounded memory (module docstring). Results: ``fusion`` (None until
     started), ``emitted`` epochs, ``latency_s``: for every pass, the wall time (s) from the
-    arrival of the row that made it due to its last epoch emitted (the data's own delay, the look-ahead and the replan interval, comes on top), for the
-    last :data:`LATENCIES_KEPT` passes."""
+    arrival of the row that made it due to its last epoch emitted (the data's own delay, the
+    look-ahead and the replan interval, comes on top), for the last :data:`LATENCIES_KEPT` passes."""
 
     def __init__(self, loaded: LoadedLayout, sinks: Sequence[EpochSink] = (), *, lookahead_s: float = LOOKAHEAD_S,
                  warmup_s: float = WARMUP_S, replan_s: float = REPLAN_S, output_interval_s: float = OUTPUT_INTERVAL_S,
