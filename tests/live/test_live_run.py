@@ -11,7 +11,7 @@ import pytest
 
 from bodyfusion.base.errors import ConfigError, InputError
 from bodyfusion.core.layout import load_layout
-from bodyfusion.live.engine import LiveRun
+from bodyfusion.live.engine import REPLAN_BATCH_S, LiveRun
 from bodyfusion.live.sinks import JsonLinesSink
 from bodyfusion.live.sources import line_rows, replay, replay_rows
 from bodyfusion.runner.batch import run_layout
@@ -59,6 +59,14 @@ def test_a_live_replay_of_the_vicon_walk_is_the_batch_run_bit_for_bit(batch, tmp
         np.testing.assert_array_equal(s.position_n, left.pos_n[k])
     # states are emitted behind the newest data by the look-ahead, not at the end
     assert len(run.latency_s) > 100
+
+
+def test_a_replay_as_fast_as_it_runs_passes_every_30_s_and_is_the_batch_run(batch):
+    """The spacing of the passes (fusion live --speed max: REPLAN_BATCH_S) changes no state."""
+    run = LiveRun(load_layout(VICON), replan_s=REPLAN_BATCH_S)
+    replay(run, replay_rows(run))
+    _same_tracks(run.close(), batch)
+    assert REPLAN_BATCH_S == 30.0 and len(run.latency_s) == 4  # the start, then every 30 s of the 120 s
 
 
 def test_a_line_stream_over_tcp_gives_the_same_run(batch):
