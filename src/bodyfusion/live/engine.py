@@ -39,6 +39,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from bodyfusion.base.errors import ConfigError, InputError, NotReady
+from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.sections import TableSection
 from bodyfusion.core.capabilities import Streaming
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
@@ -84,8 +85,8 @@ def _finite(value: object) -> float | None:
 
 
 class RowBuffer:
-    """One system's rows as they arrive: the columns its data section reads, in growing arrays
-    (capacity doubling), and each row's time (s) as the section defines it."""
+    """One system's rows as they arrive: the columns its data section reads, and each row's time
+    (s) as the section defines it, in :class:`~bodyfusion.base.records.GrowingArray` records."""
 
     def __init__(self, section: TableSection, key: str) -> None:
         self.section, self.key = section, key
@@ -93,9 +94,8 @@ class RowBuffer:
         self._time_column = getattr(section, "time_column", None)
         self._time_scale = float(getattr(section, "time_scale", 1.0))
         self._rate_hz = getattr(section, "rate_hz", None)
-        self._data = np.empty((1024, len(self.columns)))
-        self.rows = 0
-        self.t = np.empty(1024)
+        self._data = GrowingArray((len(self.columns),), capacity=1024)
+        self._t = GrowingArray((), capacity=1024)
         self._time_index = self.columns.index(self._time_column) if self._time_column is not None else None
         self.newest_t = -math.inf
         """Time (s) of the newest row (−∞ before the first)."""
@@ -119,12 +119,9 @@ class RowBuffer:
         if not t > self.newest_t:
             self.dropped += 1
             return False
-        if self.rows == self._data.shape[0]:
-            self._data = np.concatenate([self._data, np.empty_like(self._data)])
-            self.t = np.concatenate([self.t, np.empty_like(self.t)])
-        self._data[self.rows] = values
-        self.t[self.rows] = self.newest_t = t
-        self.rows += 1
+        self._data.append(values)
+        self._t.append(t)
+        self.newest_t = t
         return True
 
     def _refuse(self, row: Mapping[str, object]) -> None:
@@ -139,13 +136,15 @@ class RowBuffer:
 
     def forget(self, d: int) -> None:
         """Drop the first ``d`` rows held (their system forgot as many samples)."""
-        d = min(d, self.rows)
-        if d <= 0:
-            return
-        self._data[:self.rows - d] = self._data[d:self.rows]
-        self.t[:self.rows - d] = self.t[d:self.rows]
-        self.rows -= d
+        d = min(max(d, 0), self.rows)
+        self._data.drop_first(d)
+        self._t.drop_first(d)
         self.forgotten += d
+
+    @property
+    def rows(self) -> int:
+        """Rows held."""
+        return len(self._t)
 
     def times(self, columns: Mapping[str, np.ndarray], first: int = 0) -> np.ndarray:
         """Times (s) of rows ``columns`` (column → array), the first of them row ``first``
@@ -164,11 +163,13 @@ class RowBuffer:
     @property
     def span_s(self) -> float:
         """Time (s) from the first row held to the newest."""
-        return float(self.t[self.rows - 1] - self.t[0]) if self.rows else 0.0
+        t = self._t.view()
+        return float(t[-1] - t[0]) if t.size else 0.0
 
     def table(self) -> dict[str, np.ndarray]:
         """The rows so far as an in-memory table (column → array)."""
-        return {c: self._data[:self.rows, k] for k, c in enumerate(self.columns)}
+        data = self._data.view()
+        return {c: data[:, k] for k, c in enumerate(self.columns)}
 
 
 class LiveRun:
