@@ -36,7 +36,7 @@ def test_an_aiding_source_needs_at_most_ten_members():
 
 @pytest.mark.parametrize("cls, offered", [
     (FootIns, {"HeadingAlignment", "BodyPlacement", "TransitionTracking", "Smoothing", "Streaming"}),
-    (HandPdr, {"HeadingAlignment", "TransitionTracking", "AbsoluteFixes", "PositionResets"}),
+    (HandPdr, {"HeadingAlignment", "TransitionTracking", "AbsoluteFixes", "PositionResets", "Streaming"}),
     (RandomWalk, {"TransitionTracking"}),
 ])
 def test_each_built_in_plugin_offers_what_its_sensor_has(cls, offered):

@@ -98,7 +98,7 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
     (b"\xff\xfe not text\n", "line 3: not UTF-8 text"),
     (b"[1, 2]\n", "line 3: not a JSON object"),
     (b'{"system": "left_foot", "acc_x": NaN}\n', "line 3: left_foot needs finite numbers"),
-    (b'{"system": "head"}\n', "line 3: system 'head' is none of this layout's"),
+    (b'{"system": "head"}\n', "line 3: system 'head' is no stream of this layout"),
     (b'{"system": "left_foot", "acc_x": 1' + b"0" * 400 + b'}\n', "line 3: left_foot needs finite numbers"),
 ], ids=["bytes", "array", "nan", "system", "beyond_float"])
 def test_a_bad_line_on_the_stream_is_refused_naming_it(bad, said):
@@ -170,7 +170,7 @@ def test_a_row_without_the_sections_columns_is_refused():
     run = LiveRun(load_layout(VICON))
     with pytest.raises(ConfigError, match="without column"):
         run.push("left_foot", {"time_index": 0.0})
-    with pytest.raises(ConfigError, match="no system"):
+    with pytest.raises(ConfigError, match="no stream of this layout"):
         run.push("nose", {})
 
 

@@ -158,6 +158,15 @@ class Streaming(ABC):
     look-ahead beyond it; :meth:`~bodyfusion.core.system.SensorSystem.decided_until` says up to
     when that is, and the fuser takes no event after it."""
 
+    @classmethod
+    def streamed_sections(cls, config: BaseModel) -> tuple[str, ...]:
+        """The sections of ``config`` whose tables grow live: the system's data section first (its
+        rows pace the run, which waits for them), then its aiding sections (a phone's GNSS: their
+        rows are taken as they come and never hold the run up). Default: the data section alone.
+        A configuration that cannot run live raises :class:`~bodyfusion.base.errors.ConfigError`
+        naming its key."""
+        return (cls.data_section,)
+
     @abstractmethod
     def start_streaming(self, lookahead_s: float) -> None:
         """From now on the recording grows: decide samples ``lookahead_s`` (s) behind the newest."""
@@ -172,10 +181,10 @@ class Streaming(ABC):
         """The recording is complete: read it whole (what it still holds, after
         :meth:`forget_before`) and decide every sample."""
 
-    def forget_before(self, t: float) -> int:
+    def forget_before(self, t: float) -> dict[str, int]:
         """Drop the samples before ``t`` (s) and every history row of them, as far as what is still
-        to decide allows; the data section's table loses as many first rows, and the samples left
-        are numbered from 0 again. Returns the number of samples dropped (a live run that keeps a
-        bounded history, :mod:`bodyfusion.live`). Default: forget nothing (0), so that a plugin
-        written before it runs live as it did, holding its whole history."""
-        return 0
+        to decide allows; each streamed section's table loses as many first rows, and the rows left
+        are numbered from 0 again. Returns the rows dropped per section (section → count; a live
+        run that keeps a bounded history, :mod:`bodyfusion.live`). Default: forget nothing, so
+        that a plugin written before it runs live as it did, holding its whole history."""
+        return {}

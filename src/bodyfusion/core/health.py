@@ -77,7 +77,7 @@ class CovarianceMonitor:
         if not math.isfinite(decided):
             self._t_end = self.monitored.t_end
 
-    def forget_before(self, t: float) -> int:
+    def forget_before(self, t: float) -> dict[str, int]:
         """The system's ``forget_before(t)`` (:class:`~bodyfusion.core.capabilities.Streaming`),
         and the stride times passed dropped."""
         del self._stride_t[:self._next]

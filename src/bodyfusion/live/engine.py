@@ -85,11 +85,15 @@ def _finite(value: object) -> float | None:
 
 
 class RowBuffer:
-    """One system's rows as they arrive: the columns its data section reads, and each row's time
-    (s) as the section defines it, in :class:`~bodyfusion.base.records.GrowingArray` records."""
+    """The rows of one of a system's streamed sections as they arrive: the columns the section
+    reads, and each row's time (s) as the section defines it, in
+    :class:`~bodyfusion.base.records.GrowingArray` records. ``key``: the section's dotted key
+    (``systems.NAME.SECTION``); ``paces``: the run waits for these rows (the system's data section),
+    or takes them as they come (an aiding section, a phone's GNSS)."""
 
-    def __init__(self, section: TableSection, key: str) -> None:
-        self.section, self.key = section, key
+    def __init__(self, section: TableSection, key: str, paces: bool = True) -> None:
+        self.section, self.key, self.paces = section, key, paces
+        self.system, _, self.section_name = key.removeprefix("systems.").rpartition(".")
         self.columns = section.required_columns()
         self._time_column = getattr(section, "time_column", None)
         self._time_scale = float(getattr(section, "time_scale", 1.0))
@@ -197,18 +201,25 @@ class LiveRun:
             raise ConfigError("smoother.kind", f"{layout.smoother.kind}: a live run does not smooth yet; use none",
                               loaded.path)
         self.buffers: dict[str, RowBuffer] = {}
+        """Every streamed section's rows, by stream: a system's name for its data section,
+        ``NAME.SECTION`` for an aiding section (:meth:`stream_name`)."""
         for name, cfg in self.loaded.system_configs.items():
             cls = get_registry().system_class(cfg.plugin, key=f"systems.{name}.plugin", path=loaded.path)
             if not issubclass(cls, Streaming) or cls.data_section is None:
                 raise ConfigError(f"systems.{name}.plugin", f"{cfg.plugin} does not run live (it cannot take a "
                                                             "growing recording)", loaded.path)
-            section = getattr(cfg, cls.data_section)
-            key = f"systems.{name}.{cls.data_section}"
-            if keep_s is not None and getattr(section, "time_column", None) is None:
-                raise ConfigError(f"{key}.time_column", "a live run that keeps a bounded history (--keep) needs "
-                                                        "each row's time in a column, not a row count / rate_hz",
-                                  loaded.path)
-            self.buffers[name] = RowBuffer(section, key)
+            try:
+                sections = cls.streamed_sections(cfg)
+            except ConfigError as err:
+                raise ConfigError(f"systems.{name}.{err.key}", err.reason, loaded.path) from None
+            for k, section_name in enumerate(sections):
+                section = getattr(cfg, section_name)
+                key = f"systems.{name}.{section_name}"
+                if keep_s is not None and getattr(section, "time_column", None) is None:
+                    raise ConfigError(f"{key}.time_column", "a live run that keeps a bounded history (--keep) needs "
+                                                            "each row's time in a column, not a row count / rate_hz",
+                                      loaded.path)
+                self.buffers[self.stream_name(name, None if k == 0 else section_name)] = RowBuffer(section, key, k == 0)
         self.output = EpochOutput(output_interval_s, sinks)
         self.lookahead_s, self.warmup_s, self.replan_s, self.seed = lookahead_s, warmup_s, replan_s, seed
         self.keep_s = keep_s
@@ -233,12 +244,19 @@ class LiveRun:
         to twice it plus what each pass derives again; without, the whole run so far."""
         return max(b.span_s for b in self.buffers.values())
 
-    def push(self, system: str, row: Mapping[str, float]) -> None:
-        """A row of ``system``'s data (column → value, as its data section names them), then a pass
-        when one is due (:meth:`pump`)."""
-        buffer = self.buffers.get(system)
+    @staticmethod
+    def stream_name(system: str, section: str | None = None) -> str:
+        """The name of a system's stream of rows: the system's own for its data section (``section``
+        None), ``SYSTEM.SECTION`` for an aiding section (a phone's ``hand.gnss``)."""
+        return system if section is None else f"{system}.{section}"
+
+    def push(self, system: str, row: Mapping[str, float], section: str | None = None) -> None:
+        """A row of ``system``'s data section (column → value, as the section names them), or of its
+        aiding ``section`` (a phone's ``gnss``), then a pass when one is due (:meth:`pump`)."""
+        buffer = self.buffers.get(self.stream_name(system, section))
         if buffer is None:
-            raise ConfigError("system", f"{system!r} is no system of this layout ({', '.join(self.buffers)})")
+            raise ConfigError("system", f"{self.stream_name(system, section)!r} is no stream of this layout "
+                                        f"({', '.join(self.buffers)})")
         arrived = time.perf_counter()
         buffer.add(row)
         if self.pump():
@@ -246,10 +264,12 @@ class LiveRun:
 
     def pump(self) -> bool:
         """Start once every system holds the warm-up; afterwards a pass every ``replan_s`` of data.
-        True when it made a pass."""
-        newest = min(b.newest_t for b in self.buffers.values())
+        True when it made a pass. The data sections pace it; an aiding section's rows (fixes) are
+        taken as they come."""
+        pacing = [b for b in self.buffers.values() if b.paces]
+        newest = min(b.newest_t for b in pacing)
         if self.fusion is None:
-            if all(b.span_s >= self._start_after_s for b in self.buffers.values()):
+            if all(b.span_s >= self._start_after_s for b in pacing):
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 try:
                     self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
@@ -269,12 +289,11 @@ class LiveRun:
         return False
 
     def _read_tables(self, read) -> None:
-        """Bind each buffer's rows to its system's data section (the section the built system reads)
-        and let the system ``read`` it."""
-        for name, b in self.buffers.items():
-            system = self.fusion.systems[name]
-            section = getattr(system.config, b.key.rpartition(".")[2])
-            section.bind(b.table(), b.key)
+        """Bind each buffer's rows to its system's section (the section the built system reads) and
+        let each system ``read`` them."""
+        for b in self.buffers.values():
+            getattr(self.fusion.systems[b.system].config, b.section_name).bind(b.table(), b.key)
+        for system in self.fusion.systems.values():
             read(system)
 
     def _advance(self, newest: float) -> None:
@@ -292,8 +311,10 @@ class LiveRun:
         if not math.isfinite(decided) or decided - self.keep_s < self._forgot_at + self.keep_s:
             return
         self._forgot_at = decided - self.keep_s
-        for name, buffer in self.buffers.items():
-            buffer.forget(self.fusion.systems[name].forget_before(self._forgot_at))
+        for name, system in self.fusion.systems.items():
+            for section_name, rows in system.forget_before(self._forgot_at).items():
+                self.buffers[self.stream_name(name, None if section_name == system.data_section else section_name)
+                             ].forget(rows)
         self.fusion.fuser.forget_before(self._forgot_at)
 
     def close(self) -> RunResult:
@@ -303,9 +324,9 @@ class LiveRun:
         without any row is refused."""
         try:
             if self.fusion is None:  # never ready: the whole recording is in hand now
-                if not all(b.rows for b in self.buffers.values()):
+                if not all(b.rows for b in self.buffers.values() if b.paces):
                     raise ConfigError("--source", "no rows arrived for " + ", ".join(
-                        n for n, b in self.buffers.items() if not b.rows))
+                        n for n, b in self.buffers.items() if b.paces and not b.rows))
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
                                              lookahead_s=self.lookahead_s, complete=True)

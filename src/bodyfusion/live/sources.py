@@ -6,7 +6,9 @@
 * Line stream (:func:`line_rows`): JSON lines over TCP (the run listens; one client) or UDP
   (one or more lines per datagram). Each line is one row: ``{"system": NAME, COLUMN: VALUE,
   ...}``, the columns those the system's data section names (a foot INS: its ``time_column``,
-  ``acc_columns``, ``gyro_columns`` and ``stance_column``, in the section's units). A line that
+  ``acc_columns``, ``gyro_columns`` and ``stance_column``, in the section's units); a row of an
+  aiding section adds ``"section": SECTION`` (a phone's fix: ``"section": "gnss"`` with the
+  ``gnss`` section's ``time_column``, ``lat_column``... ). A line that
   is not such an object is refused with its number. The stream ends when the client closes
   (TCP) or an ``{"end": true}`` line arrives.
 """
@@ -122,10 +124,12 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
                 continue
             if obj.get("end") is True:
                 return
-            name = obj.pop("system", None)
+            system, section = obj.pop("system", None), obj.pop("section", None)
+            name = run.stream_name(str(system), None if section is None else str(section))
             if name not in run.buffers:
-                raise InputError(f"{address}: line {number}", f"system {name!r} is none of this layout's "
-                                                              f"({', '.join(run.buffers)})")
+                raise InputError(f"{address}: line {number}", f"system {system!r}"
+                                 f"{'' if section is None else f' section {section!r}'} is no stream of this layout "
+                                 f"({', '.join(run.buffers)})")
             buffer = run.buffers[name]
             try:
                 row = {c: float(obj[c]) for c in buffer.columns}

@@ -166,7 +166,7 @@ class StreamingFootIns(Streaming):
         """The recording's first sample (s), also once it is forgotten (the fuser's epoch grid starts there)."""
         return self._t_first if self._t_first is not None else float(self.stream.t[0])
 
-    def forget_before(self, t: float) -> int:
+    def forget_before(self, t: float) -> dict[str, int]:
         """Drop the samples before ``t`` (s) with their inputs and history rows, as far as the next
         pass allows: it derives again from :data:`CONTEXT_S` before the first undecided sample, on
         the stride period's grid (so the number dropped is a multiple of its hop), and the lockout
@@ -174,7 +174,7 @@ class StreamingFootIns(Streaming):
         and corrections') lose the number dropped; the covariances kept for a smoother before it
         are dropped with them (a live run does not smooth)."""
         if self._lookahead_s is None:
-            return 0
+            return {}
         hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
         d = min(int(np.searchsorted(self.stream.t, t)), self._decided - int(CONTEXT_S * self._rate_hz) - hop, self._i)
         starts, ends = self._stance_runs
@@ -183,7 +183,7 @@ class StreamingFootIns(Streaming):
             d = min(d, int(starts[r]))
         d -= d % hop
         if d <= 0:
-            return 0
+            return {}
         self._live.drop_first(d)
         data, n = self.run_data, self._i + 1
         for name in ("hist_x", "hist_cov", "hist_nis"):
@@ -202,7 +202,7 @@ class StreamingFootIns(Streaming):
         self.corrections = self.corrections.forgotten(d)
         self.forgotten += d
         self._take_live()
-        return d
+        return {self.data_section: d}
 
     @staticmethod
     def _shifted(indexed: tuple[np.ndarray, np.ndarray], d: int) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,9 @@ import numpy as np
 from bodyfusion.plugins.hand_pdr.config import MagnetometerConfig, PdrFilterConfig
 
 E, N, U, PSI, S, B, BE, BN, C, O = range(10)
+STEP, GNSS, MAGNETOMETER, STEADY = range(4)
+"""The filter's event kinds, in the order they are processed at one time: a step, a GNSS fix, a
+magnetometer sample, the phone held steadily again (the heading re-opened)."""
 """Error-state indices (O, the holding offset δo, only with the magnetometer)."""
 
 

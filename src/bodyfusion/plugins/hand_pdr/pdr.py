@@ -7,9 +7,25 @@ filter then walks the detected steps in time order.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from bodyfusion.plugins.hand_pdr.config import StepConfig
+
+
+@dataclass
+class PdrInputs:
+    """What the PDR filter takes from the phone's IMU samples: ``step_index`` (sample of each step),
+    ``step_length_m`` (m, before the step scale), ``up_b`` (N, 3: Up in the phone frame),
+    ``azimuth`` (N: cumulative azimuth change, rad, :func:`azimuth_increments`) and ``steady``
+    (N: held steadily, :func:`held_steadily`)."""
+
+    step_index: np.ndarray
+    step_length_m: np.ndarray
+    up_b: np.ndarray
+    azimuth: np.ndarray
+    steady: np.ndarray
 
 
 def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:

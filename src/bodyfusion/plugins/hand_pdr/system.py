@@ -87,13 +87,15 @@ from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
 from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
 from bodyfusion.plugins.hand_pdr.gnss_aiding import DIFFUSE_SD_M, GnssAiding
+from bodyfusion.plugins.hand_pdr.streaming import StreamingHandPdr
 from bodyfusion.plugins.hand_pdr.track_heading import TrackHeading
-from bodyfusion.plugins.hand_pdr.model import B, BE, BN, C, E, N, O, PSI, U, PdrModel
+from bodyfusion.plugins.hand_pdr.model import B, BE, BN, C, E, GNSS, MAGNETOMETER, N, O, PSI, STEADY, STEP, U, PdrModel
 from bodyfusion.plugins.hand_pdr.magnetometer import (
     MagneticHeading,
     read_magnetometer_csv,
 )
 from bodyfusion.plugins.hand_pdr.pdr import (
+    PdrInputs,
     azimuth_increments,
     detect_steps,
     held_steadily,
@@ -107,11 +109,9 @@ NO_STEP_FINDING_S = 10.0
 """A recording at least this long (s) without a detected step gets a ``no_steps`` finding."""
 N_ERR = 9
 """Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
-STEP, GNSS, MAGNETOMETER, STEADY = range(4)
-"""Event kinds, in the order they are processed at one time."""
 
 
-class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes, PositionResets):
+class HandPdr(StreamingHandPdr, GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes, PositionResets):
     """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
     with the magnetometer's holding offset), or a bank of them while the heading is unknown.
 
@@ -157,14 +157,9 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
         g = config.gnss
         if g is not None and g.format in ("nmea", "ubx") and g.table is not None:
             raise ConfigError(f"{key}.gnss.format", "an in-memory GNSS table is read as format csv (its columns)")
-        if g is not None and g.format == "csv":
-            fixes = read_gnss_csv(g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
-                                  height_column=g.height_column, accuracy_column=g.accuracy_column,
-                                  speed_column=g.speed_column, course_column=g.course_column)
-        elif g is not None and g.format == "nmea":
-            fixes = read_nmea(g.path)
-        elif g is not None and g.format == "ubx":
-            fixes = read_ubx(g.path)
+        if g is not None and g.format != "phone_log":
+            self._check_fixes_arrived()
+            fixes = self._read_fixes()
         if fixes is not None and fixes.report is not report:  # a phone log's fixes share its report
             report = report.merge(fixes.report)
         self._report = report
@@ -172,13 +167,11 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
             report.warn(f"{name}: none of the {len(fixes)} GNSS fixes ({fixes.t[0]:.6g}–{fixes.t[-1]:.6g} s) falls "
                         f"within the IMU's time span ({self.t[0]:.6g}–{self.t[-1]:.6g} s): GNSS unused; check the "
                         "two clocks")
-        self.step_index = detect_steps(self.t, acc, config.step, context.gravity_mps2)
         self._acc_norm_median = float(np.median(np.linalg.norm(acc, axis=1)))
-        self.step_length_m = step_lengths(self.t, acc, self.step_index, config.step)
-        up_b = up_in_body(self.t, acc)
-        self._azimuth = azimuth_increments(self.t, gyro, up_b)
+        derived = self._derive(self.t, acc, gyro)
+        self.step_index, self.step_length_m = derived.step_index, derived.step_length_m
+        self._azimuth, self._steady, up_b = derived.azimuth, derived.steady, derived.up_b
         f = config.filter
-        self._steady = held_steadily(self.t, up_b, f.pose_window_s, np.deg2rad(f.pose_change_deg))
         on = magn is not None
         self.n_err = N_ERR + on
         self._nominal = NOMINAL + [O] * on
@@ -187,15 +180,14 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
         self.geodetic_origin = context.geodetic_origin
         self._fixes: PhoneFixes | None = None
         if fixes is not None and len(fixes):
-            self._fixes = PhoneFixes.of(fixes, context.outages.get(name, ()), f, self.geodetic_origin,
-                                        self.t[self.step_index], self.step_length_m, self.walking(fixes.t),
-                                        self.held_steadily(fixes.t))
+            self._fixes = self._phone_fixes(fixes)
             self.geodetic_origin = self._fixes.origin
         self._events = self._event_list()
         ini = config.initial
         self.start_fix_s: float | None = None
         self._start_fix = 0
         if ini.position_m == "gnss":
+            self._check_start_fix()
             if self._fixes is None or self._fixes.confirmed < 0:
                 raise ConfigError(f"{key}.initial.position_m", "no GNSS fix to start from")
             self._start_fix = self._fixes.confirmed
@@ -212,12 +204,41 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
         self.restart()
 
     # --- set-up -----------------------------------------------------------------
+    def _derive(self, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> PdrInputs:
+        """What the filter takes from the phone's IMU samples (times ``t`` s, specific force
+        ``acc`` m/s^2, rate ``gyro`` rad/s, phone frame): its steps and their lengths, the azimuth
+        increments and where the phone is held steadily."""
+        step, f = self.config.step, self.config.filter
+        steps = detect_steps(t, acc, step, self.context.gravity_mps2)
+        up_b = up_in_body(t, acc)
+        return PdrInputs(steps, step_lengths(t, acc, steps, step), up_b, azimuth_increments(t, gyro, up_b),
+                         held_steadily(t, up_b, f.pose_window_s, np.deg2rad(f.pose_change_deg)))
+
+    def _read_fixes(self) -> GnssFixes:
+        """The fixes of the ``gnss`` section (csv: its file or in-memory table; nmea; ubx)."""
+        g = self.config.gnss
+        if g.format == "nmea":
+            return read_nmea(g.path)
+        if g.format == "ubx":
+            return read_ubx(g.path)
+        return read_gnss_csv(g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
+                             height_column=g.height_column, accuracy_column=g.accuracy_column,
+                             speed_column=g.speed_column, course_column=g.course_column)
+
+    def _phone_fixes(self, fixes: GnssFixes) -> PhoneFixes:
+        """``fixes`` as the filter takes them (:class:`~bodyfusion.plugins.hand_pdr.fixes.PhoneFixes`),
+        in the ENU frame about :attr:`geodetic_origin` (None: the start fix's)."""
+        return PhoneFixes.of(fixes, self.context.outages.get(self.name, ()), self.config.filter, self.geodetic_origin,
+                             self.t[self.step_index], self.step_length_m, self.walking(fixes.t),
+                             self.held_steadily(fixes.t))
+
     def findings(self) -> list[Finding]:
         """``no_steps``: the PDR found no step in a recording of :data:`NO_STEP_FINDING_S` or more
-        (it never moved: the track is the GNSS fixes', or the start point)."""
+        (it never moved: the track is the GNSS fixes', or the start point); a live run's
+        departures from the batch run (:meth:`live_findings`)."""
         span = float(self.t[-1] - self.t[0])
         if self.step_index.size or span < NO_STEP_FINDING_S:
-            return []
+            return self.live_findings()
         g = self.context.gravity_mps2
         unit = (f" Its specific force has a median norm of {self._acc_norm_median:.3g} m/s^2 where gravity is {g:.3g}: "
                 "a unit or a scale is likely wrong.") if not 0.5 * g < self._acc_norm_median < 2.0 * g else ""
@@ -227,7 +248,8 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
             f"its GNSS fixes' where it has them, else its start point.{unit}",
             "the phone did not walk (on a table, in a bag), or its accelerometer is read in the wrong unit or axes, "
             "or the step detector's thresholds (step.*) miss this walker's steps.",
-            "check the accelerometer's unit and axes in the phone's data section, and step.threshold_mps2.")]
+            "check the accelerometer's unit and axes in the phone's data section, and step.threshold_mps2."),
+            *self.live_findings()]
 
     def walking(self, t: np.ndarray) -> np.ndarray:
         """(N,) True where the PDR says the phone walks at times ``t`` (s): a step detected in
@@ -244,17 +266,28 @@ class HandPdr(GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, Ab
         ``filter.pose_window_s`` (:func:`~bodyfusion.plugins.hand_pdr.pdr.held_steadily`)."""
         return self._steady[np.maximum(np.searchsorted(self.t, t, side="right") - 1, 0)]
 
-    def _event_list(self) -> list[tuple[float, int, int, int]]:
+    def _event_list(self, after: float = -np.inf, until: float = np.inf) -> list[tuple[float, int, int, int]]:
         """(time, kind, index, IMU sample at or before the time) of steps, GNSS fixes,
-        magnetometer updates and re-opened headings, in time order."""
-        ev = [(float(self.t[i]), STEP, k) for k, i in enumerate(self.step_index)]
+        magnetometer updates and re-opened headings within the IMU's span, those in (``after``,
+        ``until``] s only, in time order."""
+        t = self.t
+        lo, hi = max(after, float(t[0])), min(until, float(t[-1]))
+
+        def within(times: np.ndarray) -> range:
+            return range(*np.searchsorted(times, [lo, hi], side="right"))
+
+        step_t = t[self.step_index]
+        ev = [(float(step_t[k]), STEP, k) for k in range(*np.searchsorted(step_t, [after, until], side="right"))]
         if self._fixes is not None:
-            ev += [(float(tf), GNSS, j) for j, tf in enumerate(self._fixes.t) if self.t[0] < tf <= self.t[-1]]
+            ev += [(float(self._fixes.t[j]), GNSS, j) for j in within(self._fixes.t)]
         if self._mag is not None:
-            ev += [(float(tm), MAGNETOMETER, k) for k, tm in enumerate(self._mag.t) if self.t[0] < tm <= self.t[-1]]
+            ev += [(float(self._mag.t[k]), MAGNETOMETER, k) for k in within(self._mag.t)]
         if self.config.initial.heading_deg == "gnss_track":  # the phone held steadily again
-            again = np.flatnonzero(self._steady[1:] & ~self._steady[:-1]) + 1
-            ev += [(float(self.t[i]), STEADY, int(i)) for i in again]
+            i0, i1 = np.searchsorted(t, [after, until], side="right")
+            i0 = max(int(i0), 1)
+            i1 = max(int(i1), i0)
+            again = np.flatnonzero(self._steady[i0:i1] & ~self._steady[i0 - 1:i1 - 1]) + i0
+            ev += [(float(t[i]), STEADY, int(i)) for i in again]
         ev.sort()
         sample = np.searchsorted(self.t, [e[0] for e in ev], side="right") - 1
         return [(te, kind, k, int(i)) for (te, kind, k), i in zip(ev, sample)]
