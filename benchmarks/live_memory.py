@@ -1,10 +1,10 @@
 """Memory of a long live run that keeps a bounded history (``fusion live --keep``).
 
-The walk of ``benchmarks/soak.py`` without the phone (the hand's PDR does not run live): both
-feet with ICM-20948-class IMUs at 100 Hz, the feet's maximum-separation constraint, projection
-with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion simulate``, its
-own process). A second process replays it through :class:`~bodyfusion.live.engine.LiveRun` as
-fast as it runs (a pass every 5 s of data, a state every 0.1 s to a sink that counts them),
+The walk of ``benchmarks/soak.py``: both feet with ICM-20948-class IMUs at 100 Hz and a
+hand-held phone (IMU at 100 Hz, GNSS at 1 Hz), the three maximum-separation constraints,
+projection with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion
+simulate``, its own process); ``--no-phone``: the feet alone. A second process replays it through :class:`~bodyfusion.live.engine.LiveRun` as
+fast as it runs (a pass every 30 s of data, a state every 0.1 s to a sink that counts them),
 keeping ``--keep`` s of history (default 60); its rows come from ``fusion live``'s replay
 (:func:`~bodyfusion.live.sources.replay_rows`: each file read a chunk of lines at a time and
 merged in time order), so the source holds no recording. The
@@ -15,7 +15,7 @@ Prints the samples; last line ``peak_rss_mb=<MB> first_half_growth_mb=<MB> last_
 hours=<h> wall_s=<s>`` (growth: resident memory at the half-way sample to the last, and from the
 first sample after warm-up to the half-way one).
 
-Run: python benchmarks/live_memory.py [--hours 24] [--keep 60] [--no-truth] [--keep-dir DIR]
+Run: python benchmarks/live_memory.py [--hours 24] [--keep 60] [--no-truth] [--no-phone] [--keep-dir DIR]
 """
 
 from __future__ import annotations
@@ -34,16 +34,18 @@ import yaml
 HERE = Path(__file__).resolve().parent
 
 
-def scenario(hours: float) -> dict:
-    """The soak benchmark's scenario (``benchmarks/soak.py``) without the phone and its constraints."""
+def scenario(hours: float, phone: bool) -> dict:
+    """The soak benchmark's scenario (``benchmarks/soak.py``), without the phone and its
+    constraints unless ``phone``."""
     spec = importlib.util.spec_from_file_location("soak", HERE / "soak.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     out = module.scenario(hours)
     out["name"] = f"live_memory_{hours:g}h"
-    del out["systems"]["hand_phone"]
-    out["layout"]["systems"] = {}
-    out["layout"]["constraints"] = [c for c in out["layout"]["constraints"] if "hand_phone" not in c["between"]]
+    if not phone:
+        del out["systems"]["hand_phone"]
+        out["layout"]["systems"] = {}
+        out["layout"]["constraints"] = [c for c in out["layout"]["constraints"] if "hand_phone" not in c["between"]]
     return out
 
 
@@ -97,6 +99,7 @@ def main() -> None:
     parser.add_argument("--keep", type=float, default=60.0, help="history kept, s (fusion live --keep)")
     parser.add_argument("--keep-dir", type=Path, help="keep the simulated walk in this folder")
     parser.add_argument("--no-truth", action="store_true", help="run the layout without its truth")
+    parser.add_argument("--no-phone", action="store_true", help="the feet alone")
     parser.add_argument("--replay", type=Path, help=argparse.SUPPRESS)  # the child: replay this config
     args = parser.parse_args()
     if args.replay is not None:
@@ -106,7 +109,7 @@ def main() -> None:
     try:
         work.mkdir(parents=True, exist_ok=True)
         scenario_path = work / "scenario.yaml"
-        scenario_path.write_text(yaml.safe_dump(scenario(args.hours)))
+        scenario_path.write_text(yaml.safe_dump(scenario(args.hours, not args.no_phone)))
         walk = work / "walk"
         subprocess.run(["fusion", "simulate", str(scenario_path), "--out", str(walk), "--overwrite"], check=True,
                        stdout=subprocess.DEVNULL)

@@ -30,6 +30,7 @@ next replan has run. Each system must offer :class:`~bodyfusion.core.capabilitie
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import reprlib
 import time
@@ -45,6 +46,7 @@ from bodyfusion.core.capabilities import Streaming
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.registry import get_registry
+from bodyfusion.evaluation.streamed_scores import StreamedScores
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.batch import Fusion, finish_fusion, prepare_fusion
 
@@ -231,6 +233,9 @@ class LiveRun:
         self.started: tuple[float, float] | None = None
         """When the run started: the data's time (s) and the wall time (s, :func:`time.perf_counter`)
         at the end of its first pass (None: not yet, or only at the close)."""
+        self.scorer: StreamedScores | None = None
+        """With ``keep_s`` and a truth: the scores of every state emitted (the finished result's
+        ``whole_run``; its ``scores`` cover the part kept)."""
         self.not_started: NotReady | None = None
         """Why the run could not start on the data so far (it tries again every :data:`RETRY_S` of data)."""
 
@@ -278,6 +283,10 @@ class LiveRun:
                     self.not_started = err
                     self._start_after_s += RETRY_S
                     return False
+                if self.keep_s is not None and self.fusion.truths:  # the result will cover the last part only
+                    truth = self.loaded.layout.truth
+                    self.scorer = StreamedScores(self.fusion.truths, truth.alignment, truth.alignment_distance_m)
+                    self.output.sinks = [*self.output.sinks, self.scorer]
                 self._advance(newest)
                 self.started = (newest, time.perf_counter())
                 return True
@@ -331,6 +340,10 @@ class LiveRun:
                 self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
                                              lookahead_s=self.lookahead_s, complete=True)
             self._read_tables(lambda s: s.close_stream())
-            return finish_fusion(self.fusion)
+            result = finish_fusion(self.fusion)
+            if self.scorer is None:
+                return result
+            self.output.close()  # the last states scored
+            return dataclasses.replace(result, whole_run=self.scorer.scores())
         finally:
             self.output.close()

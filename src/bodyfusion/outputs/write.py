@@ -85,6 +85,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
             p75 = alone["horizontal_error_m"]["p75"]
             block["sensor_alone"] = {**alone, "fused_over_alone_p75": block["horizontal_error_m"]["p75"] / p75
                                      if p75 > 0 else None}
+        if name in result.whole_run:
+            block["whole_run"] = result.whole_run[name]
         block["diagnostics"] = system.diagnostics()
         block["health"] = health[name]
         systems[name] = block

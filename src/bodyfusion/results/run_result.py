@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # pandas loads when a table is asked for, xarray when a datas
 
 
 _MAPPINGS = ("systems", "trajectories", "truths", "scores", "heading_rotations_rad", "timings_s", "aiding", "nees",
-             "sensor_alone")
+             "sensor_alone", "whole_run")
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,10 @@ class RunResult:
     sensor_alone: Mapping[str, dict] = field(default_factory=dict)
     """Per system with an absolute sensor (a phone's GNSS) and geo-referenced truth: the errors
     of that sensor used alone (:func:`bodyfusion.evaluation.metrics.sensor_alone_score`)."""
+    whole_run: Mapping[str, dict] = field(default_factory=dict)
+    """A live run that kept a bounded history: per system with truth, the errors of every state it
+    emitted (:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`), where ``scores``
+    cover the part kept."""
     findings: tuple[Finding, ...] = ()
     """Health findings of the run (:class:`~bodyfusion.base.findings.Finding`): the systems', the
     fuser's and the evaluation's, in that order."""

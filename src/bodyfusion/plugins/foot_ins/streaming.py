@@ -140,8 +140,8 @@ class StreamingFootIns(Streaming):
                 f"cover t = {t[0]:.1f}–{t[-1]:.1f} s of the {t[-1] - self._t_first:.0f} s run; the states sent to "
                 "the sinks cover all of it.",
                 "fusion live --keep bounds the history a run holds (and its memory).",
-                "score the whole track from a states sink (--sink states.parquet), or run fusion run on the "
-                "recording for whole-run figures."))
+                "read the whole run's errors in metrics.json (systems.NAME.whole_run: every state emitted, scored "
+                "against the truth), or run fusion run on the recording for whole-run figures."))
         if self.revised_inputs:
             out.append(Finding(
                 "live_revisions", "info", self.name, float(t[0]), float(t[-1]),

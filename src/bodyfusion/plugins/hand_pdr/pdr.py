@@ -7,6 +7,7 @@ filter then walks the detected steps in time order.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,14 +29,22 @@ class PdrInputs:
     steady: np.ndarray
 
 
-def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
-    """Zero-phase 2nd-order Butterworth low-pass along axis 0."""
+@functools.lru_cache(maxsize=32)
+def _butterworth(cutoff: float) -> np.ndarray:
+    """Second-order sections of the 2nd-order Butterworth low-pass at ``cutoff`` (a fraction of the
+    Nyquist rate): designed once for each (a live run filters every pass)."""
     # imported here: scipy.signal (which imports scipy.stats) is slow to import, and a run
     # without a phone loads this plugin but never filters
-    from scipy.signal import butter, sosfiltfilt
+    from scipy.signal import butter
 
-    sos = butter(2, min(cutoff_hz / (0.5 * rate_hz), 0.99), output="sos")
-    return sosfiltfilt(sos, x, axis=0)
+    return butter(2, cutoff, output="sos")
+
+
+def lowpass(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
+    """Zero-phase 2nd-order Butterworth low-pass along axis 0."""
+    from scipy.signal import sosfiltfilt
+
+    return sosfiltfilt(_butterworth(min(cutoff_hz / (0.5 * rate_hz), 0.99)), x, axis=0)
 
 
 def up_in_body(t: np.ndarray, acc_b: np.ndarray, cutoff_hz: float = 0.3) -> np.ndarray:
@@ -96,8 +105,13 @@ def detect_steps(t: np.ndarray, acc_b: np.ndarray, cfg: StepConfig, gravity: flo
     distance = max(1, int(round(cfg.min_interval_s * rate)))
     peaks, _ = find_peaks(a, height=cfg.threshold_mps2, distance=distance)
     period = stride_period(a, rate) * rate  # samples per step; NaN where nothing repeats
-    fills = []
+    fills: list[int] = []
+    if not np.isfinite(period).any():
+        return peaks
+    shortest = float(np.nanmin(period))  # no gap shorter than MISSED_STEPS of it can hold a missed step
     for lo, hi in zip(np.concatenate([[0], peaks]), np.concatenate([peaks, [a.size]])):
+        if hi - lo <= MISSED_STEPS * shortest:
+            continue
         p = float(np.nanmedian(period[lo:hi])) if np.isfinite(period[lo:hi]).any() else np.nan
         if not p > 0 or hi - lo <= MISSED_STEPS * p:
             continue

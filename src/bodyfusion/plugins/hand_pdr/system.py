@@ -71,13 +71,13 @@ import numpy as np
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.findings import Finding
-from bodyfusion.base.types import InputReport, Trajectory
+from bodyfusion.base.types import InputReport
 from bodyfusion.core.heading import wrap_angle
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.core.capabilities import AbsoluteFixes, HeadingAlignment, PositionResets, TransitionTracking
-from bodyfusion.core.system import CovarianceHistory, LayoutContext, SensorSystem
-from bodyfusion.nav.filter_health import NisRecord, innovation_columns
-from bodyfusion.plugins.hand_pdr.results import ERROR_STATES, STORED, hand_states
+from bodyfusion.core.system import LayoutContext, SensorSystem
+from bodyfusion.nav.filter_health import NisRecord
+from bodyfusion.plugins.hand_pdr.results import PdrResults
 from bodyfusion.io.gnss import GnssFixes, read_gnss_csv, read_nmea, read_ubx
 from bodyfusion.io.imu import read_imu
 from bodyfusion.io.phone_log import read_getsensordata
@@ -111,7 +111,7 @@ N_ERR = 9
 """Error states without the magnetometer; with it, the offset δo is state ``O`` (the tenth)."""
 
 
-class HandPdr(StreamingHandPdr, GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes, PositionResets):
+class HandPdr(StreamingHandPdr, PdrResults, GnssAiding, SensorSystem, HeadingAlignment, TransitionTracking, AbsoluteFixes, PositionResets):
     """PDR from a phone's IMU with a 9-state error Kalman filter corrected by GNSS (10 states
     with the magnetometer's holding offset), or a bank of them while the heading is unknown.
 
@@ -556,76 +556,3 @@ class HandPdr(StreamingHandPdr, GnssAiding, SensorSystem, HeadingAlignment, Tran
 
     def sample_times(self) -> np.ndarray:
         return self.t
-
-    # --- results ----------------------------------------------------------------------
-    def _history(self) -> tuple[np.ndarray, np.ndarray]:
-        """The records (t, nominal state) (K, 1 + n) and covariances (K, n_err, n_err); of several
-        records at one time (an update right after a step), the last."""
-        h = self._hist_x.view()
-        last = np.concatenate([h[1:, 0] > h[:-1, 0], [True]])
-        return h[last], self._hist_P.view()[last]
-
-    def trajectory(self) -> Trajectory:
-        h, P = self._history()
-        var = np.diagonal(P, axis1=1, axis2=2)[:, :3]
-        return Trajectory(h[:, 0], h[:, 1:4], np.sqrt(np.maximum(var, 0.0)), P[:, E, N])
-
-    def states(self) -> dict[str, np.ndarray]:
-        """At every record (each step, GNSS or magnetometer update, the fuser's corrections; the
-        mixture's mean while the heading bank is open): :func:`~bodyfusion.plugins.hand_pdr.results.hand_states`."""
-        return hand_states(self._history()[0])
-
-    def covariance_history(self) -> CovarianceHistory:
-        """The whole error-state covariance (:data:`~bodyfusion.plugins.hand_pdr.results.ERROR_STATES`) at every record."""
-        h, P = self._history()
-        return CovarianceHistory(h[:, 0], ERROR_STATES[:self.n_err], P.copy(), STORED)
-
-    def events(self) -> dict[str, np.ndarray]:
-        """The detected steps: their time (s) and modelled length (m, before the step scale)."""
-        t = self.t[self.step_index]
-        return {"event": np.full(t.size, "step"), "t": t, "t_end": t, "length_m": self.step_length_m}
-
-    def innovations(self) -> dict[str, np.ndarray]:
-        """GNSS position (3 dof), GNSS course and magnetometer (1 dof) updates, recorded while the
-        heading bank is one filter (see :meth:`health`)."""
-        return innovation_columns({kind: rec.columns() for kind, rec in self.nis_records.items()})
-
-    @property
-    def samples(self) -> int:
-        return len(self.t)
-
-    @property
-    def input_report(self) -> InputReport:
-        return self._report
-
-    def diagnostics(self) -> dict:
-        """Counts for metrics.json. ``start_fix_s``: the fix the position started from.
-        ``gnss``: fixes accepted, rejected by the gate, masked by an outage, held (a repeat of
-        the previous position), too fast, before the start fix; position resets after
-        rejections in a row; course updates accepted, rejected, skipped while standing, while
-        the phone was handled, for the fix's accuracy. ``heading``: ``given`` or ``gnss_track``
-        with the bank's size, the hypotheses alive at the end, the times it resolved
-        (``resolutions_s``; ``resolved_s`` the last, None if open at the end), how often
-        handling the phone re-opened it, and the fixes that weighed the hypotheses or did
-        not (the phone standing or handled). ``magnetometer``: its counts and offset (deg)."""
-        x = self.x
-        heading: dict = {"initial": "given" if self.config.initial.heading_deg != "gnss_track" else "gnss_track"}
-        if heading["initial"] == "gnss_track":
-            heading.update(hypotheses=self.config.initial.heading_hypotheses, alive=len(self._bank),
-                           resolved_s=self.heading_resolved_s, resolutions_s=list(self.heading_resolutions),
-                           **self.heading_counts)
-        return {"steps": len(self.step_index),
-                "mean_step_length_m": float(x[7] * self.step_length_m.mean()) if len(self.step_length_m) else None,
-                "step_scale": float(x[7]),
-                "start_fix_s": self.start_fix_s,
-                "gnss": dict(self.gnss_counts),
-                "heading": heading,
-                **({"magnetometer": {**self.mag_counts, "offset_deg": float(np.rad2deg(wrap_angle(x[8])))}}
-                   if self._mag is not None else {})}
-
-    def health(self) -> dict:
-        """As :meth:`SensorSystem.health`, plus ``nis``: ``gnss_position`` (3 dof: east, north, up),
-        ``gnss_course`` (1 dof) and, with the magnetometer, ``magnetometer`` (1 dof), each counted
-        before the gate while the heading bank is one filter (an open bank's moments are a
-        mixture's, not a Gaussian's); the update that follows a position reset is not counted."""
-        return {**super().health(), "nis": {kind: rec.tally().to_dict() for kind, rec in self.nis_records.items()}}

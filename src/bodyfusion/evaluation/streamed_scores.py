@@ -1,0 +1,126 @@
+"""Scores of the states a live run emits, made as they are emitted.
+
+A live run that keeps a bounded history (``fusion live --keep``) finishes with the last part of
+each track only, so its scores (:func:`~bodyfusion.evaluation.metrics.score_systems`) cover that
+part. :class:`StreamedScores` is a sink beside the others
+(:class:`~bodyfusion.core.epoch_state.EpochSink`) that scores every state as it passes, by the
+batch scoring's rule applied to the states' track: the errors at the truth epochs, the estimate
+interpolated linearly to them between two consecutive states (errors at truth epochs outside the
+states' span are not made), after the evaluation alignment (``none``: identity; ``first_3m``: the
+planar fit of :func:`~bodyfusion.evaluation.metrics.fit_first_distance_alignment`, on the states
+of the alignment's first metres). It holds two float32 errors per truth epoch scored and the
+states of the first metres, nothing of the track.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from bodyfusion.base.records import GrowingArray
+from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.core.epoch_state import EpochState
+from bodyfusion.evaluation.metrics import PlanarTransform, error_stats, fit_first_distance_alignment
+
+FIT_WAIT_STATES = 6000
+"""States (10 min at the default 0.1 s) the alignment waits for its distance at most: then it is
+fitted on those, as the batch fit takes a whole track that never travels that far."""
+
+
+class _Track:
+    """One system's scoring: its truth, the cursor of the next truth epoch, the last state seen
+    and the errors so far."""
+
+    def __init__(self, truth: TruthTrack) -> None:
+        self.t, self.pos = np.asarray(truth.t, dtype=float), np.asarray(truth.pos_n, dtype=float)
+        self.next = 0
+        self.last: tuple[float, np.ndarray] | None = None
+        self.errors = GrowingArray((2,), np.float32)
+        self.span = [math.inf, -math.inf]
+        self.travelled_m = 0.0
+
+    def take(self, t1: float, p1: np.ndarray, transform: PlanarTransform) -> None:
+        """The state (``t1`` s, ``p1`` ENU m): errors at the truth epochs since the last state."""
+        if self.last is None:
+            self.next = int(np.searchsorted(self.t, t1, side="left"))  # epochs before the first state: unscored
+            self.last = (t1, p1)
+            return
+        t0, p0 = self.last
+        if not t1 > t0:
+            return
+        stop = int(np.searchsorted(self.t, t1, side="right"))
+        if stop > self.next:
+            tk = self.t[self.next:stop]
+            est = p0 + np.outer((tk - t0) / (t1 - t0), p1 - p0)
+            d = transform.apply(est) - self.pos[self.next:stop]
+            self.errors.extend(np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])]).astype(np.float32))
+            self.span = [min(self.span[0], float(tk[0])), max(self.span[1], float(tk[-1]))]
+            self.next = stop
+        self.last = (t1, p1)
+
+
+class StreamedScores:
+    """The sink (module docstring): ``truths`` by system, the layout's truth ``alignment``
+    (``none`` or ``first_3m``) and ``alignment_distance_m``. :meth:`scores` gives the figures."""
+
+    def __init__(self, truths: Mapping[str, TruthTrack], alignment: str, alignment_distance_m: float) -> None:
+        self.tracks = {name: _Track(truth) for name, truth in truths.items()}
+        self.distance_m = alignment_distance_m
+        self.transform: PlanarTransform | None = PlanarTransform.identity() if alignment == "none" else None
+        self._first: list[EpochState] = []
+        """The states before the alignment is fitted."""
+
+    def write(self, state: EpochState) -> None:
+        if self.transform is None:
+            self._first.append(state)
+            for name, track in self.tracks.items():
+                s = state.systems.get(name)
+                if s is not None and len(self._first) > 1:
+                    before = self._first[-2].systems[name].position_n
+                    track.travelled_m += float(np.hypot(*(s.position_n - before)[:2]))
+            if len(self._first) >= FIT_WAIT_STATES or all(t.travelled_m >= self.distance_m
+                                                          for t in self.tracks.values()):
+                self._fit()
+            return
+        for name, track in self.tracks.items():
+            s = state.systems.get(name)
+            if s is not None:
+                track.take(s.t, np.asarray(s.position_n, dtype=float), self.transform)
+
+    def _fit(self) -> None:
+        """Fit the alignment on the states so far and score them."""
+        estimates = {}
+        for name in self.tracks:
+            rows = [(e.systems[name].t, *e.systems[name].position_n) for e in self._first if name in e.systems]
+            a = np.unique(np.asarray(rows, dtype=float).reshape(-1, 4), axis=0)
+            estimates[name] = Trajectory(a[:, 0], a[:, 1:], np.zeros_like(a[:, 1:]))
+        truths = {name: TruthTrack(track.t, track.pos) for name, track in self.tracks.items()}
+        usable = {n: e for n, e in estimates.items() if len(e.t) > 1}
+        self.transform = fit_first_distance_alignment(usable, truths, self.distance_m) if usable else \
+            PlanarTransform.identity()
+        first, self._first = self._first, []
+        for state in first:
+            self.write(state)
+
+    def close(self) -> None:
+        """A run that ended before its systems travelled the alignment's distance is fitted on what
+        it has."""
+        if self.transform is None and self._first:
+            self._fit()
+
+    def scores(self) -> dict[str, dict]:
+        """Per system: ``horizontal_error_m`` and, where the truth has heights, ``vertical_error_m``
+        (:func:`~bodyfusion.evaluation.metrics.error_stats`), ``scored_epochs``, ``t_start`` and
+        ``t_end`` (s) of the truth epochs scored, and ``epochs`` saying how they were made."""
+        self.close()
+        out = {}
+        for name, track in self.tracks.items():
+            e = track.errors.view().astype(float)
+            vertical = {"vertical_error_m": error_stats(e[:, 1])} if np.isfinite(e[:, 1]).any() else {}
+            out[name] = {"horizontal_error_m": error_stats(e[:, 0]), **vertical,
+                         "scored_epochs": int(np.count_nonzero(np.isfinite(e[:, 0]))),
+                         "t_start": track.span[0] if len(e) else None, "t_end": track.span[1] if len(e) else None,
+                         "epochs": "truth epochs; the emitted states interpolated linearly to them"}
+        return out

@@ -1,0 +1,67 @@
+"""The states a live run emits, scored as they pass: the whole run's errors of a run that keeps a
+bounded history, by the batch scoring's rule on the states' track."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bodyfusion.base.types import TruthTrack
+from bodyfusion.core.epoch_state import EpochState, SystemState
+from bodyfusion.core.layout import load_layout
+from bodyfusion.evaluation.streamed_scores import StreamedScores
+from bodyfusion.live.engine import LiveRun
+from bodyfusion.live.sources import replay, replay_rows
+from bodyfusion.outputs.write import metrics_document
+from bodyfusion.runner.batch import run_layout
+from tests.paths import CONFIGS
+
+
+def _walk(rotation_rad: float, offset_m: np.ndarray, scorer: StreamedScores) -> None:
+    """A straight 1 m/s walk north-east, its states every 0.1 s turned by ``rotation_rad`` and
+    moved by ``offset_m`` from the truth."""
+    c, s = np.cos(rotation_rad), np.sin(rotation_rad)
+    for t in np.arange(0.0, 20.0, 0.1):
+        true = np.array([0.6 * t, 0.8 * t, 0.0])
+        est = np.array([c * true[0] - s * true[1], s * true[0] + c * true[1], 0.0]) + offset_m
+        scorer.write(EpochState(float(t), {"foot": SystemState(float(t), est, np.zeros(3))}, {}, 0.0))
+
+
+def _truth() -> dict[str, TruthTrack]:
+    t = np.arange(0.0, 20.0, 0.01)
+    return {"foot": TruthTrack(t, np.column_stack([0.6 * t, 0.8 * t, np.zeros_like(t)]))}
+
+
+def test_the_first_metres_alignment_takes_out_a_turned_and_moved_frame():
+    scorer = StreamedScores(_truth(), "first_3m", 3.0)
+    _walk(np.deg2rad(30.0), np.array([2.0, -1.0, 0.5]), scorer)
+    score = scorer.scores()["foot"]
+    assert score["horizontal_error_m"]["max"] < 1e-5  # the states' track is straight: interpolation is exact
+    assert score["scored_epochs"] == 1991  # the truth epochs from the first state to the last: 0–19.9 s at 100 Hz
+
+
+def test_without_alignment_the_errors_are_the_frames_offset():
+    scorer = StreamedScores(_truth(), "none", 3.0)
+    _walk(0.0, np.array([3.0, 4.0, 1.0]), scorer)
+    score = scorer.scores()["foot"]
+    assert score["horizontal_error_m"]["mean"] == pytest.approx(5.0, abs=1e-5)
+    assert score["vertical_error_m"]["mean"] == pytest.approx(1.0, abs=1e-5)
+
+
+def test_a_bounded_live_run_scores_its_whole_track_as_the_batch_run_does():
+    """The Vicon walk kept 20 s at a time: its result scores the last part; ``whole_run`` scores
+    every state emitted, within 1 % of the batch run's figures on the whole walk."""
+    loaded = load_layout(CONFIGS / "dual_foot_vicon.yaml")
+    run = LiveRun(loaded, keep_s=20.0)
+    replay(run, replay_rows(run))
+    result = run.close()
+    batch = run_layout(load_layout(CONFIGS / "dual_foot_vicon.yaml"))
+    doc = json.loads(json.dumps(metrics_document(result, "vicon", 0.0)))
+    for name, score in batch.scores.items():
+        whole = doc["systems"][name]["whole_run"]
+        assert whole["horizontal_error_m"]["rmse"] == pytest.approx(score.metrics["horizontal_error_m"]["rmse"],
+                                                                    rel=0.01)
+        assert whole["scored_epochs"] == pytest.approx(score.metrics["scored_epochs"], rel=0.01)
+        assert result.scores[name].metrics["scored_epochs"] < 0.6 * whole["scored_epochs"]  # the kept part's
