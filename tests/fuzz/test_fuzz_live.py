@@ -1,21 +1,28 @@
-"""Fuzzing the live engine: the Vicon walk's rows pushed into a :class:`~bodyfusion.live.engine.LiveRun`
-with hostile edits — a cell set to a bad value, a column missing, a row for a system of no such
-name, a row again (late), a block of rows reversed, a time jump — into a run keeping all its
-history or a bounded part of it (``keep_s``). A run either refuses the row
-with one :class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks;
-never another exception.
+"""Fuzzing the live engine: the Vicon walk's rows, and the fuzzing recording's feet and phone (its
+IMU and GNSS streams), pushed into a :class:`~bodyfusion.live.engine.LiveRun` with hostile edits —
+a cell set to a bad value, a column missing, a row for a system of no such name, a row again
+(late), a block of rows reversed, a time jump — into a run keeping all its history or a bounded
+part of it (``keep_s``). A run either refuses the row with one
+:class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks; never
+another exception.
 
-Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35, as the file fuzzing); derandomised; each
-case's outcome goes to the long mode's table as the file fuzzing's do (target ``live rows``)."""
+Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35, as the file fuzzing; a third of them for the
+phone); derandomised; each case's outcome goes to the long mode's table as the file fuzzing's do
+(targets ``live rows``, ``live phone rows``)."""
 
 from __future__ import annotations
 
 import math
 import os
+import shutil
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -23,6 +30,7 @@ from bodyfusion.base.errors import FusionError
 from bodyfusion.core.layout import load_layout
 from bodyfusion.live.engine import LiveRun
 from bodyfusion.live.sources import replay_rows
+from tests.fuzz.recording import write_recording
 from tests.fuzz.test_fuzz_inputs import CASE_OUTCOME, recorded
 from tests.paths import CONFIGS
 
@@ -58,7 +66,7 @@ class RowEdit:
         if self.how == "reverse":
             return [*rows[:k], *rows[k:k + 20][::-1], *rows[k + 20:]]
         shift = float(self.value) if isinstance(self.value, (int, float)) and math.isfinite(self.value) else 3600.0
-        time_column = "time_index" if "time_index" in row else column
+        time_column = next((c for c in ("time_index", "t") if c in row), column)
         return [*rows[:k], *((t2, n2, {**r2, time_column: r2[time_column] + shift} if n2 == name else r2)
                              for t2, n2, r2 in rows[k:])]
 
@@ -74,16 +82,28 @@ def vicon_rows() -> list[tuple[float, str, dict]]:
     return [(t, name, dict(row)) for t, name, row in replay_rows(run)]
 
 
-@pytest.mark.slow
-@settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-@given(edits=row_edits, keep_s=st.sampled_from([None, 15.0, 40.0]))
-def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, edits, keep_s):
-    rows = vicon_rows
+@pytest.fixture(scope="module")
+def phone_walk() -> Iterator[tuple[Path, list[tuple[float, str, dict]]]]:
+    """The fuzzing recording's feet and phone (IMU and GNSS CSVs, no magnetometer, no UWB) as a
+    live layout, and its rows."""
+    folder = Path(tempfile.mkdtemp(prefix="fuzz_live_phone_"))
+    layout = yaml.safe_load(write_recording(folder)["csv"].read_text())
+    del layout["systems"]["feet_tags"]
+    layout["systems"]["hand_phone"].pop("magnetometer", None)
+    path = folder / "layout_live.yaml"
+    path.write_text(yaml.safe_dump(layout, sort_keys=False))
+    run = LiveRun(load_layout(path))
+    yield path, [(t, name, dict(row)) for t, name, row in replay_rows(run)]
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def _push_all(config: Path, rows: list[tuple[float, str, dict]], edits: list[RowEdit], target: str,
+              **live: float | None) -> None:
+    """Push the edited ``rows`` into a live run of ``config``: refused in one error, or finite tracks."""
     for edit in edits:
         rows = edit(rows)
-    with recorded("live rows", edits):
-        run = LiveRun(load_layout(VICON), lookahead_s=2.0, keep_s=keep_s)
+    with recorded(target, edits):
+        run = LiveRun(load_layout(config), lookahead_s=2.0, **live)
         try:
             for _, name, row in rows:
                 run.push(name, row)
@@ -94,3 +114,21 @@ def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, ed
             return
         for name, track in result.trajectories.items():
             assert np.isfinite(track.pos_n).all() and np.isfinite(track.pos_sd).all(), name
+
+
+@pytest.mark.slow
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(edits=row_edits, keep_s=st.sampled_from([None, 15.0, 40.0]))
+def test_hostile_live_rows_are_refused_in_one_error_or_run_finite(vicon_rows, edits, keep_s):
+    _push_all(VICON, vicon_rows, edits, "live rows", keep_s=keep_s)
+
+
+@pytest.mark.slow
+@settings(max_examples=max(EXAMPLES // 3, 5), deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(edits=row_edits)
+def test_hostile_live_phone_rows_are_refused_in_one_error_or_run_finite(phone_walk, edits):
+    """The 12 s walk starts after 3 s of data: the phone's GNSS rows ride beside its IMU's."""
+    config, rows = phone_walk
+    _push_all(config, rows, edits, "live phone rows", warmup_s=3.0)
