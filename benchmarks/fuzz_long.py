@@ -4,16 +4,16 @@ Runs ``tests/fuzz/test_fuzz_inputs.py`` and ``tests/fuzz/test_fuzz_live.py`` (ev
 file and the layout corrupted by Hypothesis's edits: truncations, garbage lines, non-finite or
 absurd numbers in a field or a column, scaled and swapped columns, duplicated, deleted or
 reversed lines, re-encodings, NMEA checksums redone, layout keys set wrong, deleted or added;
-each case through ``fusion validate`` and ``fusion run``; the live engine's rows edited likewise:
-bad cells, missing columns, unknown systems, late and reversed rows, time jumps) with
-``--examples`` per target (8 targets; default 300: 2,400 cases), derandomised (the same cases
-every time), and every case's outcome recorded: ``refused`` (exit 2, one ``error:`` line),
-``ran`` (exit 0, finite trajectories, strict JSON), ``silent`` (a score moved past the suite's
-margin with no warning: a silent wrong result) or ``defect`` (anything else: a traceback, a hang
-over 60 s, a non-finite output, a second error line).
+each case through ``fusion validate`` and ``fusion run``; the live engine's rows edited
+likewise: bad cells, missing columns, unknown systems, late and reversed rows, time jumps) with
+``--examples`` per target (9 targets, the phone's live rows a third as many; default 300: 2,500
+cases), derandomised (the same cases every time), and every case's outcome recorded: ``refused``
+(exit 2, one ``error:`` line), ``ran`` (exit 0, finite trajectories, strict JSON), ``silent`` (a
+score moved past the suite's margin with no warning: a silent wrong result) or ``defect``
+(anything else: a traceback, a hang over 60 s, a non-finite output, a second error line).
 
-Writes ``--table`` (CSV: target, classes, outcome, detail, case, validate) and prints the summary per
-target and per edit class; last line ``cases=… refused=… ran=… silent=… defects=…``.
+Writes ``--table`` (CSV: target, classes, outcome, detail, case, validate) and prints the
+summary per target and per edit class; last line ``cases=… refused=… ran=… silent=… defects=…``.
 
 Run: python benchmarks/fuzz_long.py [--examples 300] [--table fuzz_cases.csv]
 """

@@ -1,13 +1,13 @@
 """Memory of a long live run that keeps a bounded history (``fusion live --keep``).
 
 The walk of ``benchmarks/soak.py``: both feet with ICM-20948-class IMUs at 100 Hz and a
-hand-held phone (IMU at 100 Hz, GNSS at 1 Hz), the three maximum-separation constraints,
-projection with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion
-simulate``, its own process); ``--no-phone``: the feet alone. A second process replays it through :class:`~bodyfusion.live.engine.LiveRun` as
-fast as it runs (a pass every 30 s of data, a state every 0.1 s to a sink that counts them),
-keeping ``--keep`` s of history (default 60); its rows come from ``fusion live``'s replay
-(:func:`~bodyfusion.live.sources.replay_rows`: each file read a chunk of lines at a time and
-merged in time order), so the source holds no recording. The
+hand-held phone (IMU at 100 Hz, GNSS at 1 Hz), the three maximum-separation constraints, projection
+with cross-covariances, for ``--hours`` (default 24), simulated once (``fusion simulate``, its
+own process); ``--no-phone``: the feet alone. A second process replays it through
+:class:`~bodyfusion.live.engine.LiveRun` as fast as it runs (a pass every 30 s of data, a state
+every 0.1 s to a sink that counts them), keeping ``--keep`` s of history (default 60); its rows
+come from ``fusion live``'s replay (:func:`~bodyfusion.live.sources.replay_rows`: each file read
+a chunk of lines at a time and merged in time order), so the source holds no recording. The
 resident memory (``VmRSS``) is sampled every half hour of data. With ``--no-truth`` the layout's
 truth is left out, as in the field (a day's truth track alone holds several hundred MB).
 
