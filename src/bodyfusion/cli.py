@@ -140,7 +140,7 @@ def run(config: Annotated[Path, typer.Argument(help="Layout YAML file.")],
 @app.command()
 def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
          source: Annotated[str, typer.Option(
-             "--source", help="replay (the layout's recordings), tcp://HOST:PORT or udp://HOST:PORT (JSON lines).")
+             "--source", help="replay (the layout's recordings), tcp://HOST:PORT or udp://HOST:PORT (JSON or CSV lines).")
          ] = "replay",
          speed: Annotated[str, typer.Option("--speed", help="Replay pace: a factor of real time, or max.")] = "1",
          sink: Annotated[list[str] | None, typer.Option(

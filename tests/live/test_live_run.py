@@ -69,9 +69,24 @@ def test_a_replay_as_fast_as_it_runs_passes_every_30_s_and_is_the_batch_run(batc
     assert REPLAN_BATCH_S == 30.0 and len(run.latency_s) == 4  # the start, then every 30 s of the 120 s
 
 
-def test_a_line_stream_over_tcp_gives_the_same_run(batch):
+def _csv_lines(rows):
+    """The rows as CSV lines, each stream's columns in reverse order after its header line."""
+    out, seen = [], set()
+    for _, name, row in rows:
+        columns = sorted(row, reverse=True)
+        if name not in seen:
+            seen.add(name)
+            out.append(",".join([f"#{name}", *columns]))
+        out.append(",".join([name, *(repr(row[c]) for c in columns)]))
+    return [line + "\n" for line in out]
+
+
+@pytest.mark.parametrize("form", ["json", "csv"])
+def test_a_line_stream_over_tcp_gives_the_same_run(batch, form):
     run = LiveRun(load_layout(VICON), [])
     rows = list(replay_rows(run))
+    lines = ([json.dumps({"system": name, **row}) + "\n" for _, name, row in rows] if form == "json"
+             else _csv_lines(rows))
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
@@ -84,8 +99,7 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
             except OSError:
                 threading.Event().wait(0.05)
         with client, client.makefile("w") as f:
-            for _, name, row in rows:
-                f.write(json.dumps({"system": name, **row}) + "\n")
+            f.writelines(lines)
 
     sender = threading.Thread(target=send)
     sender.start()
@@ -100,7 +114,11 @@ def test_a_line_stream_over_tcp_gives_the_same_run(batch):
     (b'{"system": "left_foot", "acc_x": NaN}\n', "line 3: left_foot needs finite numbers"),
     (b'{"system": "head"}\n', "line 3: system 'head' is no stream of this layout"),
     (b'{"system": "left_foot", "acc_x": 1' + b"0" * 400 + b'}\n', "line 3: left_foot needs finite numbers"),
-], ids=["bytes", "array", "nan", "system", "beyond_float"])
+    (b"left_foot,1,2,3\n", "line 3: left_foot takes 8 values"),
+    (b"left_foot,1,2,3,4,5,6,nan,7\n", "line 3: left_foot needs finite numbers"),
+    (b"#left_foot,acc_x,acc_y\n", "line 3: the header of left_foot lacks column"),
+    (b"head,1,2\n", "line 3: system 'head' is no stream"),
+], ids=["bytes", "array", "nan", "system", "beyond_float", "csv_short", "csv_nan", "csv_header", "csv_system"])
 def test_a_bad_line_on_the_stream_is_refused_naming_it(bad, said):
     run = LiveRun(load_layout(VICON), [])
     rows = list(replay_rows(run))[:2]

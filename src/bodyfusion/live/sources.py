@@ -3,14 +3,24 @@
 * Replay (:func:`replay_rows`, :func:`replay`): every system's recording read as its data
   section reads it (the same columns and units), merged in time order and pushed at the
   recording's pace × ``speed`` (None: as fast as the run takes them).
-* Line stream (:func:`line_rows`): JSON lines over TCP (the run listens; one client) or UDP
-  (one or more lines per datagram). Each line is one row: ``{"system": NAME, COLUMN: VALUE,
-  ...}``, the columns those the system's data section names (a foot INS: its ``time_column``,
-  ``acc_columns``, ``gyro_columns`` and ``stance_column``, in the section's units); a row of an
-  aiding section adds ``"section": SECTION`` (a phone's fix: ``"section": "gnss"`` with the
-  ``gnss`` section's ``time_column``, ``lat_column``... ). A line that
-  is not such an object is refused with its number. The stream ends when the client closes
-  (TCP) or an ``{"end": true}`` line arrives.
+* Line stream (:func:`line_rows`): lines over TCP (the run listens; one client) or UDP (one or
+  more lines per datagram), each one row, as JSON or CSV (:class:`LineReader`; the two may mix):
+
+  - JSON: ``{"system": NAME, COLUMN: VALUE, ...}``, the columns those the system's data section
+    names (a foot INS: its ``time_column``, ``acc_columns``, ``gyro_columns`` and
+    ``stance_column``, in the section's units); a row of an aiding section adds ``"section":
+    SECTION`` (a phone's fix: ``"section": "gnss"`` with the ``gnss`` section's ``time_column``,
+    ``lat_column``...).
+  - CSV: ``STREAM,VALUE,...``, the stream a system's name (its data section) or
+    ``NAME.SECTION`` (``hand.gnss``), the values in the order of a header line ``#STREAM,COLUMN,...``
+    sent before (any order, every column the section reads), or without one in the order of the
+    section's columns (:meth:`~bodyfusion.base.sections.TableSection.required_columns`: an IMU
+    section's ``acc_columns``, ``gyro_columns``, ``stance_column``, ``time_column``; a GNSS
+    section's ``time_column``, ``lat_column``, ``lon_column``, ``height_column``,
+    ``accuracy_column``, ``speed_column``, ``course_column``; those set).
+
+  A line that is neither is refused with its number. The stream ends when the client closes
+  (TCP) or an end line arrives (``{"end": true}`` or ``end``).
 """
 
 from __future__ import annotations
@@ -76,22 +86,80 @@ def replay(run: LiveRun, rows: Iterator[Row], speed: float | None = None,
             status(run, t)
 
 
-def _parse(raw: bytes, number: int, where: str) -> dict | None:
-    """Line ``number`` of the stream ``where`` as a JSON object (None when blank); anything else is
-    refused naming the line."""
-    try:
-        line = raw.decode("utf-8").strip()
-    except UnicodeDecodeError:
-        raise InputError(f"{where}: line {number}", "not UTF-8 text") from None
-    if not line:
-        return None
-    try:
-        obj = json.loads(line)
-    except json.JSONDecodeError as err:
-        raise InputError(f"{where}: line {number}", f"not JSON ({err.msg})") from None
-    if not isinstance(obj, dict):
-        raise InputError(f"{where}: line {number}", "not a JSON object")
-    return obj
+END = ("\0end", {})
+"""What :meth:`LineReader.row` gives for the stream's end line (no stream has a NUL in its name)."""
+
+
+class LineReader:
+    """The lines of a stream ``where`` as rows of ``run``'s streams (module docstring: a JSON
+    object, or CSV values after a ``#`` header or in the section's column order); a line that is
+    neither is refused naming its number."""
+
+    def __init__(self, run: LiveRun, where: str) -> None:
+        self.run, self.where = run, where
+        self.orders: dict[str, list[str]] = {}
+        """Per stream, the order of its CSV values (from its ``#`` header; else its section's columns)."""
+
+    def row(self, raw: bytes, number: int) -> tuple[str, dict[str, float]] | None:
+        """(stream, column → value) of line ``number``; None for a blank line or a header;
+        :data:`END` for the end line."""
+        at = f"{self.where}: line {number}"
+        try:
+            line = raw.decode("utf-8").strip()
+        except UnicodeDecodeError:
+            raise InputError(at, "not UTF-8 text") from None
+        if not line:
+            return None
+        if line.startswith(("{", "[")):  # JSON (an array is refused as no object)
+            return self._json(line, at)
+        parts = [p.strip() for p in line.split(",")]
+        if parts[0].startswith("#"):
+            name = parts[0][1:].strip()
+            buffer = self._buffer(name, None, at)
+            missing = [c for c in buffer.columns if c not in parts[1:]]
+            if missing:
+                raise InputError(at, f"the header of {name} lacks column(s) {', '.join(missing)}")
+            self.orders[name] = parts[1:]
+            return None
+        if parts == ["end"]:
+            return END
+        buffer = self._buffer(parts[0], None, at)
+        order = self.orders.get(parts[0], buffer.columns)
+        if len(parts) - 1 != len(order):
+            raise InputError(at, f"{parts[0]} takes {len(order)} values ({', '.join(order)}), not {len(parts) - 1}")
+        return parts[0], self._numbers(dict(zip(order, parts[1:])), parts[0], buffer, at)
+
+    def _json(self, line: str, at: str) -> tuple[str, dict[str, float]]:
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as err:
+            raise InputError(at, f"not JSON ({err.msg})") from None
+        if not isinstance(obj, dict):
+            raise InputError(at, "not a JSON object")
+        if obj.get("end") is True:
+            return END
+        system, section = obj.pop("system", None), obj.pop("section", None)
+        buffer = self._buffer(str(system), None if section is None else str(section), at)
+        name = self.run.stream_name(str(system), None if section is None else str(section))
+        return name, self._numbers(obj, name, buffer, at)
+
+    def _buffer(self, system: str, section: str | None, at: str) -> RowBuffer:
+        name = self.run.stream_name(system, section)
+        if name not in self.run.buffers:
+            raise InputError(at, f"system {system!r}{'' if section is None else f' section {section!r}'} is no "
+                                 f"stream of this layout ({', '.join(self.run.buffers)})")
+        return self.run.buffers[name]
+
+    @staticmethod
+    def _numbers(cells: dict, name: str, buffer: RowBuffer, at: str) -> dict[str, float]:
+        """The section's columns of ``cells`` as finite floats, else refused naming them."""
+        try:
+            row = {c: float(cells[c]) for c in buffer.columns}
+        except (KeyError, TypeError, ValueError, OverflowError):  # an integer beyond a float's range too
+            row = {}
+        if len(row) < len(buffer.columns) or not all(map(math.isfinite, row.values())):
+            raise InputError(at, f"{name} needs finite numbers in columns {', '.join(buffer.columns)}")
+        return row
 
 
 def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterator[Row]:
@@ -118,27 +186,14 @@ def line_rows(run: LiveRun, address: str, *, timeout_s: float = 60.0) -> Iterato
             lines = iter(connection.makefile("rb"))
         else:
             lines = (line for packet in iter(lambda: server.recv(65536), b"") for line in packet.splitlines())
+        reader = LineReader(run, address)
         for number, line in enumerate(lines, start=1):
-            obj = _parse(line, number, address)
-            if obj is None:
+            got = reader.row(line, number)
+            if got is None:
                 continue
-            if obj.get("end") is True:
+            if got is END:
                 return
-            system, section = obj.pop("system", None), obj.pop("section", None)
-            name = run.stream_name(str(system), None if section is None else str(section))
-            if name not in run.buffers:
-                raise InputError(f"{address}: line {number}", f"system {system!r}"
-                                 f"{'' if section is None else f' section {section!r}'} is no stream of this layout "
-                                 f"({', '.join(run.buffers)})")
-            buffer = run.buffers[name]
-            try:
-                row = {c: float(obj[c]) for c in buffer.columns}
-            except (KeyError, TypeError, ValueError, OverflowError):  # an integer beyond a float's range too
-                row = {}
-            if len(row) < len(buffer.columns) or not all(map(math.isfinite, row.values())):
-                raise InputError(f"{address}: line {number}", f"{name} needs finite numbers in columns "
-                                                              f"{', '.join(buffer.columns)}")
-            yield float("nan"), name, row
+            yield float("nan"), got[0], got[1]
     except socket.timeout:
         raise InputError(address, f"nothing arrived for {timeout_s:g} s") from None
     finally:
