@@ -53,6 +53,10 @@ MAX_TRUTH_SPEED_MPS = 15.0
 lost and found again)."""
 DROPOUT_MARGIN_S = 0.5
 """Time (s) on each side of a truth jump whose errors are the truth's."""
+EVENT_SPAN_S = 10.0
+"""Longest span (s) of a finding that reports an event (a re-anchoring), not a stretch."""
+EVENT_MARGIN_S = 2.0
+"""Time (s) on each side of an event over which the error is compared (:func:`_raised_error`)."""
 
 
 def truth_jumps(t: np.ndarray, pos: np.ndarray) -> np.ndarray:
@@ -82,9 +86,23 @@ def _truth_unit(scale: float) -> str | None:
     return None
 
 
+def _raised_error(finding: Finding, t: np.ndarray, err: np.ndarray) -> bool:
+    """True for a finding of an event (spanning at most :data:`EVENT_SPAN_S`) across which the
+    horizontal error ``err`` (at times ``t``, s; finite) rises by more than :data:`LARGE_ERROR_M`:
+    from the last error :data:`EVENT_MARGIN_S` before it to the largest within that margin after
+    it (the estimate is interpolated between its records, which spreads a jump over the gap
+    between two)."""
+    if finding.t_start is None or finding.t_end is None or finding.t_end - finding.t_start > EVENT_SPAN_S:
+        return False
+    before = np.searchsorted(t, finding.t_start - EVENT_MARGIN_S, side="right") - 1
+    a, b = np.searchsorted(t, [finding.t_end, finding.t_end + EVENT_MARGIN_S], side="right")
+    return 0 <= before and b > a and float(err[a - 1:b].max()) - float(err[before]) > LARGE_ERROR_M
+
+
 def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]:
     """A warning per system whose horizontal error exceeds :data:`LARGE_ERROR_M`, naming the
-    cause: the run's own findings about the system (or the run's constraints) when it has any,
+    cause: the run's own findings about the system (or the run's constraints) when it has any
+    (its warnings, and an event it reported that the error jumped across: a re-anchoring),
     else the shape of the error: a scale (the track larger or smaller than the truth's), a
     heading drift (its second half turned from its first) or a jump (the error grows at once)."""
     out = []
@@ -94,7 +112,8 @@ def large_error_findings(scores: dict, findings: list[Finding]) -> list[Finding]
         if not finite.any() or float(np.max(err[finite])) <= LARGE_ERROR_M:
             continue
         t, worst = score.t, int(np.argmax(np.where(finite, err, -np.inf)))
-        own = [f for f in findings if f.severity == "warning" and f.system in (name, None)]
+        own = [f for f in findings if f.system in (name, None)
+               and (f.severity == "warning" or _raised_error(f, t[finite], err[finite]))]
         est, truth = score.pos_est_aligned[finite, :2], score.pos_truth[finite, :2]
         half = max(2, len(est) // 2)
         scale, _ = _similarity(est, truth)

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from bodyfusion.core.layout import load_layout
 from bodyfusion.runner import run_layout
+from bodyfusion.plugins.hand_pdr.gnss_aiding import BIAS_LIMIT
 from bodyfusion.plugins.hand_pdr.track_heading import MIN_FIXES, WINDOW_M, TrackHeading
 from tests.paths import CONFIGS, SHARED_DATA, needs_shared
 
@@ -60,3 +61,17 @@ def test_the_fused_phone_is_never_worse_than_its_gnss_alone(log):
     alone = result.sensor_alone["hand_phone"]["horizontal_error_m"]["p75"]
     assert fused <= alone, (fused, alone)
     assert not [f for f in result.findings if f.kind == "worse_than_sensor_alone"]
+
+
+def test_a_reanchoring_is_reported_and_named_as_the_cause_of_the_error_it_makes(dual_foot_hand_walk):
+    """On the simulated loop the fixes of the last seconds carry a slow error of ~11 m (4 times
+    their correlated σ): the phone takes its position afresh from the last fix. The run reports
+    the re-anchoring, its move and bias, and the large error it makes names it as its cause."""
+    result = run_layout(load_layout(dual_foot_hand_walk))
+    hand = result.systems["hand_phone"]
+    (t, move, bias, _), = hand.reanchors
+    assert t == 165.0 and 10.0 < move < 13.0 and bias > BIAS_LIMIT
+    kinds = {(f.kind, f.system): f for f in result.findings}
+    reanchored = kinds[("gnss_reanchored", "hand_phone")]
+    assert reanchored.t_start == 165.0 and f"moved {move:.1f} m" in reanchored.message
+    assert "gnss reanchored at t = 165.0" in kinds[("large_error", "hand_phone")].cause

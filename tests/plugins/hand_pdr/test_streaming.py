@@ -12,8 +12,6 @@ from bodyfusion.core.layout import load_layout
 from bodyfusion.live.engine import LiveRun
 from bodyfusion.live.sources import replay_rows
 from bodyfusion.runner.batch import run_layout
-from bodyfusion.sim.scenario import simulate
-from tests.paths import CONFIGS
 
 
 class Collect:
@@ -28,12 +26,8 @@ class Collect:
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    """Both feet and the phone (IMU, GNSS with a 45 s outage) on the 166 s loop of
-    configs/dual_foot_hand_gnss.yaml."""
-    out = tmp_path_factory.mktemp("hand_walk")
-    simulate(CONFIGS / "dual_foot_hand_gnss.yaml", out)
-    return out / "config.yaml"
+def walk(dual_foot_hand_walk):
+    return dual_foot_hand_walk
 
 
 def _live(config, keep_s=None, delay_fixes_s=0.0):

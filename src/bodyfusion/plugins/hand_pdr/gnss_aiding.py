@@ -82,11 +82,14 @@ class GnssAiding:
             counts["position_resets"] += 1
             self._rejected_in_row = 0
             self._position_resets.append((self._tc, self.position_n() - before))
-        elif ok and len(self._bank) == 1 and np.hypot(*self._bank.moments(copy=False)[0][5:7]) > BIAS_LIMIT:
+        elif ok and len(self._bank) == 1 and (bias := np.hypot(*self._bank.moments(copy=False)[0][5:7])) > BIAS_LIMIT:
+            before = self.position_n().copy()
             self._reanchor()  # the filter explains the fixes by a bias no fix has: the PDR strayed
             ok = self._update(H, residual, R, self._gate_pos, False, None)
             counts["reanchored"] += 1
             self.reanchor_times.append(self._tc)
+            self.reanchors.append((self._tc, float(np.hypot(*(self.position_n() - before)[:2])), float(bias),
+                                   float(fx.sd[j])))
         counts["accepted" if ok else "rejected"] += 1
         if len(self._bank) > 1:
             self.heading_counts["unweighted_standing" if not walking else

@@ -86,7 +86,7 @@ from bodyfusion.plugins.hand_pdr.bank_filter import BankFilter
 from bodyfusion.plugins.hand_pdr.config import HandPdrConfig
 from bodyfusion.plugins.hand_pdr.fixes import PhoneFixes
 from bodyfusion.plugins.hand_pdr.hypotheses import Hypothesis
-from bodyfusion.plugins.hand_pdr.gnss_aiding import DIFFUSE_SD_M, GnssAiding
+from bodyfusion.plugins.hand_pdr.gnss_aiding import BIAS_LIMIT, DIFFUSE_SD_M, GnssAiding
 from bodyfusion.plugins.hand_pdr.streaming import StreamingHandPdr
 from bodyfusion.plugins.hand_pdr.track_heading import TrackHeading
 from bodyfusion.plugins.hand_pdr.model import B, BE, BN, C, E, GNSS, MAGNETOMETER, N, O, PSI, STEADY, STEP, U, PdrModel
@@ -234,11 +234,23 @@ class HandPdr(StreamingHandPdr, PdrResults, GnssAiding, SensorSystem, HeadingAli
 
     def findings(self) -> list[Finding]:
         """``no_steps``: the PDR found no step in a recording of :data:`NO_STEP_FINDING_S` or more
-        (it never moved: the track is the GNSS fixes', or the start point); a live run's
-        departures from the batch run (:meth:`live_findings`)."""
+        (it never moved: the track is the GNSS fixes', or the start point); ``gnss_reanchored``:
+        each time the phone took its position afresh from a fix; a live run's departures from
+        the batch run (:meth:`live_findings`)."""
+        out = [Finding(
+            "gnss_reanchored", "info", self.name, t, t,
+            f"the phone took its position afresh from the GNSS fix at t = {t:.1f} s and moved {move:.1f} m: its "
+            f"filter explained the fixes by a slow GNSS error of {bias:.1f} times the fix's correlated σ "
+            f"({sd:.1f} m), more than it allows ({BIAS_LIMIT:g}).",
+            "the dead reckoning strayed from the fixes (a heading or step length the fixes could not correct), or "
+            "the fixes themselves carry a large slow error there (multipath, a building's shadow): the filter "
+            "cannot tell the two apart and takes the fix.",
+            "compare the track with the systems worn with the phone around that time; where the fixes were wrong, "
+            "raise filter.gnss_correlated_fraction or the fixes' σ (filter.accuracy_to_sigma).")
+            for t, move, bias, sd in self.reanchors]
         span = float(self.t[-1] - self.t[0])
         if self.step_index.size or span < NO_STEP_FINDING_S:
-            return self.live_findings()
+            return out + self.live_findings()
         g = self.context.gravity_mps2
         unit = (f" Its specific force has a median norm of {self._acc_norm_median:.3g} m/s^2 where gravity is {g:.3g}: "
                 "a unit or a scale is likely wrong.") if not 0.5 * g < self._acc_norm_median < 2.0 * g else ""
@@ -249,7 +261,7 @@ class HandPdr(StreamingHandPdr, PdrResults, GnssAiding, SensorSystem, HeadingAli
             "the phone did not walk (on a table, in a bag), or its accelerometer is read in the wrong unit or axes, "
             "or the step detector's thresholds (step.*) miss this walker's steps.",
             "check the accelerometer's unit and axes in the phone's data section, and step.threshold_mps2."),
-            *self.live_findings()]
+            *out, *self.live_findings()]
 
     def walking(self, t: np.ndarray) -> np.ndarray:
         """(N,) True where the PDR says the phone walks at times ``t`` (s): a step detected in
@@ -328,6 +340,9 @@ class HandPdr(StreamingHandPdr, PdrResults, GnssAiding, SensorSystem, HeadingAli
                             "heading_skipped_accuracy": 0, "track_heading_accepted": 0, "track_heading_rejected": 0,
                             "reanchored": 0}
         self.reanchor_times: list[float] = []
+        self.reanchors: list[tuple[float, float, float, float]] = []
+        """Each re-anchoring: time (s), the horizontal move it made (m), the bias |β̂| that set it off
+        (units of the fix's correlated σ) and the fix's σ (m)."""
         self._position_resets: list[tuple[float, np.ndarray]] = []
         self.nis_records = {"gnss_position": NisRecord(3), "gnss_course": NisRecord(1), "gnss_track": NisRecord(1)}
         self._track = TrackHeading(f.gnss_correlated_fraction)
