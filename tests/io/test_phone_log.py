@@ -54,6 +54,17 @@ def test_malformed_lines_are_skipped_and_counted_with_their_line(tmp_path):
     assert "skipped 2 malformed" in note and "[158, 159]" in note
 
 
+@pytest.mark.parametrize("posi", ["POSI;0.9;2;49.4613;11.1109;1e300;100", "POSI;0.9;2;49.4613;11.1109;0;1.5",
+                                  "POSI;0.9;3e10;49.4613;11.1109;0;100"], ids=["floor_beyond_int", "building_half",
+                                                                             "counter_beyond_int"])
+def test_a_reference_point_without_whole_numbers_where_they_belong_is_malformed(tmp_path, posi):
+    """A POSI line's counter, floor and building are whole numbers: another number there is a
+    malformed line, skipped and counted, not cast to an integer of any value."""
+    log = read_getsensordata(synthetic_log(tmp_path, extra=[posi]))
+    assert log.reference.counter.tolist() == [1]
+    assert any("skipped 1 malformed" in n and "[158]" in n for n in log.report.notes)
+
+
 def test_too_few_inertial_lines_is_one_line_error(tmp_path):
     with pytest.raises(InputError, match="fewer than 10 usable ACCE"):
         read_getsensordata(synthetic_log(tmp_path, n=5))

@@ -29,6 +29,9 @@ from bodyfusion.io.timestamps import apply_timestamp_policy
 
 USED_TYPES = {"ACCE": 5, "GYRO": 5, "MAGN": 5, "GNSS": 10, "POSI": 6}
 """Line type → number of numeric fields after the type that are used."""
+INTEGER_FIELDS = {"POSI": (1, 4, 5)}
+"""Line type → the used fields that are whole numbers (a reference point's counter, floor and
+building): a line holding another number there (1.5, 1e300) is malformed."""
 MIN_TRIAD_SAMPLES = 10
 """Fewest ACCE and GYRO samples, in increasing time, a log must hold (fewer MAGN: no magnetometer)."""
 TRIAD_LIMIT = {"ACCE": ACC_LIMIT_MPS2, "GYRO": GYRO_LIMIT_RADPS, "MAGN": 1.0e4}
@@ -117,7 +120,8 @@ def read_getsensordata(path: str | Path) -> PhoneLog:
             parsed = [float(v) for v in values]
         except ValueError:
             parsed = []
-        if len(parsed) < need or not np.all(np.isfinite(parsed)):
+        if len(parsed) < need or not np.all(np.isfinite(parsed)) or any(
+                not (abs(parsed[i]) < 2**31 and parsed[i] == int(parsed[i])) for i in INTEGER_FIELDS.get(kind, ())):
             malformed.append(number)
             continue
         rows[kind].append(parsed)
