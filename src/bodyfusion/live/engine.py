@@ -23,9 +23,18 @@ as many rows (:meth:`RowBuffer.forget`) and the fuser its older constraint epoch
 memory and emits the states of a run that keeps everything; its finished result covers the part
 kept.
 
+Streams: a system's data section paces the run (its rows are waited for); a system may stream
+aiding sections beside it (:meth:`~bodyfusion.core.capabilities.Streaming.streamed_sections`: the
+phone's GNSS), whose rows are taken as they come and never hold the run up. Each is a
+:class:`RowBuffer` in ``buffers``, named by :meth:`LiveRun.stream_name`.
+
 Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
 next replan has run. Each system must offer :class:`~bodyfusion.core.capabilities.Streaming`
-(the foot INS does); aiding sources and smoothers do not run live yet and are refused.
+(the foot INS and the hand-held phone do); aiding sources and smoothers do not run live yet and
+are refused.
+
+Scores: with ``keep_s`` and a truth, every state emitted is scored as it passes
+(:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`, the result's ``whole_run``).
 """
 
 from __future__ import annotations
