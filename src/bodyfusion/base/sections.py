@@ -129,6 +129,13 @@ class TableSection(StrictModel):
         """The in-memory table bound to the section (None: its data is the file at :attr:`path`)."""
         return self._table
 
+    def rows_from(self, first: int) -> TableSection:
+        """A copy of the section bound to its in-memory table's rows from ``first`` on (a column →
+        array table: what a live pass reads again)."""
+        section = self.model_copy()
+        section.bind({c: v[first:] for c, v in self._table.items()}, self._label)
+        return section
+
     @property
     def label(self) -> str:
         """The section's dotted key in the layout, once a table is bound."""

@@ -6,8 +6,9 @@ time in seconds (float64); specific force in m/s^2; angular rate in rad/s.
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import ClassVar
@@ -15,6 +16,17 @@ from typing import ClassVar
 import numpy as np
 
 LOG = logging.getLogger("bodyfusion")
+
+
+@contextlib.contextmanager
+def log_silenced() -> Iterator[None]:
+    """The package's log off within the block (a live pass reading a context whose findings an
+    earlier pass already said)."""
+    LOG.disabled = True
+    try:
+        yield
+    finally:
+        LOG.disabled = False
 """The package's logger, parent of every module's (``logging.getLogger(__name__)``): warnings about
 the input and the run go here; the command line shows them on stderr (:mod:`bodyfusion.cli`)."""
 

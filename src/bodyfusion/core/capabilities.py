@@ -29,6 +29,8 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 from pydantic import BaseModel
 
+from bodyfusion.base.findings import Finding
+
 Capability = TypeVar("Capability")
 
 
@@ -188,3 +190,17 @@ class Streaming(ABC):
         run that keeps a bounded history, :mod:`bodyfusion.live`). Default: forget nothing, so
         that a plugin written before it runs live as it did, holding its whole history."""
         return {}
+
+
+def forgotten_history_finding(system: str, t_first: float, t0: float, t1: float, forgotten: int) -> Finding:
+    """The ``live_window`` finding of a system that forgot ``forgotten`` samples of a live run
+    (:meth:`Streaming.forget_before`): the run began at ``t_first`` (s); the system holds
+    ``t0``–``t1`` (s)."""
+    return Finding(
+        "live_window", "info", system, t0, t1,
+        f"the live run kept the last {t1 - t0:.0f} s of this system's recording (it forgot the {forgotten} samples "
+        f"before t = {t0:.1f} s as it went): its track, scores and findings here cover t = {t0:.1f}–{t1:.1f} s of "
+        f"the {t1 - t_first:.0f} s run; the states sent to the sinks cover all of it.",
+        "fusion live --keep bounds the history a run holds (and its memory).",
+        "read the whole run's errors in metrics.json (systems.NAME.whole_run: every state emitted, scored against "
+        "the truth), or run fusion run on the recording for whole-run figures.")

@@ -32,8 +32,8 @@ import numpy as np
 from bodyfusion.base.errors import FusionError, NotReady
 from bodyfusion.base.findings import Finding
 from bodyfusion.base.records import GrowingArray
-from bodyfusion.base.types import LOG, ImuStream
-from bodyfusion.core.capabilities import Streaming
+from bodyfusion.base.types import ImuStream, log_silenced
+from bodyfusion.core.capabilities import Streaming, forgotten_history_finding
 from bodyfusion.io.imu import read_imu
 from bodyfusion.nav import detectors
 from bodyfusion.nav.gait import PERIOD_HOP_S
@@ -133,15 +133,7 @@ class StreamingFootIns(Streaming):
                 "a live run levels on its first rest; a batch run on the first rest as still as the recording's "
                 "stillest.", "stand still for a second or two before walking, as still as at any rest later."))
         if self.forgotten:
-            out.append(Finding(
-                "live_window", "info", self.name, float(t[0]), float(t[-1]),
-                f"the live run kept the last {t[-1] - t[0]:.0f} s of this system's recording (it forgot the "
-                f"{self.forgotten} samples before t = {t[0]:.1f} s as it went): its track, scores and findings here "
-                f"cover t = {t[0]:.1f}–{t[-1]:.1f} s of the {t[-1] - self._t_first:.0f} s run; the states sent to "
-                "the sinks cover all of it.",
-                "fusion live --keep bounds the history a run holds (and its memory).",
-                "read the whole run's errors in metrics.json (systems.NAME.whole_run: every state emitted, scored "
-                "against the truth), or run fusion run on the recording for whole-run figures."))
+            out.append(forgotten_history_finding(self.name, self._t_first, float(t[0]), float(t[-1]), self.forgotten))
         if self.revised_inputs:
             out.append(Finding(
                 "live_revisions", "info", self.name, float(t[0]), float(t[-1]),
@@ -221,13 +213,8 @@ class StreamingFootIns(Streaming):
         hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
         a = max(0, n0 - int(CONTEXT_S * self._rate_hz))
         a -= a % hop  # the stride period's windows on the whole recording's grid
-        section = self.config.data.model_copy()
-        section.bind({c: v[a:] for c, v in self.config.data.table.items()}, self.config.data.label)
-        LOG.disabled = True  # what the reader finds in the context it said on an earlier pass
-        try:
-            derived = self._derive(read_imu(section))
-        finally:
-            LOG.disabled = False
+        with log_silenced():  # what the reader finds in the context it said on an earlier pass
+            derived = self._derive(read_imu(self.config.data.rows_from(a)))
         self._splice(derived, a)
         self._decide(float(self.stream.t[-1]) - self._lookahead_s)
 

@@ -56,7 +56,7 @@ class PdrResults:
         return hand_states(self._history()[0])
 
     def covariance_history(self) -> CovarianceHistory:
-        """The whole error-state covariance (:data:`~bodyfusion.plugins.hand_pdr.results.ERROR_STATES`) at every record."""
+        """The whole error-state covariance (:data:`ERROR_STATES`) at every record."""
         h, P = self._history()
         return CovarianceHistory(h[:, 0], ERROR_STATES[:self.n_err], P.copy(), STORED)
 

@@ -30,8 +30,8 @@ from pydantic import BaseModel
 
 from bodyfusion.base.errors import ConfigError, FusionError, NotReady
 from bodyfusion.base.findings import Finding
-from bodyfusion.base.types import LOG, ImuStream
-from bodyfusion.core.capabilities import Streaming
+from bodyfusion.base.types import ImuStream, log_silenced
+from bodyfusion.core.capabilities import Streaming, forgotten_history_finding
 from bodyfusion.io.gnss import GnssFixes
 from bodyfusion.io.imu import read_imu
 from bodyfusion.plugins.hand_pdr.model import GNSS, STEADY, STEP
@@ -121,13 +121,9 @@ class StreamingHandPdr(Streaming):
         """The IMU recording from :data:`CONTEXT_S` before the first undecided sample (its first
         sample's index, the samples) and the fixes, read whole."""
         a = max(0, self._decided - int(CONTEXT_S * self._rate_hz))
-        section = self.config.imu.model_copy()
-        section.bind({c: v[a:] for c, v in self.config.imu.table.items()}, self.config.imu.label)
-        LOG.disabled = True  # what the readers find in the context they said on an earlier pass
-        try:
-            return a, read_imu(section), self._read_fixes() if self.config.gnss is not None else None
-        finally:
-            LOG.disabled = False
+        with log_silenced():  # what the readers find in the context they said on an earlier pass
+            fixes = self._read_fixes() if self.config.gnss is not None else None
+            return a, read_imu(self.config.imu.rows_from(a)), fixes
 
     def _splice(self, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, a: int) -> None:
         """Keep the final samples' derivations and take every later sample's from the derivation
@@ -230,15 +226,7 @@ class StreamingHandPdr(Streaming):
         t0, t1 = float(self.t[0]), float(self.t[-1])
         out = []
         if self.forgotten:
-            out.append(Finding(
-                "live_window", "info", self.name, t0, t1,
-                f"the live run kept the last {t1 - t0:.0f} s of this system's recording (it forgot the "
-                f"{self.forgotten} samples before t = {t0:.1f} s as it went): its track, scores and findings here "
-                f"cover t = {t0:.1f}–{t1:.1f} s of the {t1 - self._t_first:.0f} s run; the states sent to the sinks "
-                "cover all of it.",
-                "fusion live --keep bounds the history a run holds (and its memory).",
-                "read the whole run's errors in metrics.json (systems.NAME.whole_run: every state emitted, scored "
-                "against the truth), or run fusion run on the recording for whole-run figures."))
+            out.append(forgotten_history_finding(self.name, self._t_first, t0, t1, self.forgotten))
         if self.revised_steps:
             out.append(Finding(
                 "live_revisions", "info", self.name, t0, t1,
