@@ -231,6 +231,7 @@ class LiveRun:
                                                             "each row's time in a column, not a row count / rate_hz",
                                       loaded.path)
                 self.buffers[self.stream_name(name, None if k == 0 else section_name)] = RowBuffer(section, key, k == 0)
+        self._pacing = [b for b in self.buffers.values() if b.paces]
         self.output = EpochOutput(output_interval_s, sinks)
         self.lookahead_s, self.warmup_s, self.replan_s, self.seed = lookahead_s, warmup_s, replan_s, seed
         self.keep_s = keep_s
@@ -280,10 +281,9 @@ class LiveRun:
         """Start once every system holds the warm-up; afterwards a pass every ``replan_s`` of data.
         True when it made a pass. The data sections pace it; an aiding section's rows (fixes) are
         taken as they come."""
-        pacing = [b for b in self.buffers.values() if b.paces]
-        newest = min(b.newest_t for b in pacing)
+        newest = min(b.newest_t for b in self._pacing)
         if self.fusion is None:
-            if all(b.span_s >= self._start_after_s for b in pacing):
+            if all(b.span_s >= self._start_after_s for b in self._pacing):
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 try:
                     self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,

@@ -148,7 +148,7 @@ class StreamingHandPdr(Streaming):
         self.step_index = np.concatenate([self.step_index[:kept], d.step_index[new] + a])
         self.step_length_m = np.concatenate([self.step_length_m[:kept], d.step_length_m[new]])
 
-    def _decide(self, until_t: float, fixes) -> None:
+    def _decide(self, until_t: float, fixes: GnssFixes | None) -> None:
         """Make the samples up to ``until_t`` (s) final and queue their events, with ``fixes`` (the
         GNSS section read whole; None: none) flagged as the batch run flags them."""
         before = self.decided_until()
