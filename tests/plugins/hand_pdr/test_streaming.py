@@ -26,8 +26,8 @@ class Collect:
 
 
 @pytest.fixture(scope="module")
-def walk(dual_foot_hand_walk):
-    return dual_foot_hand_walk
+def walk(short_hand_walk):
+    return short_hand_walk
 
 
 def _live(config, keep_s=None, delay_fixes_s=0.0):
@@ -53,8 +53,8 @@ def test_the_live_phone_places_the_batch_runs_steps_and_takes_its_fixes(walk, li
     assert np.array_equal(ours.step_index, hand.step_index)
     assert ours.gnss_counts == hand.gnss_counts
     assert ours.revised_steps == 0 and ours.late_fixes == 0
-    assert run.buffers["hand_phone.gnss"].rows == 166  # a fix a second, every one taken into its buffer
-    assert len(states) > 1500
+    assert run.buffers["hand_phone.gnss"].rows == 59  # a fix a second, every one taken into its buffer
+    assert len(states) > 550
     ours_t, batch_t = ours.trajectory(), hand.trajectory()
     common = np.intersect1d(ours_t.t, batch_t.t)
     a = ours_t.pos_n[np.searchsorted(ours_t.t, common)]
@@ -67,14 +67,14 @@ def test_a_bounded_history_with_the_phone_emits_the_same_states(walk, live):
     run, result, states = _live(walk, keep_s=20.0)
     assert states == whole
     hand = result.systems["hand_phone"]
-    assert hand.forgotten > 10_000 and run.buffers["hand_phone.gnss"].forgotten > 100
+    assert hand.forgotten > 1000 and run.buffers["hand_phone.gnss"].forgotten > 10
     assert "live_window" in {f.kind for f in hand.findings()}
 
 
 def test_fixes_that_arrive_after_their_time_was_decided_are_counted_and_said(walk):
     _, result, _ = _live(walk, delay_fixes_s=5.0)  # beyond the 2 s look-ahead
     hand = result.systems["hand_phone"]
-    assert hand.late_fixes > 100
+    assert hand.late_fixes > 30
     assert "late_fixes" in {f.kind for f in hand.findings()}
 
 
