@@ -117,12 +117,20 @@ class StreamingHandPdr(Streaming):
         self._splice(stream.t, stream.acc_b, stream.gyro_b, a)
         self._decide(float(self.t[-1]) - self._lookahead_s, fixes)
 
-    def _read_context(self) -> tuple[int, ImuStream, GnssFixes | None]:
+    def _open_fix(self) -> int:
+        """The first fix after the decided time: its flags (walking, held steadily) wait for the
+        steps around it; the fixes before it are final."""
+        fixes = self._fixes
+        return int(np.searchsorted(fixes.t, self.decided_until(), side="right")) if fixes is not None else 0
+
+    def _read_context(self) -> tuple[int, ImuStream, tuple[int, GnssFixes] | None]:
         """The IMU recording from :data:`CONTEXT_S` before the first undecided sample (its first
-        sample's index, the samples) and the fixes, read whole."""
+        sample's index, the samples) and the fixes from the one before the first open fix on (the
+        first one read, the fixes: a fix is flagged against its predecessor)."""
         a = max(0, self._decided - int(CONTEXT_S * self._rate_hz))
+        first = max(self._open_fix() - 1, 0)
         with log_silenced():  # what the readers find in the context they said on an earlier pass
-            fixes = self._read_fixes() if self.config.gnss is not None else None
+            fixes = (first, self._read_fixes(first)) if self.config.gnss is not None else None
             return a, read_imu(self.config.imu.rows_from(a)), fixes
 
     def _splice(self, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, a: int) -> None:
@@ -148,21 +156,25 @@ class StreamingHandPdr(Streaming):
         self.step_index = np.concatenate([self.step_index[:kept], d.step_index[new] + a])
         self.step_length_m = np.concatenate([self.step_length_m[:kept], d.step_length_m[new]])
 
-    def _decide(self, until_t: float, fixes: GnssFixes | None) -> None:
+    def _decide(self, until_t: float, fixes: tuple[int, GnssFixes] | None) -> None:
         """Make the samples up to ``until_t`` (s) final and queue their events, with ``fixes`` (the
-        GNSS section read whole; None: none) flagged as the batch run flags them."""
+        GNSS section's rows from a first one on, :meth:`_read_context`; None: none): the open ones
+        flagged as the batch run flags them, the final ones kept."""
         before = self.decided_until()
-        if fixes is not None and len(fixes):
-            held = self._fixes
-            start = held.confirmed if held is not None else -1
-            read = min(self._fixes_read, len(fixes))
+        if fixes is not None and len(fixes[1]) and fixes[0] + len(fixes[1]) > self._open_fix():
+            first, rows = fixes
+            held, u = self._fixes, self._open_fix()
+            read = self._fixes_read
+            tail = self._phone_fixes(rows)
             # a fix's position is converted once, when it is read: the same conversion whatever was
             # read or forgotten before it (a vectorised sine may round by where it falls in its array)
-            pos = np.concatenate([held.pos[:read] if held is not None else np.empty((0, 3)),
-                                  fixes.select(np.arange(len(fixes)) >= read).enu(self.geodetic_origin)])
-            self._fixes = dataclasses.replace(self._phone_fixes(fixes), pos=pos, confirmed=start)
-            fresh = self._fixes.t[self._fixes_read:]
-            self.late_fixes += int(np.count_nonzero(fresh <= before))
+            fresh = rows.select(first + np.arange(len(rows)) >= read).enu(self.geodetic_origin)
+            joined = {f.name: np.concatenate([getattr(held, f.name)[:u], getattr(tail, f.name)[u - first:]])
+                      if held is not None else getattr(tail, f.name) for f in dataclasses.fields(tail)
+                      if isinstance(getattr(tail, f.name), np.ndarray)}
+            joined["pos"] = np.concatenate([held.pos[:read], fresh]) if held is not None else fresh
+            self._fixes = dataclasses.replace(tail, **joined, confirmed=held.confirmed if held is not None else -1)
+            self.late_fixes += int(np.count_nonzero(self._fixes.t[read:] <= before))
             self._fixes_read = len(self._fixes.t)
         self._decided = max(self._decided, int(np.searchsorted(self.t, until_t, side="right")))
         self._events = self._events[self._next:] + self._event_list(before, self.decided_until())
@@ -182,7 +194,7 @@ class StreamingHandPdr(Streaming):
         self.revised_steps = int(np.setxor1d(mine, theirs).size)
         a, context, fixes = self._read_context()  # the last part as a pass reads it: the same sums
         self._splice(context.t, context.acc_b, context.gyro_b, a)
-        self._report = stream.report if fixes is None else stream.report.merge(fixes.report)
+        self._report = stream.report if fixes is None else stream.report.merge(self._read_fixes().report)
         self._decide(math.inf, fixes)
         self._decided = len(self.t)
         self._lookahead_s = None

@@ -214,14 +214,15 @@ class HandPdr(StreamingHandPdr, PdrResults, GnssAiding, SensorSystem, HeadingAli
         return PdrInputs(steps, step_lengths(t, acc, steps, step), up_b, azimuth_increments(t, gyro, up_b),
                          held_steadily(t, up_b, f.pose_window_s, np.deg2rad(f.pose_change_deg)))
 
-    def _read_fixes(self) -> GnssFixes:
-        """The fixes of the ``gnss`` section (csv: its file or in-memory table; nmea; ubx)."""
+    def _read_fixes(self, first: int = 0) -> GnssFixes:
+        """The fixes of the ``gnss`` section (csv: its file or in-memory table, that table's rows
+        from ``first`` on; nmea; ubx)."""
         g = self.config.gnss
         if g.format == "nmea":
             return read_nmea(g.path)
         if g.format == "ubx":
             return read_ubx(g.path)
-        return read_gnss_csv(g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
+        return read_gnss_csv(g.rows_from(first) if first else g, time_column=g.time_column, lat_column=g.lat_column, lon_column=g.lon_column,
                              height_column=g.height_column, accuracy_column=g.accuracy_column,
                              speed_column=g.speed_column, course_column=g.course_column)
 
