@@ -5,6 +5,7 @@ the study outlives it."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -135,11 +136,20 @@ def _corrupt(path: Path, kind: str) -> None:
         pq.write_table(pq.read_table(path).drop_columns(["run_key"]), path)
 
 
+@pytest.fixture(scope="module")
+def finished_study(tmp_path_factory) -> Path:
+    """A small study run to its end once: its folder (study.yaml, walk.yaml, out/)."""
+    folder = tmp_path_factory.mktemp("finished_study")
+    run_study(write_study(folder, STUDY.replace("seeds: 4", "seeds: 1").replace("[0, 5, 10]", "[0, 5]")),
+              folder / "out", workers=1)
+    return folder
+
+
 @pytest.mark.parametrize("kind", ["truncated", "empty", "garbage", "bits_flipped", "no_run_key"])
-def test_a_corrupt_results_file_is_moved_aside_with_a_warning_and_its_runs_run_again(tmp_path, kind, caplog):
-    study = write_study(tmp_path, STUDY.replace("seeds: 4", "seeds: 1").replace("[0, 5, 10]", "[0, 5]"))
-    out = tmp_path / "out"
-    run_study(study, out, workers=1)
+def test_a_corrupt_results_file_is_moved_aside_with_a_warning_and_its_runs_run_again(finished_study, tmp_path, kind,
+                                                                                    caplog):
+    shutil.copytree(finished_study, tmp_path / "study")
+    study, out = tmp_path / "study" / "study.yaml", tmp_path / "study" / "out"
     clean = pq.read_table(out / "results.parquet")
     _corrupt(out / "results.parquet", kind)
     with caplog.at_level("WARNING", logger="bodyfusion"):
