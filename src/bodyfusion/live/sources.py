@@ -114,8 +114,7 @@ class LineReader:
             return self._json(line, at)
         parts = [p.strip() for p in line.split(",")]
         if parts[0].startswith("#"):
-            name = parts[0][1:].strip()
-            buffer = self._buffer(name, None, at)
+            name, buffer = self._buffer(parts[0][1:].strip(), None, at)
             missing = [c for c in buffer.columns if c not in parts[1:]]
             if missing:
                 raise InputError(at, f"the header of {name} lacks column(s) {', '.join(missing)}")
@@ -123,11 +122,11 @@ class LineReader:
             return None
         if parts == ["end"]:
             return END
-        buffer = self._buffer(parts[0], None, at)
-        order = self.orders.get(parts[0], buffer.columns)
+        name, buffer = self._buffer(parts[0], None, at)
+        order = self.orders.get(name, buffer.columns)
         if len(parts) - 1 != len(order):
-            raise InputError(at, f"{parts[0]} takes {len(order)} values ({', '.join(order)}), not {len(parts) - 1}")
-        return parts[0], self._numbers(dict(zip(order, parts[1:])), parts[0], buffer, at)
+            raise InputError(at, f"{name} takes {len(order)} values ({', '.join(order)}), not {len(parts) - 1}")
+        return name, self._numbers(dict(zip(order, parts[1:])), name, buffer, at)
 
     def _json(self, line: str, at: str) -> tuple[str, dict[str, float]]:
         try:
@@ -139,16 +138,16 @@ class LineReader:
         if obj.get("end") is True:
             return END
         system, section = obj.pop("system", None), obj.pop("section", None)
-        buffer = self._buffer(str(system), None if section is None else str(section), at)
-        name = self.run.stream_name(str(system), None if section is None else str(section))
+        name, buffer = self._buffer(str(system), None if section is None else str(section), at)
         return name, self._numbers(obj, name, buffer, at)
 
-    def _buffer(self, system: str, section: str | None, at: str) -> RowBuffer:
+    def _buffer(self, system: str, section: str | None, at: str) -> tuple[str, RowBuffer]:
+        """The stream's name and buffer, else refused naming the line."""
         name = self.run.stream_name(system, section)
         if name not in self.run.buffers:
             raise InputError(at, f"system {system!r}{'' if section is None else f' section {section!r}'} is no "
                                  f"stream of this layout ({', '.join(self.run.buffers)})")
-        return self.run.buffers[name]
+        return name, self.run.buffers[name]
 
     @staticmethod
     def _numbers(cells: dict, name: str, buffer: RowBuffer, at: str) -> dict[str, float]:

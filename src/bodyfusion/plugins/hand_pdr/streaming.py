@@ -166,9 +166,10 @@ class StreamingHandPdr(Streaming):
             held, u = self._fixes, self._open_fix()
             read = self._fixes_read
             tail = self._phone_fixes(rows)
-            # a fix's position is converted once, when it is read: the same conversion whatever was
-            # read or forgotten before it (a vectorised sine may round by where it falls in its array)
-            fresh = rows.select(first + np.arange(len(rows)) >= read).enu(self.geodetic_origin)
+            # a fix's position is kept from the pass that read it: converted in an array that starts
+            # where it does whatever was forgotten before (a vectorised sine may round by where a
+            # value falls in its array)
+            fresh = tail.pos[read - first:]
             joined = {f.name: np.concatenate([getattr(held, f.name)[:u], getattr(tail, f.name)[u - first:]])
                       if held is not None else getattr(tail, f.name) for f in dataclasses.fields(tail)
                       if isinstance(getattr(tail, f.name), np.ndarray)}
