@@ -29,6 +29,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 from pydantic import BaseModel
 
+from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
 
 Capability = TypeVar("Capability")
@@ -128,6 +129,11 @@ class Smoothing(ABC):
     def smooth(self, cfg: BaseModel) -> dict | None:
         """Smooth the run (the layout's ``smoother`` section); afterwards ``trajectory()`` is the
         smoothed track. Returns the smoother's diagnostics, None when it did not smooth."""
+
+    def joint_smoothing_member(self, cfg: BaseModel) -> Any:
+        """This run as a member of the joint RTS of the systems the fuser corrected together
+        (:class:`bodyfusion.core.joint_smoothing.JointMember`). Default: it cannot be one."""
+        raise FusionError(f"{getattr(self, 'name', type(self).__name__)} cannot be smoothed jointly")
 
 
 class AbsoluteFixes(ABC):

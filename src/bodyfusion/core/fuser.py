@@ -54,6 +54,7 @@ from bodyfusion.core.constraints import ConstraintSolution
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.constraint_log import ConstraintLog
+from bodyfusion.core.joint_smoothing import JointCorrections
 from bodyfusion.core.epoch_state import EpochOutput
 from bodyfusion.core.schedule import CONSTRAINT, MEASUREMENT, TIE, EventSchedule
 from bodyfusion.core.system import AidingSource, SensorSystem
@@ -152,6 +153,8 @@ class JointState:
                                    for k, s in enumerate(systems)])
         self.cross = np.zeros((offsets[-1], offsets[-1]))
         self._P = np.zeros_like(self.cross)
+        self.corrections: JointCorrections | None = None
+        """Every correction made, for the joint smoother (:meth:`keep_corrections`)."""
         if track:
             for s in systems:
                 if not offers(s, TransitionTracking):
@@ -184,11 +187,23 @@ class JointState:
             P[b, b] = s.covariance()
         return P
 
-    def correct(self, dx: np.ndarray, P_new: np.ndarray, which: list[int], measured: Set[int] = frozenset()) -> None:
-        """Hand each system in ``which`` its block of δx and P*: as its own correction to the
+    def keep_corrections(self) -> None:
+        """Log every correction from now on (time, stacked prior and posterior covariance, δx:
+        :class:`~bodyfusion.core.joint_smoothing.JointCorrections`), for the joint smoother of a
+        tracked joint state."""
+        if self.track:
+            self.corrections = JointCorrections([s.name for s in self.systems],
+                                                [b.stop - b.start for b in self.blocks])
+
+    def correct(self, t: float, dx: np.ndarray, P_new: np.ndarray, which: list[int],
+                measured: Set[int] = frozenset()) -> None:
+        """Hand each system in ``which`` its block of δx and P* (the correction at time t, s, of
+        the stacked state whose covariance :meth:`covariance` last gave): as its own correction to the
         ``measured`` systems, as a relative one (derived from the others' estimates too) to
         the rest; keep P*'s cross-covariances when tracking (then ``which`` must be every
         system: all of them moved)."""
+        if self.corrections is not None:
+            self.corrections.record(t, self._P, P_new, dx, own=bool(measured))
         for k in which:
             b = self.blocks[k]
             if k in measured:
@@ -348,7 +363,7 @@ class Fuser:
         if joint:
             # a measurement of one system is its own; one between systems (or spread to the
             # others by the cross-covariances) is relative for every system it moves
-            self.joint.correct(dx, P_new, which, measured=frozenset(joint) if len(names) == 1 else frozenset())
+            self.joint.correct(t, dx, P_new, which, measured=frozenset(joint) if len(names) == 1 else frozenset())
         else:
             measured[0].apply_correction(dx, P_new)
 
@@ -373,7 +388,7 @@ class Fuser:
             tie.log.append((t, z, float(np.sqrt(r_var)), nis, accepted))
             self.report.ties_rejected += int(not accepted)
             if accepted:
-                joint.correct(dx, P_new, list(range(len(joint.systems))) if joint.track else [a, b])
+                joint.correct(t, dx, P_new, list(range(len(joint.systems))) if joint.track else [a, b])
             tie.restart_at(ref.position_n(), sys.position_n())
 
     @staticmethod
@@ -421,7 +436,7 @@ class Fuser:
             rep.constraint_log.record(t, p_hat, p_hat, sol, solve_us, limits)
             return
         rep.activations += int(bool(sol.active))
-        joint.correct(dx, P_new, self._corrected)
+        joint.correct(t, dx, P_new, self._corrected)
         rep.constraint_log.record(t, p_hat, p_hat + dx[pos], sol, solve_us, limits, tail)
 
     def follow_position_resets(self) -> None:

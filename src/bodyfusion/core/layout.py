@@ -149,6 +149,13 @@ class SmootherConfig(StrictModel):
     foot's estimate), and ``constrain_smoothed`` applies the constraints again on the smoothed
     tracks, so that they hold there too: by default (unset) wherever the fuser enforces them
     (``fuser.method`` not ``none``); ``true`` also after independent filters; ``false`` never.
+
+    ``joint`` (default true): where the fuser tracks cross-covariances (``fuser.cross_covariance``),
+    the whole-run RTS smooths the systems it corrected together as one stacked state
+    (:mod:`bodyfusion.core.joint_smoothing`): each correction derived from several systems is
+    information for all of their smoothed tracks, not a known input of each; the constraints then
+    need not be applied again (``constrain_smoothed`` unset means false there). Without tracked
+    cross-covariances, or where a member cannot take part, each system is smoothed on its own.
     """
 
     kind: Literal["none", "rts", "fixed-lag", "fb", "fb-rts"] = "none"
@@ -158,6 +165,7 @@ class SmootherConfig(StrictModel):
     min_stance_s: float = Field(default=0.04, ge=0)
     max_segment_s: float = Field(default=10.0, gt=0)
     constrain_smoothed: bool | None = None
+    joint: bool = True
 
     @model_validator(mode="after")
     def _span_of_kind(self) -> "SmootherConfig":
@@ -169,6 +177,11 @@ class SmootherConfig(StrictModel):
     def rts_sweep(self) -> bool:
         """An RTS sweep over the filter's record (``rts``, ``fixed-lag``)."""
         return self.kind in ("rts", "fixed-lag")
+
+    def smooths_jointly(self, fuser: FuserConfig) -> bool:
+        """The whole-run RTS of the fuser's tracked joint state (``joint`` and
+        ``fuser.cross_covariance``)."""
+        return self.joint and self.kind == "rts" and not self.segmented and fuser.cross_covariance
 
     @property
     def segmented(self) -> bool:

@@ -17,9 +17,11 @@ from dataclasses import replace
 import numpy as np
 
 from bodyfusion.base.interrupts import deferred
+from bodyfusion.base.errors import FusionError
 from bodyfusion.core.capabilities import Smoothing, offers
 from bodyfusion.core.constraints import violations
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
+from bodyfusion.core.joint_smoothing import JointCorrections, smooth_jointly
 from bodyfusion.core.layout import ConstraintConfig, FuserConfig, SmootherConfig
 from bodyfusion.core.system import SensorSystem
 from bodyfusion.base.types import LOG, Trajectory
@@ -38,22 +40,46 @@ def plan_smoothing(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> 
         system.plan_smoothing(cfg)
 
 
-def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig) -> dict[str, dict]:
+def smooth_jointly_or_say_why(systems: Mapping[str, SensorSystem], cfg: SmootherConfig,
+                              corrections: JointCorrections) -> tuple[dict[str, dict], str | None]:
+    """The joint RTS of the fuser's joint state (:mod:`bodyfusion.core.joint_smoothing`) when every
+    member can take part: ({member: its diagnostics}, None); else ({}, why not)."""
+    try:
+        missing = [name for name in corrections.names if name not in systems]
+        if missing:
+            raise FusionError(f"{', '.join(missing)} cannot be smoothed")
+        members = {name: systems[name].joint_smoothing_member(cfg) for name in corrections.names}
+        return smooth_jointly(members, corrections), None
+    except FusionError as err:
+        LOG.info("smoothing each system on its own: %s", err)
+        return {}, str(err)
+
+
+def smooth_systems(systems: Mapping[str, SensorSystem], cfg: SmootherConfig,
+                   corrections: JointCorrections | None = None) -> dict[str, dict]:
     """Smooth every system that smooths; returns {system: its smoothing diagnostics}, in the
-    layout's order. Systems that smooth in a thread
+    layout's order. With the fuser's ``corrections`` of a tracked joint state, its members are
+    smoothed together first (:func:`smooth_jointly_or_say_why`; why not, where they cannot, is
+    in each system's diagnostics under ``joint_skipped``). Systems that smooth in a thread
     (:attr:`~bodyfusion.core.capabilities.Smoothing.smooths_in_a_thread`) are smoothed at the
     same time, one thread each; the others here, one after another. A signal taken meanwhile is
     answered once every smoother is done (:func:`~bodyfusion.base.interrupts.deferred`): raised
     while a thread waits on a lock the main thread holds, it would leave them both waiting."""
     systems = smoothing_systems(systems)
-    threaded = [name for name, system in systems.items() if system.smooths_in_a_thread]
-    done = {}
+    joint, why_not = smooth_jointly_or_say_why(systems, cfg, corrections) if corrections is not None else ({}, None)
+    alone = {name: system for name, system in systems.items() if name not in joint}
+    threaded = [name for name, system in alone.items() if system.smooths_in_a_thread]
+    done = dict(joint)
     with deferred(), ThreadPoolExecutor(max_workers=max(1, len(threaded) - 1)) as pool:
         futures = {name: pool.submit(systems[name].smooth, cfg) for name in threaded[1:]}
-        for name, system in systems.items():
+        for name, system in alone.items():
             if name not in futures:
                 done[name] = system.smooth(cfg)
         done |= {name: future.result() for name, future in futures.items()}
+    if why_not is not None:
+        for diagnostics in done.values():
+            if diagnostics is not None:
+                diagnostics["joint_skipped"] = why_not
     return {name: done[name] for name in systems if done[name] is not None}
 
 

@@ -119,6 +119,8 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     constraints, follows = resolve_constraints(loaded.layout.constraints,
                                                {name: s.body_part for name, s in built.items()}, loaded.layout.body)
     fuser = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body, output)
+    if loaded.layout.smoother.smooths_jointly(loaded.layout.fuser) and fuser.joint is not None:
+        fuser.joint.keep_corrections()
     return Fusion(loaded, built, systems, aiding, monitors, fuser, constraints, rotations, origin, truths, tracker,
                   timings, t_fusing, growing)
 
@@ -150,15 +152,16 @@ def finish_fusion(fusion: Fusion) -> RunResult:
     if loaded.layout.smoother.kind != "none":
         t0 = time.perf_counter()
         log.info("smoothing (smoother.kind %s)", loaded.layout.smoother.kind)
-        smoothed = smooth_systems(systems, loaded.layout.smoother)
+        joint = fusion.fuser.joint
+        smoothed = smooth_systems(systems, loaded.layout.smoother, joint.corrections if joint is not None else None)
         timings["smoothing_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     trajectories = {name: s.trajectory() for name, s in systems.items()}
     smoothed_constraints = None
     constrain = loaded.layout.smoother.constrain_smoothed
-    if constrain is None:
-        constrain = loaded.layout.fuser.method != "none"
+    if constrain is None:  # not where the smoother took the constraints in (joint)
+        constrain = loaded.layout.fuser.method != "none" and not any("joint" in d for d in smoothed.values())
     if constrain and loaded.layout.constraints and smoothed:
         trajectories, smoothed_constraints = constrain_trajectories(trajectories, set(smoothed), constraints,
                                                                     loaded.layout.fuser)

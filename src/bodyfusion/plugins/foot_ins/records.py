@@ -175,3 +175,22 @@ class SmoothedOutput(NamedTuple):
 
     out_x: np.ndarray
     out_var: np.ndarray
+
+
+class CrossTerms(NamedTuple):
+    """What a foot's sweep needs of the other systems it is smoothed with jointly
+    (:mod:`~bodyfusion.plugins.foot_ins.smoothing_joint`; m = the others' stacked error states,
+    0 alone): the adjoint's cross block ``X`` (15, m) between this foot and the others, carried
+    back with this foot's steps; the filter's cross-covariance ``Zs`` (L + 1, 15, m) between
+    this foot at each sample of the sweep and the others where they stand; the others' adjoint
+    ``lam_o`` (m,) and its block ``Lam_oo`` (m, m), fixed while this foot is swept."""
+
+    X: np.ndarray
+    Zs: np.ndarray
+    lam_o: np.ndarray
+    Lam_oo: np.ndarray
+
+
+def no_cross() -> CrossTerms:
+    """The cross terms of a foot smoothed on its own."""
+    return CrossTerms(np.zeros((15, 0)), np.zeros((1, 15, 0)), np.zeros(0), np.zeros((0, 0)))

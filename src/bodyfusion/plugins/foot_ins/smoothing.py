@@ -112,7 +112,7 @@ import numpy as np
 
 from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.nav import detectors
-from bodyfusion.plugins.foot_ins.records import PACKED_SIZE, SmoothedOutput, SweepRecord
+from bodyfusion.plugins.foot_ins.records import PACKED_SIZE, SmoothedOutput, SweepRecord, no_cross
 from bodyfusion.plugins.foot_ins.smoothing_fb import fb_segment
 from bodyfusion.plugins.foot_ins.smoothing_mbf import block_sweep, mbf_sweep, record_pass
 from bodyfusion.plugins.foot_ins.smoothing_record import CHECKPOINT_SAMPLES, BlockBuffers, RunRecord
@@ -270,7 +270,7 @@ def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forwar
             record = SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng],
                                  kept_P[:nk])
         failed += mbf_sweep(r.run, general, a, w - a, record, np.zeros(15), np.zeros((15, 15)),
-                            SmoothedOutput(out_x, out_var))
+                            SmoothedOutput(out_x, out_var), True, no_cross())
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
     diag["rts_gain_failures"] = failed
     return (0.0 if forward is not None else _rebuild_error(P, r.P_end)), latencies
@@ -289,7 +289,7 @@ def _rts(r: RunRecord, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_v
         return _segmented_rts(r, bounds, general, forward, out_x, out_var, diag)
     if forward is not None:  # the filter's own record: nothing to replay
         diag["rts_gain_failures"] = mbf_sweep(r.run, general, 0, r.n - 1, forward, np.zeros(15), np.zeros((15, 15)),
-                                              SmoothedOutput(out_x, out_var))
+                                              SmoothedOutput(out_x, out_var), True, no_cross())
         return 0.0, []
     starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
     P_replayed = np.empty_like(P_start)

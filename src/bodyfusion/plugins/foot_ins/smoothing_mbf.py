@@ -27,25 +27,28 @@ from bodyfusion.nav.error_state import (FilterParams, Q_DECAY, congruence_by_yaw
 from bodyfusion.nav.kalman import inv3_sym_into
 from bodyfusion.nav.zupt import ZUPT_COLUMNS, gated_variance, stance_velocity_sigma
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE, ekf_step, record_posterior, record_stance
-from bodyfusion.plugins.foot_ins.records import FilterRun, FilterState, SmoothedOutput, StepScratch, SweepRecord
+from bodyfusion.plugins.foot_ins.records import (CrossTerms, FilterRun, FilterState, SmoothedOutput, StepScratch,
+                                                 SweepRecord)
 from bodyfusion.plugins.foot_ins.smoothing_replay import replay_corrections
 from bodyfusion.plugins.foot_ins.smoothing_rts import chol_solve
 
 
 @numba.njit(cache=True)
 def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.ndarray, lam: np.ndarray,
-                        Lam: np.ndarray) -> None:
-    """lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ in place (Lam (15, 15) symmetric; the result's lower
-    triangle mirrored) for the transition of one step (C_nb, f_n m/s², dt s and the bias decay
-    of the process model ``q_diag``: :func:`~bodyfusion.plugins.foot_ins.kernels.transition`),
-    from its non-zero entries (:func:`bodyfusion.nav.error_state.transition_transpose_left`)
-    rather than a dense Φ: V = Φᵀ Lam, then Φᵀ Vᵀ = (V Φ)ᵀ, whose lower triangle is that of
-    Φᵀ Lam Φ."""
+                        Lam: np.ndarray, X: np.ndarray) -> None:
+    """lam ← Φᵀ lam, Lam ← Φᵀ Lam Φ and the cross block X ← Φᵀ X (15, m) in place (Lam (15, 15)
+    symmetric; the result's lower triangle mirrored) for the transition of one step (C_nb, f_n
+    m/s², dt s and the bias decay of the process model ``q_diag``:
+    :func:`~bodyfusion.plugins.foot_ins.kernels.transition`), from its non-zero entries
+    (:func:`bodyfusion.nav.error_state.transition_transpose_left`) rather than a dense Φ:
+    V = Φᵀ Lam, then Φᵀ Vᵀ = (V Φ)ᵀ, whose lower triangle is that of Φᵀ Lam Φ."""
     da = (1.0 - dt * q_diag[Q_DECAY]) - 1.0
     dg = (1.0 - dt * q_diag[Q_DECAY + 1]) - 1.0
     # np.bool_, not a bare True/False: numba types a constant argument as a literal, one
     # compilation per value
     transition_transpose_left(lam.reshape((15, 1)), C, f_n, dt, da, dg, np.bool_(False))
+    if X.shape[1] > 0:
+        transition_transpose_left(X, C, f_n, dt, da, dg, np.bool_(False))
     transition_transpose_left(Lam, C, f_n, dt, da, dg, np.bool_(False))
     for r in range(15):
         for c in range(r + 1, 15):
@@ -77,22 +80,14 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
-def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.ndarray, Lam: np.ndarray,
-                  Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
-    """(lam, Lam) in place from after a sample's stance update to before it: the heading reset
-    G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G; ``v`` (6,): the prior velocity v⁻ (m/s),
-    a = (v[3], v[4]) on the east and north velocity rows and the ZUPT's σ_v² v[5]), then the adjoint of the gated ZUPT
-    as the filter made it (:func:`bodyfusion.nav.zupt.zero_velocity_update`, from the prior
-    covariance's columns ``Pc`` (15, 4) at ZUPT_COLUMNS): with H its Jacobian, S its innovation
-    covariance (the gated noise), K = P⁻ Hᵀ S⁻¹, C = I − K H and y = −v⁻,
-    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H.
-    ``Hc`` (3, 4), ``K`` (15, 3), ``W`` (15, 4), ``S`` and ``Si`` (3, 3) are scratch."""
-    a0, a1 = v[3], v[4]
-    lam[8] += a0 * lam[3] + a1 * lam[4]
-    for r in range(15):
-        Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
-    for c in range(15):
-        Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
+def zupt_gain(v: np.ndarray, Pc: np.ndarray, params: FilterParams, Hc: np.ndarray, K: np.ndarray, S: np.ndarray,
+              Si: np.ndarray) -> None:
+    """The gated ZUPT of a stance sample as the filter made it
+    (:func:`bodyfusion.nav.zupt.zero_velocity_update`), from the prior velocity and the ZUPT's
+    σ_v² (``v`` (6,): v⁻ m/s, the heading reset's a, σ_v²) and the prior covariance's columns
+    ``Pc`` (15, 4) at ZUPT_COLUMNS: its Jacobian on those columns ``Hc`` (3, 4), the innovation
+    covariance with the gated noise ``S`` (3, 3), its inverse ``Si`` and the gain
+    K = P⁻ Hᵀ S⁻¹ (15, 3)."""
     y = (-v[0], -v[1], -v[2])
     for k in range(3):
         for m in range(3):
@@ -105,9 +100,6 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.n
     for k in range(3):
         S[k, k] += r_var
     inv3_sym_into(S, Si)
-    u0 = Si[0, 0] * y[0] + Si[0, 1] * y[1] + Si[0, 2] * y[2]
-    u1 = Si[1, 0] * y[0] + Si[1, 1] * y[1] + Si[1, 2] * y[2]
-    u2 = Si[2, 0] * y[0] + Si[2, 1] * y[1] + Si[2, 2] * y[2]
     for r in range(15):
         m0 = Pc[r, 0] + Pc[r, 3] * Hc[0, 3]
         m1 = Pc[r, 1] + Pc[r, 3] * Hc[1, 3]
@@ -115,9 +107,44 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.n
         K[r, 0] = m0 * Si[0, 0] + m1 * Si[1, 0] + m2 * Si[2, 0]
         K[r, 1] = m0 * Si[0, 1] + m1 * Si[1, 1] + m2 * Si[2, 1]
         K[r, 2] = m0 * Si[0, 2] + m1 * Si[1, 2] + m2 * Si[2, 2]
+
+
+@numba.njit(cache=True)
+def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.ndarray, Lam: np.ndarray,
+                  X: np.ndarray, Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
+    """(lam, Lam) and the cross block X (15, m) in place from after a sample's stance update to
+    before it: the heading reset G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G, X ← Gᵀ X;
+    ``v`` (6,): the prior velocity v⁻ (m/s), a = (v[3], v[4]) on the east and north velocity
+    rows and the ZUPT's σ_v² v[5]), then the adjoint of the gated ZUPT as the filter made it
+    (:func:`zupt_gain`): with H its Jacobian, S its innovation covariance, K = P⁻ Hᵀ S⁻¹,
+    C = I − K H and y = −v⁻,
+    lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H,  X ← Cᵀ X.
+    ``Hc`` (3, 4), ``K`` (15, 3), ``W`` (15, 4), ``S`` and ``Si`` (3, 3) are scratch."""
+    a0, a1 = v[3], v[4]
+    lam[8] += a0 * lam[3] + a1 * lam[4]
+    for r in range(15):
+        Lam[r, 8] += a0 * Lam[r, 3] + a1 * Lam[r, 4]
+    for c in range(15):
+        Lam[8, c] += a0 * Lam[3, c] + a1 * Lam[4, c]
+    for c in range(X.shape[1]):
+        X[8, c] += a0 * X[3, c] + a1 * X[4, c]
+    zupt_gain(v, Pc, params, Hc, K, S, Si)
+    y = (-v[0], -v[1], -v[2])
+    u0 = Si[0, 0] * y[0] + Si[0, 1] * y[1] + Si[0, 2] * y[2]
+    u1 = Si[1, 0] * y[0] + Si[1, 1] * y[1] + Si[1, 2] * y[2]
+    u2 = Si[2, 0] * y[0] + Si[2, 1] * y[1] + Si[2, 2] * y[2]
+    for r in range(15):
         u0 += K[r, 0] * lam[r]
         u1 += K[r, 1] * lam[r]
         u2 += K[r, 2] * lam[r]
+    for c in range(X.shape[1]):  # X ← X − Hᵀ (Kᵀ X)
+        w0 = w1 = w2 = 0.0
+        for r in range(15):
+            w0 += K[r, 0] * X[r, c]
+            w1 += K[r, 1] * X[r, c]
+            w2 += K[r, 2] * X[r, c]
+        for m in range(4):
+            X[ZUPT_COLUMNS[m], c] -= Hc[0, m] * w0 + Hc[1, m] * w1 + Hc[2, m] * w2
     # W = Lam K (the columns of Lam H come with Hᵀ), Z = Kᵀ Lam K + S⁻¹ (into S); W a row of
     # Lam (symmetric) at a time, each element summed over k in the order of a row times a column
     for r in range(15):
@@ -207,6 +234,26 @@ def _general_adjoint(P_post: np.ndarray, P_prior: np.ndarray, dxs: np.ndarray, d
             Lam[r, c] = v
             Lam[c, r] = v
     return True
+
+
+@numba.njit(cache=True)
+def _cross_through_general(P_post: np.ndarray, P_prior: np.ndarray, a0: float, a1: float, X: np.ndarray) -> bool:
+    """The cross block X (15, m) in place from after a general update (prior covariance
+    ``P_prior``, posterior ``P_post``, heading reset a) to before it: X ← Aᵀ X with the update's
+    closed-loop map A = G (I − K H) = P⁺ G⁻ᵀ (P⁻)⁻¹, i.e. X ← (P⁻)⁻¹ G⁻¹ P⁺ X (the map
+    :func:`_general_adjoint` takes lam and Lam through). False when P⁻ cannot be factorised."""
+    m = X.shape[1]
+    Y = np.empty((15, m))
+    for r in range(15):
+        for c in range(m):
+            s = 0.0
+            for k in range(15):
+                s += P_post[r, k] * X[k, c]
+            Y[r, c] = s
+    for c in range(m):
+        Y[3, c] -= a0 * Y[8, c]
+        Y[4, c] -= a1 * Y[8, c]
+    return chol_solve(P_prior, Y, X, np.empty((15, 16)))
 
 
 @numba.njit(inline="always")
@@ -335,9 +382,44 @@ def record_pass(start: FilterState, run: FilterRun, general: np.ndarray, i0: int
     return P, error, ns, ng, nk
 
 
+@numba.njit(inline="always")
+def _cross_error(P: np.ndarray, Z: np.ndarray, X: np.ndarray, lam_o: np.ndarray, e: np.ndarray,
+                 V: np.ndarray) -> None:
+    """The others' part of a jointly smoothed error, e ← e − Z lam_o (Z (15, m) the
+    cross-covariance, lam_o (m,) the others' adjoint), and V = Xᵀ P[:, 0:3] (m, 3) for
+    :func:`_cross_position_term`."""
+    m = Z.shape[1]
+    for r in range(15):
+        s = 0.0
+        for c in range(m):
+            s += Z[r, c] * lam_o[c]
+        e[r] -= s
+    for c in range(m):
+        for a in range(3):
+            s = 0.0
+            for k in range(15):
+                s += X[k, c] * P[k, a]
+            V[c, a] = s
+
+
+@numba.njit(inline="always")
+def _cross_position_term(Z: np.ndarray, V: np.ndarray, Lam_oo: np.ndarray, a: int, b: int) -> float:
+    """Element (a, b) of P X Zᵀ + Z Xᵀ P + Z Lam_oo Zᵀ (V = Xᵀ P[:, 0:3]): what the others add to
+    the position block of P Lam P in a joint sweep."""
+    m = Z.shape[1]
+    s = 0.0
+    for c in range(m):
+        s += V[c, a] * Z[b, c] + Z[a, c] * V[c, b]
+        w = 0.0
+        for k in range(m):
+            w += Lam_oo[c, k] * Z[b, k]
+        s += Z[a, c] * w
+    return s
+
+
 @numba.njit(cache=True, nogil=True)
 def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: SweepRecord, lam: np.ndarray,
-              Lam: np.ndarray, out: SmoothedOutput) -> int:
+              Lam: np.ndarray, out: SmoothedOutput, write_last: bool, cross: CrossTerms) -> int:
     """The fixed-interval (RTS) smoother over samples i0 … i0 + L of the filter's ``run``, from
     what :func:`record_pass` stored (the ``record``), in the modified Bryson–Frazier form (G. J. Bierman,
     Factorization Methods for Discrete Sequential Estimation, 1977): the backward sweep
@@ -355,17 +437,36 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
     noise (in exact arithmetic the textbook sweep of ``rts_block``, a third of its
     operations). On entry (lam, Lam) is the adjoint at i0 + L (zeros at the end of the run), on
     return at i0. Writes out_x[i] = hist_x[i] ⊞ dxs_i and out_var[i] (variances east, north,
-    up, covariance east–north of Ps_i, m²). Returns the samples whose update could not be
-    undone (general updates with a non-positive-definite prior; the sweep restarts from zero
-    adjoints there, as ``rts_block`` from the filter)."""
+    up, covariance east–north of Ps_i, m²) for i0 ≤ i < i0 + L, and at i0 + L with
+    ``write_last``.
+
+    Smoothed jointly with other systems (``cross``, :class:`~bodyfusion.plugins.foot_ins.records.CrossTerms`,
+    m > 0; :mod:`~bodyfusion.plugins.foot_ins.smoothing_joint`), the state and covariance are
+    the stacked ones': with Z_i the filter's cross-covariance to the others (``Zs[i − i0]``),
+    their adjoint lam_o and block Lam_oo, and the cross block X of the adjoint (carried back
+    with this foot's steps, X ← Aᵀ X),
+
+        dxs_i = −P⁺_i lam_i − Z_i lam_o,
+        Ps_i = P⁺_i − [P⁺ Lam P⁺ + P⁺ X Zᵀ + Z Xᵀ P⁺ + Z Lam_oo Zᵀ]_i,
+
+    and the sweep enters at i0 + L before the kept corrections there (the caller took the
+    adjoint back through them, jointly).
+
+    Returns the samples whose update could not be undone (general updates with a
+    non-positive-definite prior; the sweep restarts from zero adjoints there, as ``rts_block``
+    from the filter)."""
     (t, _, _, stance), params, replay, _ = run
     hist_x = replay.recorded_x
     Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = record
+    X, Zs, lam_o, Lam_oo = cross
+    m = X.shape[1]
     out_x, out_var = out
     q_diag = process_noise_diag(params)
     P = np.empty((15, 15))
     d = np.empty(15)
+    e = np.empty(15)
     T = np.empty((3, 15))
+    V = np.empty((m, 3))
     y = np.empty(16)
     Hc = np.empty((3, 4))
     K = np.empty((15, 3))
@@ -383,24 +484,40 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
                 P[r, c] = v
                 P[c, r] = v
                 q += 1
-        for r0 in range(0, 15, 5):
-            _smoothed_error_columns(P, lam, Lam, r0, d, T)
-        for k in range(16):
-            y[k] = hist_x[i, k]
-        inject(y, d)
-        for k in range(16):
-            out_x[i, k] = y[k]
-        # position block of P Lam P: P[0:3, :] T
-        q00 = q11 = q22 = q01 = 0.0
-        for k in range(15):
-            q00 += P[0, k] * T[0, k]
-            q11 += P[1, k] * T[1, k]
-            q22 += P[2, k] * T[2, k]
-            q01 += P[0, k] * T[1, k]
-        out_var[i, 0] = P[0, 0] - q00
-        out_var[i, 1] = P[1, 1] - q11
-        out_var[i, 2] = P[2, 2] - q22
-        out_var[i, 3] = P[0, 1] - q01
+        if j < L or write_last:
+            for r0 in range(0, 15, 5):
+                _smoothed_error_columns(P, lam, Lam, r0, d, T)
+            for r in range(15):
+                e[r] = d[r]
+            # position block of P Lam P: P[0:3, :] T
+            q00 = q11 = q22 = q01 = 0.0
+            for k in range(15):
+                q00 += P[0, k] * T[0, k]
+                q11 += P[1, k] * T[1, k]
+                q22 += P[2, k] * T[2, k]
+                q01 += P[0, k] * T[1, k]
+            if m > 0:
+                Z = Zs[j]
+                _cross_error(P, Z, X, lam_o, e, V)
+                q00 += _cross_position_term(Z, V, Lam_oo, 0, 0)
+                q11 += _cross_position_term(Z, V, Lam_oo, 1, 1)
+                q22 += _cross_position_term(Z, V, Lam_oo, 2, 2)
+                q01 += _cross_position_term(Z, V, Lam_oo, 0, 1)
+            for k in range(16):
+                y[k] = hist_x[i, k]
+            inject(y, e)
+            for k in range(16):
+                out_x[i, k] = y[k]
+            out_var[i, 0] = P[0, 0] - q00
+            out_var[i, 1] = P[1, 1] - q11
+            out_var[i, 2] = P[2, 2] - q22
+            out_var[i, 3] = P[0, 1] - q01
+        else:  # the adjoint's own smoothed error, for the update below
+            for r in range(15):
+                s = 0.0
+                for k in range(15):
+                    s += P[k, r] * lam[k]
+                d[r] = -s
         if j == 0:
             break
         if general[i]:
@@ -413,18 +530,23 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
                         P[r, k] = kept_P[nk, r, k]
                         dr -= P[r, k] * lam[k]
                     d[r] = dr
-            if not _general_adjoint(P, gen_P[ng], d, gen_dx[ng], gen_a[ng, 0], gen_a[ng, 1], lam, Lam):
+            ok = _general_adjoint(P, gen_P[ng], d, gen_dx[ng], gen_a[ng, 0], gen_a[ng, 1], lam, Lam)
+            if ok and m > 0:
+                ok = _cross_through_general(P, gen_P[ng], gen_a[ng, 0], gen_a[ng, 1], X)
+            if not ok:
                 failed += 1
                 for r in range(15):
                     lam[r] = 0.0
                     for c in range(15):
                         Lam[r, c] = 0.0
+                    for c in range(m):
+                        X[r, c] = 0.0
         if stance[i]:
             ns -= 1
             if not general[i]:
-                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, Hc, K, W4, S3, Si3)
+                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, X, Hc, K, W4, S3, Si3)
         quat_to_dcm_into(hist_x[i - 1, 6:10], C_nb)
-        _transition_adjoint(C_nb, f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam)
+        _transition_adjoint(C_nb, f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam, X)
     return failed
 
 
@@ -448,6 +570,7 @@ def block_sweep(run: FilterRun, general: np.ndarray, starts: np.ndarray, P_start
     blocks = starts.shape[0]
     failed = 0
     error = 0.0
+    cross = CrossTerms(np.zeros((15, 0)), np.zeros((1, 15, 0)), np.zeros(0), np.zeros((0, 0)))  # alone
     for k in range(blocks - 1, -1, -1):
         a = starts[k]
         b = starts[k + 1] if k + 1 < blocks else hist_x.shape[0] - 1
@@ -458,5 +581,6 @@ def block_sweep(run: FilterRun, general: np.ndarray, starts: np.ndarray, P_start
             for c in range(15):
                 P_replayed[k, r, c] = P_b[r, c]
         failed += mbf_sweep(run, general, a, b - a, SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng],
-                                                               gen_a[:ng], gen_kept[:ng], kept_P[:nk]), lam, Lam, out)
+                                                               gen_a[:ng], gen_kept[:ng], kept_P[:nk]), lam, Lam, out,
+                            True, cross)
     return failed, error

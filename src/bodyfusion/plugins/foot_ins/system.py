@@ -36,6 +36,7 @@ from bodyfusion.plugins.foot_ins.stance import LOCKOUT_STANCES, detect_stance, s
 from bodyfusion.plugins.foot_ins.strides import mounting, stride_table
 from bodyfusion.plugins.foot_ins.results import CovarianceLog, foot_covariance, foot_states, stance_phases, zupt_columns
 from bodyfusion.plugins.foot_ins.smoothing import smooth_system
+from bodyfusion.plugins.foot_ins.smoothing_joint import JointRtsMember
 from bodyfusion.plugins.foot_ins.records import ATTITUDE_COVARIANCE, RECORDED_COVARIANCE, VELOCITY_VARIANCE
 from bodyfusion.plugins.foot_ins.smoothing_record import ForwardRecord
 from bodyfusion.plugins.foot_ins.streaming import StreamingFootIns
@@ -445,6 +446,10 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         """RTS, FB or FB-RTS over this run (:mod:`bodyfusion.plugins.foot_ins.smoothing`); then :meth:`trajectory`
         is the smoothed track. The ensemble kinds are refused at validation (:meth:`check_layout`)."""
         return smooth_system(self, cfg).diagnostics
+
+    def joint_smoothing_member(self, cfg: SmootherConfig) -> JointRtsMember:
+        """This run in the joint RTS (:mod:`bodyfusion.plugins.foot_ins.smoothing_joint`)."""
+        return JointRtsMember(self, cfg)
 
     def set_smoothed(self, x: np.ndarray | None, pos_cov: np.ndarray | None, diagnostics: dict) -> None:
         """Store the smoother's result: (n, 16) nominal states and (n, 4) position covariances (as
