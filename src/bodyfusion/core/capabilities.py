@@ -133,7 +133,7 @@ class Smoothing(ABC):
     def joint_smoothing_member(self, cfg: BaseModel) -> Any:
         """This run as a member of the joint RTS of the systems the fuser corrected together
         (:class:`bodyfusion.core.joint_smoothing.JointMember`). Default: it cannot be one."""
-        raise FusionError(f"{getattr(self, 'name', type(self).__name__)} cannot be smoothed jointly")
+        raise FusionError("its kind cannot be smoothed jointly")
 
 
 class AbsoluteFixes(ABC):

@@ -45,10 +45,14 @@ def smooth_jointly_or_say_why(systems: Mapping[str, SensorSystem], cfg: Smoother
     """The joint RTS of the fuser's joint state (:mod:`bodyfusion.core.joint_smoothing`) when every
     member can take part: ({member: its diagnostics}, None); else ({}, why not)."""
     try:
-        missing = [name for name in corrections.names if name not in systems]
-        if missing:
-            raise FusionError(f"{', '.join(missing)} cannot be smoothed")
-        members = {name: systems[name].joint_smoothing_member(cfg) for name in corrections.names}
+        members = {}
+        for name in corrections.names:
+            if name not in systems:
+                raise FusionError(f"{name} cannot be smoothed")
+            try:
+                members[name] = systems[name].joint_smoothing_member(cfg)
+            except FusionError as err:
+                raise FusionError(f"{name}: {err}") from None
         return smooth_jointly(members, corrections), None
     except FusionError as err:
         LOG.info("smoothing each system on its own: %s", err)

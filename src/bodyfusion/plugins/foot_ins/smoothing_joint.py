@@ -132,8 +132,8 @@ class JointRtsMember:
         self.general = r.general_updates()
         self.record = r.forward_record.sweep_arrays(r, self.general)
         if self.record is None:
-            raise FusionError(f"{system.name}: the filter kept no whole-run record to smooth jointly "
-                              "(a run longer than it records, or the ZARU)")
+            raise FusionError("its filter kept no whole-run record to smooth jointly (a run longer than it "
+                              "records, or the ZARU)")
         self.times = np.asarray(system.sample_times()[:r.n], dtype=float)
         self._counts = np.column_stack([np.r_[0, np.cumsum(f[1:])] for f in (r.stance, self.general)]
                                        + [np.searchsorted(r.kept_idx, np.arange(r.n), side="right")])
