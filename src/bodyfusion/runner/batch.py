@@ -13,7 +13,7 @@ from bodyfusion.base.errors import FusionError, NotReady
 from bodyfusion.base.interrupts import answer_pending
 from bodyfusion.base.progress import ProgressCallback
 from bodyfusion.base.types import LOG
-from bodyfusion.core.capabilities import AbsoluteFixes, offers
+from bodyfusion.core.capabilities import AbsoluteFixes, Smoothing, offers
 from bodyfusion.core.compile_ahead import compile_fuser_ahead, finish_compiling_ahead
 from bodyfusion.core.data_tables import require_data
 from bodyfusion.core.epoch_state import EpochOutput
@@ -119,8 +119,9 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     constraints, follows = resolve_constraints(loaded.layout.constraints,
                                                {name: s.body_part for name, s in built.items()}, loaded.layout.body)
     fuser = Fuser(monitors, loaded.layout.fuser, constraints, aiding, ties, follows, loaded.layout.body, output)
-    if loaded.layout.smoother.smooths_jointly(loaded.layout.fuser) and fuser.joint is not None:
-        fuser.joint.keep_corrections()
+    if (loaded.layout.smoother.smooths_jointly(loaded.layout.fuser) and fuser.joint is not None
+            and all(offers(systems[s.name], Smoothing) for s in fuser.joint.systems)):
+        fuser.joint.keep_corrections()  # for the joint smoother (a member that does not smooth: none)
     return Fusion(loaded, built, systems, aiding, monitors, fuser, constraints, rotations, origin, truths, tracker,
                   timings, t_fusing, growing)
 
