@@ -79,7 +79,7 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
             S[c, r] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(inline="always")
 def zupt_gain(v: np.ndarray, Pc: np.ndarray, params: FilterParams, Hc: np.ndarray, K: np.ndarray, S: np.ndarray,
               Si: np.ndarray) -> None:
     """The gated ZUPT of a stance sample as the filter made it
@@ -382,7 +382,7 @@ def record_pass(start: FilterState, run: FilterRun, general: np.ndarray, i0: int
     return P, error, ns, ng, nk
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def _cross_error(P: np.ndarray, Z: np.ndarray, X: np.ndarray, lam_o: np.ndarray, e: np.ndarray,
                  V: np.ndarray) -> None:
     """The others' part of a jointly smoothed error, e ← e − Z lam_o (Z (15, m) the
@@ -402,7 +402,7 @@ def _cross_error(P: np.ndarray, Z: np.ndarray, X: np.ndarray, lam_o: np.ndarray,
             V[c, a] = s
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def _cross_position_term(Z: np.ndarray, V: np.ndarray, Lam_oo: np.ndarray, a: int, b: int) -> float:
     """Element (a, b) of P X Zᵀ + Z Xᵀ P + Z Lam_oo Zᵀ (V = Xᵀ P[:, 0:3]): what the others add to
     the position block of P Lam P in a joint sweep."""
@@ -487,8 +487,6 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
         if j < L or write_last:
             for r0 in range(0, 15, 5):
                 _smoothed_error_columns(P, lam, Lam, r0, d, T)
-            for r in range(15):
-                e[r] = d[r]
             # position block of P Lam P: P[0:3, :] T
             q00 = q11 = q22 = q01 = 0.0
             for k in range(15):
@@ -498,6 +496,8 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
                 q01 += P[0, k] * T[1, k]
             if m > 0:
                 Z = Zs[j]
+                for r in range(15):
+                    e[r] = d[r]
                 _cross_error(P, Z, X, lam_o, e, V)
                 q00 += _cross_position_term(Z, V, Lam_oo, 0, 0)
                 q11 += _cross_position_term(Z, V, Lam_oo, 1, 1)
@@ -505,7 +505,7 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
                 q01 += _cross_position_term(Z, V, Lam_oo, 0, 1)
             for k in range(16):
                 y[k] = hist_x[i, k]
-            inject(y, e)
+            inject(y, e if m > 0 else d)
             for k in range(16):
                 out_x[i, k] = y[k]
             out_var[i, 0] = P[0, 0] - q00
