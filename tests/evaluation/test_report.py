@@ -294,7 +294,7 @@ def _key_paths(doc: object, path: tuple = ()) -> list[tuple]:
 
 
 @pytest.mark.slow
-@settings(max_examples=60, derandomize=True, deadline=None, database=None,
+@settings(max_examples=30, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_metrics_json_of_another_shape_is_one_error_naming_it(vicon_run_folder, data):

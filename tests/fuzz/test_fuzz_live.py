@@ -6,8 +6,8 @@ part of it (``keep_s``). A run either refuses the row with one
 :class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks; never
 another exception.
 
-Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35, as the file fuzzing; a third of them for the
-phone); derandomised; each case's outcome goes to the long mode's table as the file fuzzing's do
+Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (as the file fuzzing; by default 18 here, half the file
+fuzzing's 35: a live run costs about a second; a third of them for the phone); derandomised; each case's outcome goes to the long mode's table as the file fuzzing's do
 (targets ``live rows``, ``live phone rows``)."""
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from tests.fuzz.test_fuzz_inputs import CASE_OUTCOME, recorded
 from tests.paths import CONFIGS
 
 VICON = CONFIGS / "dual_foot_vicon.yaml"
-EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "35"))
+EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "18"))
 BAD_CELLS = [math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0, -1.0, 1e30, "abc", "", None, True, [], {}]
 """Values a live row's cell may hold."""
 

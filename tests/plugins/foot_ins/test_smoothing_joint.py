@@ -22,10 +22,18 @@ def rmse(result, name: str) -> float:
 
 
 @pytest.fixture(scope="module")
-def runs():
+def joint_fusion():
+    """The joint RTS's run: the layout, the fusion (its fuser's log) and the result."""
+    loaded = load_layout(VICON, TRACKED + ["smoother.kind=rts"])
+    fusion = prepare_fusion(loaded)
+    return loaded, fusion, finish_fusion(fusion)
+
+
+@pytest.fixture(scope="module")
+def runs(joint_fusion):
     """The constrained filter, its joint RTS and each foot's own RTS."""
-    return {kind: run_layout(load_layout(VICON, TRACKED + extra)) for kind, extra in (
-        ("filter", []), ("joint", ["smoother.kind=rts"]), ("alone", ["smoother.kind=rts", "smoother.joint=false"]))}
+    return {"joint": joint_fusion[2]} | {kind: run_layout(load_layout(VICON, TRACKED + extra)) for kind, extra in (
+        ("filter", []), ("alone", ["smoother.kind=rts", "smoother.joint=false"]))}
 
 
 def test_joint_rts_carries_the_cross_covariances_the_fuser_kept(runs):
@@ -56,34 +64,26 @@ def test_joint_rts_without_a_joint_correction_is_each_foots_own_rts():
         np.testing.assert_array_equal(joint.systems[name].smoothed_pos_cov, alone.systems[name].smoothed_pos_cov)
 
 
-def test_the_order_the_feet_are_swept_in_moves_the_tracks_by_a_centimetre_at_most():
+def test_the_order_the_feet_are_swept_in_moves_the_tracks_by_a_centimetre_at_most(joint_fusion):
     """Each foot's own ZUPT does not correct the other (the fuser's tracked filter): it is not a
     Kalman update of the stacked state, and the sweep takes it back as the foot's own, an
     approximation the order of the sweep exposes: sweeping the right foot first instead of the
     left moves the smoothed tracks by 10 mm at most with this 0.4 m limit (1.6 mm at the
     layout's own)."""
-    tracks = []
-    for order in ([0, 1], [1, 0]):
-        loaded = load_layout(VICON, TRACKED + ["smoother.kind=rts"])
-        fusion = prepare_fusion(loaded)
-        fusion.fuser.finish()
-        log = fusion.fuser.joint.corrections
-        idx = np.concatenate([np.arange(15 * k, 15 * k + 15) for k in order])
-        swapped = JointCorrections([log.names[k] for k in order], [15, 15], log.t,
-                                   [P[np.ix_(idx, idx)] for P in log.P_prior],
-                                   [P[np.ix_(idx, idx)] for P in log.P_post], [dx[idx] for dx in log.dx])
-        smooth_jointly({n: fusion.systems[n].joint_smoothing_member(loaded.layout.smoother) for n in swapped.names},
-                       swapped)
-        tracks.append({n: fusion.systems[n].smoothed_x[:, 0:3].copy() for n in log.names})
-    for name in tracks[0]:
-        assert np.max(np.abs(tracks[0][name] - tracks[1][name])) < 0.015
+    loaded, fusion, _ = joint_fusion
+    log = fusion.fuser.joint.corrections
+    left_first = {n: fusion.systems[n].smoothed_x[:, 0:3].copy() for n in log.names}
+    idx = np.r_[15:30, 0:15]
+    swapped = JointCorrections(log.names[::-1], [15, 15], log.t, [P[np.ix_(idx, idx)] for P in log.P_prior],
+                               [P[np.ix_(idx, idx)] for P in log.P_post], [dx[idx] for dx in log.dx])
+    smooth_jointly({n: fusion.systems[n].joint_smoothing_member(loaded.layout.smoother) for n in swapped.names},
+                   swapped)
+    for name, track in left_first.items():
+        assert 0.0 < np.max(np.abs(fusion.systems[name].smoothed_x[:, 0:3] - track)) < 0.015
 
 
-def test_a_batch_run_logs_corrections_only_for_the_joint_smoother():
-    untracked = prepare_fusion(load_layout(VICON, ["smoother.kind=rts", "output.plots=false"]))
-    assert untracked.fuser.joint.corrections is None
-    fusion = prepare_fusion(load_layout(VICON, TRACKED + ["smoother.kind=rts"]))
-    assert fusion.fuser.joint.corrections is not None
-    result = finish_fusion(fusion)
+def test_a_batch_run_logs_every_joint_correction_for_the_joint_smoother_only(joint_fusion):
+    _, fusion, result = joint_fusion
     ties = sum(int(np.sum([row[4] for row in tie.log])) for tie in result.fuser.heading_ties)
     assert len(fusion.fuser.joint.corrections.t) == result.fuser.activations + result.fuser.tail_truncations + ties
+    assert prepare_fusion(load_layout(VICON, ["smoother.kind=rts", "output.plots=false"])).fuser.joint.corrections is None

@@ -18,6 +18,8 @@ only (array expressions cost numba compile time).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -59,6 +61,17 @@ def _transition_adjoint(C: np.ndarray, f_n: np.ndarray, dt: float, q_diag: np.nd
     for r in range(15):
         for c in range(r + 1, 15):
             Lam[r, c] = Lam[c, r]
+
+
+class ZuptScratch(NamedTuple):
+    """Working arrays of :func:`_zupt_adjoint`: the ZUPT's Jacobian on its columns ``Hc`` (3, 4),
+    gain ``K`` (15, 3), ``W`` (15, 4), innovation covariance ``S`` and its inverse ``Si`` (3, 3)."""
+
+    Hc: np.ndarray
+    K: np.ndarray
+    W: np.ndarray
+    S: np.ndarray
+    Si: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -111,7 +124,7 @@ def zupt_gain(v: np.ndarray, Pc: np.ndarray, params: FilterParams, Hc: np.ndarra
 
 @numba.njit(cache=True)
 def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.ndarray, Lam: np.ndarray,
-                  X: np.ndarray, Hc: np.ndarray, K: np.ndarray, W: np.ndarray, S: np.ndarray, Si: np.ndarray) -> None:
+                  X: np.ndarray, scratch: ZuptScratch) -> None:
     """(lam, Lam) and the cross block X (15, m) in place from after a sample's stance update to
     before it: the heading reset G = I + a e_ψᵀ undone (lam ← Gᵀ lam, Lam ← Gᵀ Lam G, X ← Gᵀ X;
     ``v`` (6,): the prior velocity v⁻ (m/s), a = (v[3], v[4]) on the east and north velocity
@@ -119,7 +132,8 @@ def _zupt_adjoint(v: np.ndarray, Pc: np.ndarray, params: FilterParams, lam: np.n
     (:func:`zupt_gain`): with H its Jacobian, S its innovation covariance, K = P⁻ Hᵀ S⁻¹,
     C = I − K H and y = −v⁻,
     lam ← Cᵀ lam − Hᵀ S⁻¹ y,  Lam ← Cᵀ Lam C + Hᵀ S⁻¹ H,  X ← Cᵀ X.
-    ``Hc`` (3, 4), ``K`` (15, 3), ``W`` (15, 4), ``S`` and ``Si`` (3, 3) are scratch."""
+    ``scratch``: :class:`ZuptScratch`."""
+    Hc, K, W, S, Si = scratch
     a0, a1 = v[3], v[4]
     lam[8] += a0 * lam[3] + a1 * lam[4]
     for r in range(15):
@@ -468,10 +482,7 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
     T = np.empty((3, 15))
     V = np.empty((m, 3))
     y = np.empty(16)
-    Hc = np.empty((3, 4))
-    K = np.empty((15, 3))
-    W4 = np.empty((15, 4))
-    S3, Si3 = np.empty((3, 3)), np.empty((3, 3))
+    zupt = ZuptScratch(np.empty((3, 4)), np.empty((15, 3)), np.empty((15, 4)), np.empty((3, 3)), np.empty((3, 3)))
     C_nb = np.empty((3, 3))
     ns, ng, nk = st_v.shape[0], gen_P.shape[0], kept_P.shape[0]
     failed = 0
@@ -544,7 +555,7 @@ def mbf_sweep(run: FilterRun, general: np.ndarray, i0: int, L: int, record: Swee
         if stance[i]:
             ns -= 1
             if not general[i]:
-                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, X, Hc, K, W4, S3, Si3)
+                _zupt_adjoint(st_v[ns], st_P[ns], params, lam, Lam, X, zupt)
         quat_to_dcm_into(hist_x[i - 1, 6:10], C_nb)
         _transition_adjoint(C_nb, f_ns[j], t[i] - t[i - 1], q_diag, lam, Lam, X)
     return failed
