@@ -27,6 +27,7 @@ from typing import IO
 
 from bodyfusion.base.errors import ConfigError
 from bodyfusion.base.extras import import_optional
+from bodyfusion.base.interrupts import deferred
 from bodyfusion.core.epoch_state import EpochSink, EpochState
 
 COLUMNS = ("t", "system", "t_state", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
@@ -152,7 +153,10 @@ class McapSink:
 
 class EverySink:
     """Writes each epoch to all of ``sinks`` with SIGINT and SIGTERM held back meanwhile, so that an
-    interrupted run leaves every sink at the same epoch, none with part of one."""
+    interrupted run leaves every sink at the same epoch, none with part of one: blocked in this
+    thread, and only recorded by the command line's handlers (:func:`~bodyfusion.base.interrupts.deferred`)
+    where another thread took the signal (the kernel gives a process's signal to any thread not
+    blocking it, and Python runs its handler in the main thread, here)."""
 
     def __init__(self, sinks: list[EpochSink]) -> None:
         self.sinks = sinks
@@ -161,8 +165,9 @@ class EverySink:
     def write(self, state: EpochState) -> None:
         old = signal.pthread_sigmask(signal.SIG_BLOCK, self._held)
         try:
-            for sink in self.sinks:
-                sink.write(state)
+            with deferred():
+                for sink in self.sinks:
+                    sink.write(state)
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
