@@ -92,7 +92,7 @@ def _zupt_innovation(Pc: np.ndarray, Hc: np.ndarray, S: np.ndarray) -> None:
             S[c, r] = s
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def zupt_gain(v: np.ndarray, Pc: np.ndarray, params: FilterParams, Hc: np.ndarray, K: np.ndarray, S: np.ndarray,
               Si: np.ndarray) -> None:
     """The gated ZUPT of a stance sample as the filter made it
