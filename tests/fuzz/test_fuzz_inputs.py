@@ -5,7 +5,7 @@ metrics.json that is strict JSON; never a traceback, never a hang (60 s per comm
 corrupted file that changes a score past a margin says so with a warning (no silent wrong
 result).
 
-Examples per target: ``BODYFUSION_FUZZ_EXAMPLES`` (default 35; 7 targets → 245 inputs).
+Examples per target: ``BODYFUSION_FUZZ_EXAMPLES`` (default 25; 7 targets → 175 inputs).
 Hypothesis is derandomised: the same inputs every run, so a failure reproduces. With
 ``BODYFUSION_FUZZ_TABLE`` set, every case's outcome is appended to that CSV (the long mode:
 ``benchmarks/fuzz_long.py``)."""
@@ -35,7 +35,7 @@ from bodyfusion.cli import main
 from tests.fuzz.corruptions import layout_edits, nmea_edits, text_edits
 from tests.fuzz.recording import write_recording
 
-EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "35"))
+EXAMPLES = int(os.environ.get("BODYFUSION_FUZZ_EXAMPLES", "25"))
 COMMAND_TIMEOUT_S = 60
 
 fuzz = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,

@@ -6,9 +6,9 @@ part of it (``keep_s``). A run either refuses the row with one
 :class:`~bodyfusion.base.errors.FusionError` naming it, or closes with finite tracks; never
 another exception.
 
-Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (as the file fuzzing; by default 18 here, half the file
-fuzzing's 35: a live run costs about a second; a third of them for the phone); derandomised; each case's outcome goes to the long mode's table as the file fuzzing's do
-(targets ``live rows``, ``live phone rows``)."""
+Examples: ``BODYFUSION_FUZZ_EXAMPLES`` (as the file fuzzing; by default 18 here: a live run costs
+about a second; a third of them for the phone); derandomised; each case's outcome goes to the
+long mode's table as the file fuzzing's do (targets ``live rows``, ``live phone rows``)."""
 
 from __future__ import annotations
 
