@@ -111,14 +111,16 @@ def _through_correction(P_prior: np.ndarray, P_post: np.ndarray, dx: np.ndarray,
         return False
     s = 1.0 / np.sqrt(d)  # Jacobi-scaled: the diagonal spans many decades
     try:
-        factor = scipy.linalg.cho_factor(P_prior * s[:, None] * s[None, :])
+        factor = scipy.linalg.cho_factor(P_prior * s[:, None] * s[None, :], check_finite=False)
     except np.linalg.LinAlgError:
         lam[:] = 0.0
         Lam[:] = 0.0
         return False
-    lam[:] = -s * scipy.linalg.cho_solve(factor, s * (e + dx))
-    M = s[:, None] * scipy.linalg.cho_solve(factor, s[:, None] * (P_prior - Ps))  # (P⁻)⁻¹ (P⁻ − Ps)
-    M = s[:, None] * scipy.linalg.cho_solve(factor, s[:, None] * M.T)
+    # one solve for (P⁻)⁻¹ [P⁻ − Ps | e + dx], one for the right-hand (P⁻)⁻¹
+    B = np.column_stack([P_prior - Ps, e + dx]) * s[:, None]
+    Y = s[:, None] * scipy.linalg.cho_solve(factor, B, check_finite=False)
+    lam[:] = -Y[:, -1]
+    M = s[:, None] * scipy.linalg.cho_solve(factor, s[:, None] * Y[:, :-1].T, check_finite=False)
     Lam[:] = 0.5 * (M + M.T)
     return True
 
@@ -154,24 +156,29 @@ def smooth_jointly(members: dict[str, JointMember], log: JointCorrections) -> di
     lam, Lam = np.zeros(n), np.zeros((n, n))
     ends = np.array([m.samples - 1 for m in order], dtype=np.int64)
     failures, rebuild = 0, 0.0
+    members_q = []  # per member: its block, the others' indices and the index grids between them
+    for q in range(len(order)):
+        own = blocks[q]
+        others = np.concatenate([blocks[p] for p in range(len(order)) if p != q])
+        members_q.append((own, others, np.ix_(own, own), np.ix_(own, others), np.ix_(others, own),
+                          np.ix_(others, others), [(p, np.ix_(own, blocks[p])) for p in range(len(order)) if p != q]))
     for g in range(len(events) - 1, -2, -1):
         starts = events[g][0] if g >= 0 else np.zeros(len(order), dtype=np.int64)
         C = events[g][2] if g >= 0 else np.zeros((n, n))  # the cross-covariances after event g
-        U = [order[p].transfer(int(starts[p]), int(ends[p])) for p in range(len(order))]
+        # the later members' transitions over the stretch (the first's is never needed)
+        U = [None] + [order[p].transfer(int(starts[p]), int(ends[p])) for p in range(1, len(order))]
         for q, member in enumerate(order):
-            others = np.concatenate([blocks[p] for p in range(len(order)) if p != q]) if len(order) > 1 else []
-            W = np.hstack([C[np.ix_(blocks[q], blocks[p])] @ (U[p].T if p > q else np.eye(sizes[p]))
-                           for p in range(len(order)) if p != q])
-            lam_q, Lam_qq = lam[blocks[q]].copy(), Lam[np.ix_(blocks[q], blocks[q])].copy()
-            X = np.ascontiguousarray(Lam[np.ix_(blocks[q], others)])
+            own, others, qq, qo, oq, oo, pairs = members_q[q]
+            W = np.hstack([C[qp] @ U[p].T if p > q else C[qp] for p, qp in pairs])
+            lam_q, Lam_qq, X = lam[own], Lam[qq], np.ascontiguousarray(Lam[qo])
             Z_end = member.sweep(int(starts[q]), int(ends[q]), g == len(events) - 1, W, lam_q, Lam_qq, X,
-                                 lam[others].copy(), np.ascontiguousarray(Lam[np.ix_(others, others)]))
-            lam[blocks[q]] = lam_q
-            Lam[np.ix_(blocks[q], blocks[q])] = Lam_qq
-            Lam[np.ix_(blocks[q], others)] = X
-            Lam[np.ix_(others, blocks[q])] = X.T
+                                 lam[others], np.ascontiguousarray(Lam[oo]))
+            lam[own] = lam_q
+            Lam[qq] = Lam_qq
+            Lam[qo] = X
+            Lam[oq] = X.T
             if q == 0 and g + 1 < len(events):  # every other member at the later correction: the fuser's prior there
-                C_next = events[g + 1][1][np.ix_(blocks[0], others)]
+                C_next = events[g + 1][1][qo]
                 rebuild = max(rebuild, float(np.max(np.abs(Z_end - C_next)) / max(np.max(np.abs(C_next)), 1e-300)))
         if g >= 0:
             _, P_prior, P_post, dx = events[g]

@@ -174,18 +174,21 @@ class JointRtsMember:
         with ``write_last``. Returns the cross-covariance at b (from W carried forward)."""
         m = W.shape[1]
         starts = list(range(a, b, CHUNK_SAMPLES)) or [a]
-        checkpoints = []
-        Z = W.copy()
-        for c0 in starts:
-            checkpoints.append(Z.copy())
-            self._forward(c0, min(c0 + CHUNK_SAMPLES, b), Z, np.empty((0, 15, m)))
+        checkpoints = [W.copy()]
+        if len(starts) > 1:  # the cross-covariance at each chunk's start
+            Z = W.copy()
+            for c0 in starts[:-1]:
+                self._forward(c0, c0 + CHUNK_SAMPLES, Z, np.empty((0, 15, m)))
+                checkpoints.append(Z.copy())
+        Z_end = None
         for c0, Z0 in zip(reversed(starts), reversed(checkpoints)):
             c1 = min(c0 + CHUNK_SAMPLES, b)
             Zs = np.empty((c1 - c0 + 1, 15, m))
-            self._forward(c0, c1, Z0.copy(), Zs)
+            self._forward(c0, c1, Z0, Zs)
+            Z_end = Zs[-1].copy() if Z_end is None else Z_end
             self.gain_failures += mbf_sweep(self.r.run, self.general, c0, c1 - c0, self._slice(c0, c1), lam, Lam,
                                             self.out, write_last and c1 == b, CrossTerms(X, Zs, lam_o, Lam_oo))
-        return Z
+        return Z_end
 
     def finish(self, diagnostics: dict) -> dict:
         """Hand the smoothed track to the system, with the joint sweep's ``diagnostics`` (its
