@@ -179,9 +179,10 @@ def test_a_row_holding_no_finite_number_is_refused_naming_the_system_row_and_col
         run.push(name, {**row, "gyro_x": value})
 
 
-def test_a_layout_with_a_smoother_is_refused_live():
-    with pytest.raises(ConfigError, match="smoother.kind"):
-        LiveRun(load_layout(VICON, ["smoother.kind=rts"]))
+@pytest.mark.parametrize("kind", ["rts", "fb", "fb-rts"])
+def test_a_layout_with_a_smoother_other_than_fixed_lag_is_refused_live(kind):
+    with pytest.raises(ConfigError, match="smoother.kind.*fixed-lag only"):
+        LiveRun(load_layout(VICON, [f"smoother.kind={kind}"]))
 
 
 def test_a_row_without_the_sections_columns_is_refused():

@@ -130,6 +130,13 @@ class Smoothing(ABC):
         """Smooth the run (the layout's ``smoother`` section); afterwards ``trajectory()`` is the
         smoothed track. Returns the smoother's diagnostics, None when it did not smooth."""
 
+    def live_smoother(self, cfg: BaseModel) -> Any:
+        """This run's smoother as its live run goes (the layout's ``smoother`` section): an object
+        whose ``advance(final=False)`` gives the samples the data now smooth for good
+        (:class:`~bodyfusion.core.epoch_state.SmoothedSamples`, or None; ``final``: the recording
+        is complete) and ``diagnostics()`` a dict. Default: it cannot smooth live."""
+        raise FusionError("its kind cannot be smoothed live")
+
     def joint_smoothing_member(self, cfg: BaseModel) -> Any:
         """This run as a member of the joint RTS of the systems the fuser corrected together
         (:class:`bodyfusion.core.joint_smoothing.JointMember`). Default: it cannot be one."""

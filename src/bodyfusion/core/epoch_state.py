@@ -54,11 +54,30 @@ class EpochState:
     systems: Mapping[str, SystemState]
     health: Mapping[str, int]
     wall_time: float
+    smoothed_lag_s: float | None = None
+    """None: the filtered state, emitted as the fuser takes the epoch; else the fixed-lag
+    smoothed state of the systems that smooth live, emitted once the data reach this lag (s) and
+    the window's segment bounds beyond the epoch (:class:`SmoothedSamples`; no ``health``)."""
 
     def to_dict(self) -> dict:
-        """JSON-ready: ``t``, ``systems`` (name → :meth:`SystemState.to_dict`), ``health``."""
-        return {"t": self.t, "systems": {name: s.to_dict() for name, s in self.systems.items()},
-                "health": dict(self.health)}
+        """JSON-ready: ``t``, ``systems`` (name → :meth:`SystemState.to_dict`), ``health``; a
+        smoothed state also ``smoothed_lag_s``."""
+        out = {"t": self.t, "systems": {name: s.to_dict() for name, s in self.systems.items()},
+               "health": dict(self.health)}
+        if self.smoothed_lag_s is not None:
+            out["smoothed_lag_s"] = self.smoothed_lag_s
+        return out
+
+
+@dataclass(frozen=True)
+class SmoothedSamples:
+    """Smoothed samples of one system as a live smoother hands them on, in time order: ``t`` (k,)
+    s (the samples' times), ``position_n`` (k, 3) ENU m, ``position_sd_m`` (k, 3) one-sigma east,
+    north, up (m)."""
+
+    t: np.ndarray
+    position_n: np.ndarray
+    position_sd_m: np.ndarray
 
 
 class EpochSink(Protocol):
@@ -77,6 +96,8 @@ class EpochOutput:
     interval_s: float
     sinks: Sequence[EpochSink] = ()
     emitted: int = 0
+    smoothed_emitted: int = 0
+    """Smoothed epochs emitted so far (:meth:`emit_smoothed`)."""
     totals: dict[str, int] = field(default_factory=lambda: dict.fromkeys(HEALTH_COUNTS, 0))
     """The fuser's counts (:data:`HEALTH_COUNTS`) at the last epoch emitted."""
     _closed: bool = False
@@ -96,6 +117,15 @@ class EpochOutput:
         for sink in self.sinks:
             sink.write(state)
         self.emitted += 1
+        return state
+
+    def emit_smoothed(self, t: float, systems: Mapping[str, SystemState], lag_s: float) -> EpochState:
+        """Write the smoothed state at epoch ``t`` (s) of ``systems`` (name → its smoothed
+        :class:`SystemState`), smoothed with ``lag_s`` (s), to every sink."""
+        state = EpochState(float(t), dict(systems), {}, time.perf_counter(), lag_s)
+        for sink in self.sinks:
+            sink.write(state)
+        self.smoothed_emitted += 1
         return state
 
     def _health(self, report) -> dict[str, int]:

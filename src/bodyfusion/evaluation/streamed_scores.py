@@ -65,7 +65,10 @@ class StreamedScores:
     """The sink (module docstring): ``truths`` by system, the layout's truth ``alignment``
     (``none`` or ``first_3m``) and ``alignment_distance_m``. :meth:`scores` gives the figures."""
 
-    def __init__(self, truths: Mapping[str, TruthTrack], alignment: str, alignment_distance_m: float) -> None:
+    def __init__(self, truths: Mapping[str, TruthTrack], alignment: str, alignment_distance_m: float,
+                 smoothed: bool = False) -> None:
+        self.smoothed = smoothed
+        """Score the smoothed states (:attr:`~bodyfusion.core.epoch_state.EpochState.smoothed_lag_s`), else the filtered."""
         self.tracks = {name: _Track(truth) for name, truth in truths.items()}
         self.distance_m = alignment_distance_m
         self.transform: PlanarTransform | None = PlanarTransform.identity() if alignment == "none" else None
@@ -73,6 +76,8 @@ class StreamedScores:
         """The states before the alignment is fitted."""
 
     def write(self, state: EpochState) -> None:
+        if (state.smoothed_lag_s is not None) != self.smoothed:
+            return
         if self.transform is None:
             self._first.append(state)
             for name, track in self.tracks.items():

@@ -30,8 +30,12 @@ phone's GNSS), whose rows are taken as they come and never hold the run up. Each
 
 Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
 next replan has run. Each system must offer :class:`~bodyfusion.core.capabilities.Streaming`
-(the foot INS and the hand-held phone do); aiding sources and smoothers do not run live yet and
-are refused.
+(the foot INS and the hand-held phone do); aiding sources do not run live yet and are refused.
+
+Smoothing: with ``smoother.kind: fixed-lag`` every system that smooths live
+(:meth:`~bodyfusion.core.capabilities.Smoothing.live_smoother`: the foot INS) hands on after each
+pass the samples its fixed-lag smoother now decides, merged into a second stream of epochs
+(:mod:`bodyfusion.live.smoothed`); the other smoothers need the whole run and are refused.
 
 Scores: with ``keep_s`` and a truth, every state emitted is scored as it passes
 (:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`, the result's ``whole_run``).
@@ -48,14 +52,15 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from bodyfusion.base.errors import ConfigError, InputError, NotReady
+from bodyfusion.base.errors import ConfigError, FusionError, InputError, NotReady
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.sections import TableSection
-from bodyfusion.core.capabilities import Streaming
+from bodyfusion.core.capabilities import Smoothing, Streaming, offers
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.registry import get_registry
 from bodyfusion.evaluation.streamed_scores import StreamedScores
+from bodyfusion.live.smoothed import SmoothedEpochs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.batch import Fusion, finish_fusion, prepare_fusion
 
@@ -208,9 +213,9 @@ class LiveRun:
                 raise ConfigError(f"{key} ({option})", f"{value!r} s: give {least:g} to {most:g} s")
         self.loaded = loaded.checked()
         layout = self.loaded.layout
-        if layout.smoother.kind != "none":
-            raise ConfigError("smoother.kind", f"{layout.smoother.kind}: a live run does not smooth yet; use none",
-                              loaded.path)
+        if layout.smoother.kind not in ("none", "fixed-lag"):
+            raise ConfigError("smoother.kind", f"{layout.smoother.kind}: a live run smooths with fixed-lag only "
+                                               "(or none)", loaded.path)
         self.buffers: dict[str, RowBuffer] = {}
         """Every streamed section's rows, by stream: a system's name for its data section,
         ``NAME.SECTION`` for an aiding section (:meth:`stream_name`)."""
@@ -246,6 +251,12 @@ class LiveRun:
         self.scorer: StreamedScores | None = None
         """With ``keep_s`` and a truth: the scores of every state emitted (the finished result's
         ``whole_run``; its ``scores`` cover the part kept)."""
+        self.smoothed: SmoothedEpochs | None = None
+        """With ``smoother.kind: fixed-lag``, once started: the smoothed stream (:mod:`bodyfusion.live.smoothed`)."""
+        self.smoothed_scorer: StreamedScores | None = None
+        """With the smoothed stream and a truth: the scores of every smoothed state emitted."""
+        self.not_smoothed: dict[str, str] = {}
+        """The systems not in the smoothed stream, and why."""
         self.not_started: NotReady | None = None
         """Why the run could not start on the data so far (it tries again every :data:`RETRY_S` of data)."""
 
@@ -296,6 +307,7 @@ class LiveRun:
                     truth = self.loaded.layout.truth
                     self.scorer = StreamedScores(self.fusion.truths, truth.alignment, truth.alignment_distance_m)
                     self.output.sinks = [*self.output.sinks, self.scorer]
+                self._start_smoothing()
                 self._advance(newest)
                 self.started = (newest, time.perf_counter())
                 return True
@@ -314,9 +326,33 @@ class LiveRun:
         for system in self.fusion.systems.values():
             read(system)
 
+    def _start_smoothing(self) -> None:
+        """With ``smoother.kind: fixed-lag``: every system that smooths live in the smoothed stream
+        (the others in :attr:`not_smoothed`), scored where the layout has a truth for it."""
+        cfg = self.loaded.layout.smoother
+        if cfg.kind == "none":
+            return
+        smoothers = {}
+        for name, system in self.fusion.systems.items():
+            if not offers(system, Smoothing):
+                self.not_smoothed[name] = "it does not smooth"
+                continue
+            try:
+                smoothers[name] = system.live_smoother(cfg)
+            except FusionError as err:
+                self.not_smoothed[name] = str(err)
+        self.smoothed = SmoothedEpochs(smoothers, self.output, cfg.lag_s)
+        truths = {name: track for name, track in self.fusion.truths.items() if name in smoothers}
+        if truths:
+            truth = self.loaded.layout.truth
+            self.smoothed_scorer = StreamedScores(truths, truth.alignment, truth.alignment_distance_m, smoothed=True)
+            self.output.sinks = [*self.output.sinks, self.smoothed_scorer]
+
     def _advance(self, newest: float) -> None:
         self._planned_t = newest
         self.fusion.fuser.advance()
+        if self.smoothed is not None:
+            self.smoothed.advance()
         self._forget()
 
     def _forget(self) -> None:
@@ -350,9 +386,15 @@ class LiveRun:
                                              lookahead_s=self.lookahead_s, complete=True)
             self._read_tables(lambda s: s.close_stream())
             result = finish_fusion(self.fusion)
-            if self.scorer is None:
-                return result
+            if self.smoothed is not None:  # the recordings complete: every segment to the end
+                self.smoothed.advance(final=True)
+                result = dataclasses.replace(result, live_smoothing={
+                    **self.smoothed.diagnostics(), "not_smoothed": dict(self.not_smoothed)})
             self.output.close()  # the last states scored
-            return dataclasses.replace(result, whole_run=self.scorer.scores())
+            if self.scorer is not None:
+                result = dataclasses.replace(result, whole_run=self.scorer.scores())
+            if self.smoothed_scorer is not None:
+                result = dataclasses.replace(result, whole_run_smoothed=self.smoothed_scorer.scores())
+            return result
         finally:
             self.output.close()

@@ -7,13 +7,20 @@ The records:
 
 * JSON lines: one object per epoch, :meth:`~bodyfusion.core.epoch_state.EpochState.to_dict`
   (``t``; ``systems``: name → ``t``, ``east_m``, ``north_m``, ``up_m``, ``sd_east_m``,
-  ``sd_north_m``, ``sd_up_m``; ``health``: the fuser's counts since the epoch before).
+  ``sd_north_m``, ``sd_up_m``; ``health``: the fuser's counts since the epoch before; a
+  smoothed epoch also ``smoothed_lag_s``).
 * CSV and Parquet: one row per epoch and system, columns :data:`COLUMNS` (flushed each epoch;
   Parquet in row groups of :data:`ROWS_PER_GROUP`).
 * MCAP (:mod:`mcap`, JSON encoding): per system a ``/bodyfusion/<system>/pose`` channel of
   ``foxglove.PoseInFrame`` messages (frame ``enu``; position only, the orientation is the
   identity), so that Foxglove and similar viewers draw the tracks as they grow, and one
-  ``/bodyfusion/epoch`` channel with the whole epoch (its JSON line's object).
+  ``/bodyfusion/epoch`` channel with the whole epoch (its JSON line's object); the smoothed
+  stream of a live fixed-lag smoother on ``/bodyfusion/<system>/pose_smoothed`` and
+  ``/bodyfusion/epoch_smoothed``.
+
+A live run with ``smoother.kind: fixed-lag`` writes two streams to the same sinks, interleaved in
+the order they are made: the filtered epochs, and the smoothed epochs of the same grid some
+seconds later (:mod:`bodyfusion.live.smoothed`).
 """
 
 from __future__ import annotations
@@ -30,9 +37,11 @@ from bodyfusion.base.extras import import_optional
 from bodyfusion.base.interrupts import deferred
 from bodyfusion.core.epoch_state import EpochSink, EpochState
 
-COLUMNS = ("t", "system", "t_state", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m")
+COLUMNS = ("t", "system", "t_state", "east_m", "north_m", "up_m", "sd_east_m", "sd_north_m", "sd_up_m", "stream")
 """The CSV and Parquet sinks' columns: epoch time (s), system, the state's own time (s), ENU
-position (m) and its one-sigma (m)."""
+position (m) and its one-sigma (m), and the stream: ``filtered``, or ``smoothed`` (a live
+fixed-lag smoother's, :attr:`~bodyfusion.core.epoch_state.EpochState.smoothed_lag_s`)."""
+TEXT_COLUMNS = ("system", "stream")
 ROWS_PER_GROUP = 4096
 """Rows a Parquet row group holds."""
 POSE_SCHEMA = {
@@ -65,8 +74,14 @@ class JsonLinesSink:
             self.stream.flush()
 
 
+def _stream(state: EpochState) -> str:
+    """The stream an epoch belongs to (:data:`COLUMNS`)."""
+    return "filtered" if state.smoothed_lag_s is None else "smoothed"
+
+
 def _rows(state: EpochState) -> list[tuple]:
-    return [(state.t, name, s.t, *map(float, s.position_n), *map(float, s.position_sd_m))
+    stream = _stream(state)
+    return [(state.t, name, s.t, *map(float, s.position_n), *map(float, s.position_sd_m), stream)
             for name, s in state.systems.items()]
 
 
@@ -95,7 +110,7 @@ class ParquetSink:
         import pyarrow.parquet as pq
 
         self._pa = pa
-        self.schema = pa.schema([(c, pa.string() if c == "system" else pa.float64()) for c in COLUMNS])
+        self.schema = pa.schema([(c, pa.string() if c in TEXT_COLUMNS else pa.float64()) for c in COLUMNS])
         self.writer = pq.ParquetWriter(str(path), self.schema)
         self.rows: list[tuple] = []
 
@@ -127,24 +142,29 @@ class McapSink:
                                                         data=json.dumps(POSE_SCHEMA).encode())
         epoch_schema = self.writer.register_schema(name="bodyfusion.EpochState", encoding="jsonschema",
                                                    data=json.dumps({"type": "object"}).encode())
-        self._epoch_channel = self.writer.register_channel("/bodyfusion/epoch", "json", epoch_schema)
+        self._epoch_schema = epoch_schema
         self._channels: dict[str, int] = {}
+
+    def _channel(self, topic: str, schema: int) -> int:
+        """The channel of ``topic``, registered when first used."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._channels[topic] = self.writer.register_channel(topic, "json", schema)
+        return channel
 
     def write(self, state: EpochState) -> None:
         ns = int(round(state.t * 1e9))
         stamp = {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+        suffix = "" if state.smoothed_lag_s is None else "_smoothed"
         for name, s in state.systems.items():
-            channel = self._channels.get(name)
-            if channel is None:
-                channel = self._channels[name] = self.writer.register_channel(f"/bodyfusion/{name}/pose", "json",
-                                                                              self._pose_schema)
+            channel = self._channel(f"/bodyfusion/{name}/pose{suffix}", self._pose_schema)
             x, y, z = (float(v) for v in s.position_n)
             pose = {"timestamp": stamp, "frame_id": "enu", "pose": {"position": {"x": x, "y": y, "z": z},
                                                                     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0,
                                                                                     "w": 1.0}}}
             self.writer.add_message(channel, log_time=ns, publish_time=ns, data=json.dumps(pose).encode())
-        self.writer.add_message(self._epoch_channel, log_time=ns, publish_time=ns,
-                                data=json.dumps(state.to_dict()).encode())
+        self.writer.add_message(self._channel(f"/bodyfusion/epoch{suffix}", self._epoch_schema), log_time=ns,
+                                publish_time=ns, data=json.dumps(state.to_dict()).encode())
 
     def close(self) -> None:
         self.writer.finish()

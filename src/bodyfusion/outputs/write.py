@@ -87,6 +87,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
                                      if p75 > 0 else None}
         if name in result.whole_run:
             block["whole_run"] = result.whole_run[name]
+        if name in result.whole_run_smoothed:
+            block["whole_run_smoothed"] = result.whole_run_smoothed[name]
         block["diagnostics"] = system.diagnostics()
         block["health"] = health[name]
         systems[name] = block
@@ -107,6 +109,8 @@ def metrics_document(result: RunResult, config_label: str, total_wall_s: float) 
         "health": {"findings": [f.to_dict() for f in result.findings]},
         "systems": systems,
     }
+    if result.live_smoothing is not None:
+        doc["live_smoothing"] = result.live_smoothing
     if layout.constraints:
         rep = result.fuser
         lam = np.asarray(rep.multipliers)

@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # pandas loads when a table is asked for, xarray when a datas
 
 
 _MAPPINGS = ("systems", "trajectories", "truths", "scores", "heading_rotations_rad", "timings_s", "aiding", "nees",
-             "sensor_alone", "whole_run")
+             "sensor_alone", "whole_run", "whole_run_smoothed")
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,13 @@ class RunResult:
     """A live run that kept a bounded history: per system with truth, the errors of every state it
     emitted (:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`), where ``scores``
     cover the part kept."""
+    whole_run_smoothed: Mapping[str, dict] = field(default_factory=dict)
+    """A live run with ``smoother.kind: fixed-lag``: per system in its smoothed stream with truth,
+    the errors of every smoothed state it emitted (as ``whole_run``)."""
+    live_smoothing: dict | None = None
+    """A live run with ``smoother.kind: fixed-lag``: its smoothed stream's ``epochs``, each system's
+    live smoother's diagnostics (``systems``) and the systems ``not_smoothed`` with why
+    (:mod:`bodyfusion.live.smoothed`)."""
     findings: tuple[Finding, ...] = ()
     """Health findings of the run (:class:`~bodyfusion.base.findings.Finding`): the systems', the
     fuser's and the evaluation's, in that order."""

@@ -34,3 +34,28 @@ def test_rows_hand_out_views_to_write_and_keep_them():
         rows.next_row()[:] = (k, -k)
     rows.append((5, -5))
     np.testing.assert_array_equal(rows.array(), [[k, -k] for k in range(6)])
+
+
+def test_the_covariance_log_gives_the_covariances_of_the_later_samples_alone():
+    """What a live fixed-lag window reads: from a sample on, the same numbers as the whole log's."""
+    rng = np.random.default_rng(3)
+    log = CovarianceLog(block=3)
+    for i in range(11):
+        A = rng.normal(size=(15, 15))
+        P = A @ A.T
+        if i % 3 == 0:
+            P[4, 1] += 1e-3  # kept whole: its lower triangle beside the upper
+        log.add(i // 2, P)
+    idx, P = log.covariances()
+    for since in range(7):
+        later = idx >= since
+        idx_s, P_s = log.covariances(since)
+        assert np.array_equal(idx_s, idx[later]) and np.array_equal(P_s, P[later])
+
+
+def test_rows_copy_from_any_row_across_their_blocks():
+    rows = Rows((2,), np.float64, block=4)
+    for i in range(11):
+        rows.append([i, -i])
+    for first in range(13):
+        assert np.array_equal(rows.array(first), rows.array()[first:])

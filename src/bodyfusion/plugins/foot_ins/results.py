@@ -111,12 +111,13 @@ class Rows:
     def __len__(self) -> int:
         return self._n
 
-    def array(self) -> np.ndarray:
-        """The rows so far, (n, *shape) (a copy)."""
-        out = np.empty((self._n, *self._shape), dtype=self._dtype)
-        for k, block in enumerate(self._blocks):
-            rows = out[k * self._block:(k + 1) * self._block]
-            rows[...] = block[:len(rows)]
+    def array(self, first: int = 0) -> np.ndarray:
+        """The rows so far from row ``first`` on, (n − first, *shape) (a copy of those alone)."""
+        out = np.empty((max(self._n - first, 0), *self._shape), dtype=self._dtype)
+        for k in range(first // self._block, len(self._blocks)):
+            lo = k * self._block
+            a, b = max(first, lo), min(lo + self._block, self._n)
+            out[a - first:b - first] = self._blocks[k][a - lo:b - lo]
         return out
 
 
@@ -167,10 +168,15 @@ class CovarianceLog:
                 out.add(int(i) - d, P)
         return out
 
-    def covariances(self) -> tuple[np.ndarray, np.ndarray]:
-        """(n,) sample indices and (n, 15, 15) covariances, in the order they were added."""
-        P = np.empty((len(self.idx), 15, 15))
-        P[:, _UPPER[0], _UPPER[1]] = self.upper.array()
+    def covariances(self, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) sample indices and (n, 15, 15) covariances, in the order they were added (their
+        samples' order), of the samples ``since`` and later."""
+        idx = self.idx.array()
+        k0 = int(np.searchsorted(idx, since))
+        P = np.empty((idx.size - k0, 15, 15))
+        P[:, _UPPER[0], _UPPER[1]] = self.upper.array(k0)
         P[:, _LOWER[0], _LOWER[1]] = P[:, _LOWER[1], _LOWER[0]]
-        P[self.lower_at.array()[:, None], _LOWER[0], _LOWER[1]] = self.lower.array()
-        return self.idx.array(), P
+        lower_at = self.lower_at.array()
+        m0 = int(np.searchsorted(lower_at, k0))  # in the order added
+        P[lower_at[m0:][:, None] - k0, _LOWER[0], _LOWER[1]] = self.lower.array(m0)
+        return idx[k0:], P

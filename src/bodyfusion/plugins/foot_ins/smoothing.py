@@ -140,15 +140,24 @@ class SmoothingResult:
     segment_latency_ms: np.ndarray | None = None
 
 
-def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_segment_s: float) -> np.ndarray:
-    """Segment boundaries (sample indices, increasing, first 0 and last n−1): the
-    midpoints of the stance runs at least ``min_stance_s`` long, long gaps cut evenly."""
-    n = stance.shape[0]
+def stance_midpoints(stance: np.ndarray, rate_hz: float, min_stance_s: float, ended: bool = False,
+                     skip_first: bool = False) -> np.ndarray:
+    """The midpoints (sample indices, increasing) of the stance runs at least ``min_stance_s``
+    long; ``ended``: only the runs that ended before the last sample (a live record's later
+    samples may lengthen the last); ``skip_first``: not a run that starts at sample 0 (a live
+    record that starts at the midpoint of that run)."""
     starts, ends = detectors.stance_events(stance)
     keep = (ends - starts) >= max(1, int(round(min_stance_s * rate_hz)))
-    mids = (starts[keep] + ends[keep] - 1) // 2
-    bounds = np.unique(np.concatenate([[0], mids, [n - 1]])).astype(np.int64)
-    max_len = max(2, int(round(max_segment_s * rate_hz)))
+    if ended:
+        keep &= ends < stance.shape[0]
+    if skip_first:
+        keep &= starts > 0
+    return (starts[keep] + ends[keep] - 1) // 2
+
+
+def cut_long_segments(bounds: np.ndarray, max_len: int) -> np.ndarray:
+    """``bounds`` (sample indices, increasing) with every stretch longer than ``max_len`` samples
+    cut evenly."""
     out = [int(bounds[0])]
     for b in bounds[1:]:
         a = out[-1]
@@ -160,6 +169,20 @@ def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_
             out.append(a + (gap * k) // pieces)
         out.append(int(b))
     return np.asarray(out, dtype=np.int64)
+
+
+def segment_bounds(stance: np.ndarray, rate_hz: float, min_stance_s: float, max_segment_s: float) -> np.ndarray:
+    """Segment boundaries (sample indices, increasing, first 0 and last n−1): the
+    midpoints of the stance runs at least ``min_stance_s`` long, long gaps cut evenly."""
+    n = stance.shape[0]
+    mids = stance_midpoints(stance, rate_hz, min_stance_s)
+    bounds = np.unique(np.concatenate([[0], mids, [n - 1]])).astype(np.int64)
+    return cut_long_segments(bounds, max_segment_samples(max_segment_s, rate_hz))
+
+
+def max_segment_samples(max_segment_s: float, rate_hz: float) -> int:
+    """The longest segment (samples) for ``smoother.max_segment_s``."""
+    return max(2, int(round(max_segment_s * rate_hz)))
 
 
 def _latency(ms: list[float]) -> dict:
@@ -196,7 +219,7 @@ def _blocks(r: RunRecord, starts: np.ndarray, P_start: np.ndarray) -> tuple[np.n
     return idx[order], np.concatenate(new_P)[order]
 
 
-def _sweep_store(r: RunRecord, bounds: np.ndarray, general: np.ndarray, ends: np.ndarray | None = None) -> SweepRecord:
+def sweep_store(r: RunRecord, bounds: np.ndarray, general: np.ndarray, ends: np.ndarray | None = None) -> SweepRecord:
     """The record :func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass` writes
     (``Pu`` … ``kept_P``), sized for the longest stretch ``bounds[k]`` … ``bounds[ends[k]]``
     (``ends``: default k + 1): its samples, stance samples, general updates (``general`` (n,))
@@ -253,7 +276,7 @@ def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forwar
         counts = np.column_stack([np.r_[0, np.cumsum(f[1:])][bounds] for f in (r.stance, general)] +
                                  [np.searchsorted(r.kept_idx, bounds, side="right")])
     else:
-        Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store = _sweep_store(r, bounds, general, ends)
+        store = sweep_store(r, bounds, general, ends)
         buf = BlockBuffers(1)
     P = r.P0.copy()
     for k in range(bounds.size - 1):
@@ -263,17 +286,31 @@ def _segmented_rts(r: RunRecord, bounds: np.ndarray, general: np.ndarray, forwar
             (s0, g0, k0), (s1, g1, k1) = counts[k], counts[ends[k]]
             record = SweepRecord(Pu[a:w + 1], f_ns[a:w + 1], st_v[s0:s1], st_P[s0:s1], gen_P[g0:g1], gen_dx[g0:g1],
                                  gen_a[g0:g1], gen_kept[g0:g1], kept_P[k0:k1])
+            failed += mbf_sweep(r.run, general, a, w - a, record, np.zeros(15), np.zeros((15, 15)),
+                                SmoothedOutput(out_x, out_var), True, no_cross())
         else:
-            P_w, error, ns, ng, nk = record_pass(r.start(a, P), r.run, general, a, w, store)
-            P = P_w if w == b else r.forward(a, b, P, False, buf)  # the covariance where the next window starts
-            r.state_error = max(r.state_error, error)
-            record = SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng],
-                                 kept_P[:nk])
-        failed += mbf_sweep(r.run, general, a, w - a, record, np.zeros(15), np.zeros((15, 15)),
-                            SmoothedOutput(out_x, out_var), True, no_cross())
+            P, window_failed = window_rts(r, general, (a, b, w), P, store, buf, SmoothedOutput(out_x, out_var))
+            failed += window_failed
         latencies.append((time.perf_counter_ns() - t0) / 1e6)
     diag["rts_gain_failures"] = failed
     return (0.0 if forward is not None else _rebuild_error(P, r.P_end)), latencies
+
+
+def window_rts(r: RunRecord, general: np.ndarray, window: tuple[int, int, int], P_a: np.ndarray, store: SweepRecord,
+               buf: BlockBuffers, out: SmoothedOutput) -> tuple[np.ndarray, int]:
+    """The RTS of segment a–b given the data up to w (``window`` (a, b, w), sample indices of
+    ``r``): the filter replayed from a with its covariance there ``P_a`` into ``store``
+    (:func:`~bodyfusion.plugins.foot_ins.smoothing_mbf.record_pass`, :func:`sweep_store`), swept
+    back from zero adjoints at w into ``out`` (samples a … w). Returns the filter's covariance
+    at b (where the next window starts) and the sweep's gain failures."""
+    a, b, w = window
+    P_w, error, ns, ng, nk = record_pass(r.start(a, P_a), r.run, general, a, w, store)
+    P_b = P_w if w == b else r.forward(a, b, P_a, False, buf)
+    r.state_error = max(r.state_error, error)
+    Pu, f_ns, st_v, st_P, gen_P, gen_dx, gen_a, gen_kept, kept_P = store
+    record = SweepRecord(Pu, f_ns, st_v[:ns], st_P[:ns], gen_P[:ng], gen_dx[:ng], gen_a[:ng], gen_kept[:ng],
+                         kept_P[:nk])
+    return P_b, mbf_sweep(r.run, general, a, w - a, record, np.zeros(15), np.zeros((15, 15)), out, True, no_cross())
 
 
 def _rts(r: RunRecord, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_var: np.ndarray,
@@ -294,7 +331,7 @@ def _rts(r: RunRecord, bounds: np.ndarray, whole: bool, out_x: np.ndarray, out_v
     starts, P_start = _blocks(r, *r.forward_record.checkpoints(r))
     P_replayed = np.empty_like(P_start)
     failed, error = block_sweep(r.run, general, starts, P_start, r.memory(starts),
-                                _sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed,
+                                sweep_store(r, np.r_[starts, r.n - 1], general), P_replayed,
                                 SmoothedOutput(out_x, out_var))
     r.state_error = max(r.state_error, error)
     diag["rts_gain_failures"] = failed

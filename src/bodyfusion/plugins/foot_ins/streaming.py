@@ -34,6 +34,7 @@ from bodyfusion.base.findings import Finding
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.types import ImuStream, log_silenced
 from bodyfusion.core.capabilities import Streaming, forgotten_history_finding
+from bodyfusion.core.layout import SmootherConfig
 from bodyfusion.io.imu import read_imu
 from bodyfusion.nav import detectors
 from bodyfusion.nav.gait import PERIOD_HOP_S
@@ -41,6 +42,7 @@ from bodyfusion.nav.strapdown import NOMINAL_SIZE
 from bodyfusion.plugins.foot_ins.input_policy import DerivedInputs, clock_lag, navigation_clock
 from bodyfusion.plugins.foot_ins.kernels import NO_STANCE
 from bodyfusion.plugins.foot_ins.records import RECORDED_COVARIANCE
+from bodyfusion.plugins.foot_ins.smoothing_live import LiveFixedLag
 
 CONTEXT_S = 30.0
 """Recording (s) before the first undecided sample that each pass derives again: several stride
@@ -104,6 +106,11 @@ class StreamingFootIns(Streaming):
     recording's sample k + ``forgotten``."""
     _t_first: float | None = None
     """The recording's first sample (s), once live."""
+    P_first_held: np.ndarray | None = None
+    """The filter's covariance at the first sample held, once samples before it were forgotten by a
+    run that smooths (None: the initial one): where a smoother of what is held starts."""
+    _live_smoother: LiveFixedLag | None = None
+    """The live fixed-lag smoother, once asked for (:meth:`live_smoother`)."""
 
     def _check_ready(self) -> None:
         """On a live run's first part (:attr:`~bodyfusion.core.system.LayoutContext.growing`), refuse
@@ -145,6 +152,13 @@ class StreamingFootIns(Streaming):
                 "raise the look-ahead (fusion live --lookahead) if the delay allows."))
         return out
 
+    def live_smoother(self, cfg: SmootherConfig) -> LiveFixedLag:
+        """The fixed-lag smoother as this live run goes (:mod:`bodyfusion.plugins.foot_ins.smoothing_live`)."""
+        if cfg.kind != "fixed-lag":
+            raise FusionError(f"smoother.kind {cfg.kind} does not smooth live: use fixed-lag")
+        self._live_smoother = LiveFixedLag(self, cfg)
+        return self._live_smoother
+
     def start_streaming(self, lookahead_s: float) -> None:
         if self.config.position_fixes is not None:
             raise FusionError(f"systems.{self.name}.position_fixes: a live foot INS takes no position-fix file")
@@ -164,7 +178,9 @@ class StreamingFootIns(Streaming):
         the stride period's grid (so the number dropped is a multiple of its hop), and the lockout
         watch reads the stance the filter is in whole. Indices kept (the filter's sample, the gaps'
         and corrections') lose the number dropped; the covariances kept for a smoother before it
-        are dropped with them (a live run does not smooth)."""
+        are dropped with them. A live fixed-lag smoother (:meth:`live_smoother`) keeps every sample from its next
+        segment's start, and the covariance at the new first sample is kept (:attr:`P_first_held`: a smoother at the
+        close starts there)."""
         if self._lookahead_s is None:
             return {}
         hop = max(1, int(round(PERIOD_HOP_S * self._rate_hz)))
@@ -173,9 +189,14 @@ class StreamingFootIns(Streaming):
         r = int(np.searchsorted(starts, self._i, side="right")) - 1
         if r >= 0 and ends[r] > self._i:
             d = min(d, int(starts[r]))
+        if self._live_smoother is not None:  # it smooths from its next segment's start on
+            d = min(d, self._live_smoother.start)
         d -= d % hop
         if d <= 0:
             return {}
+        if self._live_smoother is not None:  # the covariance at the new first sample: a smoother's start
+            self.P_first_held = self._live_smoother.covariance_at(d)
+            self._live_smoother.forget(d, self.P_first_held)
         self._live.drop_first(d)
         data, n = self.run_data, self._i + 1
         for name in ("hist_x", "hist_cov", "hist_nis"):

@@ -406,39 +406,50 @@ class FootIns(StreamingFootIns, InitialState, SensorSystem, HeadingAlignment, Bo
         return self.stream.t
 
     # --- smoothing (bodyfusion.plugins.foot_ins.smoothing) ---------------------------------------------
-    def smoothing_record(self) -> dict:
+    def smoothing_record(self, first: int = 0) -> dict:
         """What the smoothers need to replay this filter's run (nothing is copied but the few covariances set outside
         the compiled loop): IMU samples, stance flags, filter parameters, the recorded nominal history, the initial
         covariance, the gaps (sample index after each gap, sorted, and the covariance the gap policy added before the
         step to it: process noise of that step), the sample indices (sorted) with the covariance left there by a fuser
         correction or a fix (and, for the ckf, after every coloured update), the kept corrections' sample indices
         (sorted, one per sample) with the nominal state before the first of them there, and what the filter recorded
-        for the whole-run RTS as it ran (``forward_record``). Ensemble kinds have no such record."""
+        for the whole-run RTS as it ran (``forward_record``). ``first``: the run from that sample on, every index
+        counted from it (a live fixed-lag window; ``P0`` is then the caller's to set). Ensemble kinds have no such
+        record."""
         if not self.filter.smoothable:
             raise FusionError(f"filter.kind {self.config.filter.kind} cannot be smoothed")
         n = self._i + 1
-        idx, Ps = self.corrections.covariances()  # in time order; the ckf's own before them, sorted stably
+        idx, Ps = self.corrections.covariances(first)  # in time order; the ckf's own before them, sorted stably
         if self.run_data.override_idx:
-            order = np.argsort(idx := np.concatenate([*self.run_data.override_idx, idx]), kind="stable")
+            idx = np.concatenate([*self.run_data.override_idx, idx])
+            order = np.argsort(idx, kind="stable")
             idx, Ps = idx[order], np.concatenate([*self.run_data.override_P, Ps])[order]
+            later = idx >= first
+            idx, Ps = idx[later], Ps[later]
         # kept corrections: the state before the first at each sample
-        kept_idx, first = np.unique(self.run_data.kept_idx.view(), return_index=True)
-        gaps = self._gap_index <= self._i
+        held = self.run_data.kept_idx.view()
+        k0 = int(np.searchsorted(held, first))
+        kept_idx, kept_first = np.unique(held[k0:], return_index=True)
+        gaps = (self._gap_index <= self._i) & (self._gap_index >= first)
         gap_idx = self._gap_index[gaps]
         # the gap policy's inflation went through apply_correction: the last override at g − 1
         keep = np.ones(idx.size, dtype=bool)
         keep[np.searchsorted(idx, gap_idx - 1, side="right") - 1] = False
-        return {"t": self._t_nav[:n], "acc": self.stream.acc_b[:n], "gyro": self.stream.gyro_b[:n],
-                "stance": self.stance[:n], "params": self._params, "hist_x": self.hist_x[:n],
-                "P0": self._P0.copy(), "P_end": self.P.copy(), "override_idx": idx if keep.all() else idx[keep],
-                "override_P": Ps if keep.all() else Ps[keep], "kept_idx": kept_idx,
-                "kept_x": self.run_data.kept_x.view()[first],
-                "gap_idx": np.ascontiguousarray(gap_idx), "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
-                "rate_hz": float(1.0 / np.median(np.diff(self.stream.t))), "forward_record": self._forward_record}
+        idx, Ps = (idx, Ps) if keep.all() else (idx[keep], Ps[keep])
+        return {"t": self._t_nav[first:n], "acc": self.stream.acc_b[first:n], "gyro": self.stream.gyro_b[first:n],
+                "stance": self.stance[first:n], "params": self._params, "hist_x": self.hist_x[first:n],
+                "P0": (self._P0 if self.P_first_held is None else self.P_first_held).copy(), "P_end": self.P.copy(),
+                "override_idx": idx - first, "override_P": Ps,
+                "kept_idx": kept_idx - first, "kept_x": self.run_data.kept_x.view()[k0:][kept_first],
+                "gap_idx": np.ascontiguousarray(gap_idx - first), "gap_dP": np.ascontiguousarray(self._gap_P[gaps]),
+                "rate_hz": float(1.0 / np.median(np.diff(self.stream.t[first:]))),
+                "forward_record": self._forward_record}
 
     def plan_smoothing(self, cfg: SmootherConfig) -> None:
         """Before the run: the filter records what the layout's ``smoother`` needs as it runs when
         :meth:`~bodyfusion.plugins.foot_ins.smoothing_record.ForwardRecord.plan` says so; restarts when that changes."""
+        if self.context.growing:  # a live run's windows replay the filter: no record of a run still growing
+            return
         if self._forward_record.plan(cfg, self.config.filter.kind, self._params, self.stance):
             self.restart()
 
