@@ -5,7 +5,7 @@ that name their dotted key."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import ClassVar, Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -145,6 +145,20 @@ class TableSection(StrictModel):
         """The section reads a table (a file or one in memory) to be used; False where it may
         stand without one (a section that says how other data are read)."""
         return True
+
+    def text_columns(self) -> list[str]:
+        """Of :meth:`required_columns`, those holding names (an anchor's id), not numbers: a live
+        run's row buffer keeps them as text. Default: none."""
+        return []
+
+    def gap_columns(self) -> list[str]:
+        """Of :meth:`required_columns`, those whose cell may be empty or NaN (a failed ranging): the
+        reader drops and counts such rows by its policy, so a live row may carry them. Default: none."""
+        return []
+
+    rows_share_times: ClassVar[bool] = False
+    """Several rows may carry one time (ranges to several anchors): a live row buffer then drops
+    only rows earlier than the newest, not those at its time."""
 
     def required_columns(self) -> list[str]:
         """The columns its file must have: every ``*_column`` and ``*_columns`` field set (a

@@ -173,6 +173,12 @@ class Streaming(ABC):
     look-ahead beyond it; :meth:`~bodyfusion.core.system.SensorSystem.decided_until` says up to
     when that is, and the fuser takes no event after it."""
 
+    paces_live: ClassVar[bool] = True
+    """Its data section's rows pace a live run (it waits for them): a navigation system's. An
+    aiding source's measurements are taken as they come (False): a gap in them never holds the
+    run up, and one that arrives after the fuser passed its time is not taken (the schedule
+    counts it, :meth:`~bodyfusion.core.system.AidingSource.record_late`)."""
+
     @classmethod
     def streamed_sections(cls, config: BaseModel) -> tuple[str, ...]:
         """The sections of ``config`` whose tables grow live: the system's data section first (its

@@ -8,7 +8,9 @@ a horizon: the time up to which every system's samples and sync events are final
 events in (h₀, h], for successive horizons h₀ < h, so that the union over any sequence of
 horizons is the batch run's set of events and each slice is in the batch run's order
 (time, then kind: measurements, heading ties, constraints, outputs). A batch run is the
-one slice (−∞, ∞].
+one slice (−∞, ∞]. An aiding source whose measurements are taken as they come (a live UWB tag)
+may gain measurements at or before a horizon already passed: they are not given, and the
+source is told (:meth:`~bodyfusion.core.system.AidingSource.record_late`).
 
 Epoch times follow ``fuser.epochs`` (:func:`epoch_times`): ``events`` — every sync time of the
 systems; ``interval`` — every ``interval_s`` from the latest start; ``sample`` — every sample.
@@ -97,6 +99,10 @@ class EventSchedule:
         for i, src in enumerate(self.sources):
             times = src.measurement_times()
             k0 = self._next_measurement[i]
+            late = int(np.searchsorted(times, after, side="right"))  # at or before the last horizon, not given:
+            for k in range(k0, late):  # a live source's rows that arrived after the fuser passed their time
+                src.record_late(k)
+            k0 = max(k0, late)
             k1 = int(np.searchsorted(times, horizon, side="right"))
             events += [(float(times[k]), MEASUREMENT, i, k) for k in range(k0, k1)]
             self._next_measurement[i] = max(k0, k1)

@@ -415,3 +415,8 @@ class AidingSource(Plugin):
     def record(self, k: int, nis: float | None, accepted: bool) -> None:
         """The fuser's verdict on measurement k (nis None: not applied, e.g. outside the
         measured systems' data)."""
+
+    def record_late(self, k: int) -> None:
+        """Measurement k arrived after the fuser had passed its time (a live run's rows taken as they
+        come): it is not applied. Default: recorded as not applied (:meth:`record`)."""
+        self.record(k, None, False)

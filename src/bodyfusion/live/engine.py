@@ -30,7 +30,10 @@ phone's GNSS), whose rows are taken as they come and never hold the run up. Each
 
 Delay: a state at t is emitted once every system's data reach t + the look-ahead (2 s) and the
 next replan has run. Each system must offer :class:`~bodyfusion.core.capabilities.Streaming`
-(the foot INS and the hand-held phone do); aiding sources do not run live yet and are refused.
+(the foot INS, the hand-held phone and the UWB tag do). An aiding source's rows (a UWB tag's
+ranges) do not pace the run (:attr:`~bodyfusion.core.capabilities.Streaming.paces_live`): they are
+taken as they come, and one that arrives after the fuser passed its time is counted late by the
+schedule, not applied.
 
 Smoothing: with ``smoother.kind: fixed-lag`` every system that smooths live
 (:meth:`~bodyfusion.core.capabilities.Smoothing.live_smoother`: the foot INS) hands on after each
@@ -91,6 +94,16 @@ epoch every millisecond at the most; decisions, warm-up and passes within minute
 kept of 10 s (less than a pass derives again) to 30 days."""
 
 
+def _is_nan(value: object) -> bool:
+    """``value`` is a NaN (a failed measurement a reader drops by its policy) or empty."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return True
+    try:
+        return math.isnan(float(value))  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return False
+
+
 def _finite(value: object) -> float | None:
     """``value`` as a finite float, or None (not a number, NaN or infinite)."""
     try:
@@ -103,61 +116,87 @@ def _finite(value: object) -> float | None:
 class RowBuffer:
     """The rows of one of a system's streamed sections as they arrive: the columns the section
     reads, and each row's time (s) as the section defines it, in
-    :class:`~bodyfusion.base.records.GrowingArray` records. ``key``: the section's dotted key
-    (``systems.NAME.SECTION``); ``paces``: the run waits for these rows (the system's data section),
-    or takes them as they come (an aiding section, a phone's GNSS)."""
+    :class:`~bodyfusion.base.records.GrowingArray` records (the section's text columns, an anchor's
+    id, as text beside the numbers). ``key``: the section's dotted key (``systems.NAME.SECTION``);
+    ``paces``: the run waits for these rows (a navigation system's data section), or takes them as
+    they come (an aiding section, a phone's GNSS, a UWB tag's ranges)."""
 
     def __init__(self, section: TableSection, key: str, paces: bool = True) -> None:
         self.section, self.key, self.paces = section, key, paces
         self.system, _, self.section_name = key.removeprefix("systems.").rpartition(".")
         self.columns = section.required_columns()
+        self.text_columns = [c for c in self.columns if c in section.text_columns()]
+        self.number_columns = [c for c in self.columns if c not in self.text_columns]
+        self._gap_columns = set(section.gap_columns())
+        self._share_times = section.rows_share_times
         self._time_column = getattr(section, "time_column", None)
         self._time_scale = float(getattr(section, "time_scale", 1.0))
         self._rate_hz = getattr(section, "rate_hz", None)
-        self._data = GrowingArray((len(self.columns),), capacity=1024)
+        self._data = GrowingArray((len(self.number_columns),), capacity=1024)
+        self._text = GrowingArray((len(self.text_columns),), dtype=object, capacity=1024)
         self._t = GrowingArray((), capacity=1024)
-        self._time_index = self.columns.index(self._time_column) if self._time_column is not None else None
+        self._time_index = (self.number_columns.index(self._time_column) if self._time_column is not None
+                            else None)
         self.newest_t = -math.inf
         """Time (s) of the newest row (−∞ before the first)."""
         self.dropped = 0
-        """Rows dropped for a time not after the newest."""
+        """Rows dropped for a time not after the newest (before it, where rows may share a time)."""
         self.forgotten = 0
         """Rows forgotten from the front (:meth:`forget`): row k held is the stream's row k + forgotten."""
 
-    def add(self, row: Mapping[str, float]) -> bool:
+    def add(self, row: Mapping[str, float | str]) -> bool:
         """Append ``row`` (column → value; every column the section reads); a row whose time is not
-        after the newest is dropped and counted (``dropped``): the rows of a live recording come
-        in time order, so that row k is sample k for good. True when it was kept."""
+        after the newest (before it, where rows share times) is dropped and counted (``dropped``):
+        the rows of a live recording come in time order, so that row k is sample k for good. True
+        when it was kept."""
         try:
-            values = [float(row[c]) for c in self.columns]
-        except (KeyError, TypeError, ValueError, OverflowError):
-            values = []
-        if len(values) < len(self.columns) or not all(map(math.isfinite, values)):
+            values = [self.cell(c, row[c]) for c in self.number_columns]
+            text = [self.cell(c, row[c]) for c in self.text_columns]
+        except KeyError:
+            values, text = [None], []
+        if None in values or None in text:
             self._refuse(row)
         t = float(self._time(values[self._time_index], self.forgotten + self.rows)
                   if self._time_index is not None else self._time(0.0, self.forgotten + self.rows))
-        if not t > self.newest_t:
+        if t < self.newest_t or (t == self.newest_t and not self._share_times):
             self.dropped += 1
             return False
         self._data.append(values)
+        if self.text_columns:
+            self._text.append(np.array(text, dtype=object))
         self._t.append(t)
         self.newest_t = t
         return True
 
+    def cell(self, column: str, value: object) -> float | str | None:
+        """``value`` as the section reads ``column``: a finite float (NaN for an empty or NaN cell of
+        a gap column), or a name in a text column; None when it is neither."""
+        if column in self.text_columns:
+            return value.strip() or None if isinstance(value, str) else None
+        if column in self._gap_columns and _is_nan(value):
+            return math.nan
+        return _finite(value)
+
     def _refuse(self, row: Mapping[str, object]) -> None:
         """The error for a row without a column the section reads, or with a cell that is no finite
-        number (refused as the batch reader refuses a bad cell, here with the system's row number)."""
+        number (refused as the batch reader refuses a bad cell, here with the system's row number;
+        NaN allowed in a gap column) or no text in a text column."""
         missing = [c for c in self.columns if c not in row]
         if missing:
             raise ConfigError(self.key, f"a row without column(s) {', '.join(missing)}")
-        bad = next(c for c in self.columns if _finite(row[c]) is None)
-        raise InputError(f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}",
-                         f"{bad} is {reprlib.repr(row[bad])}, not a finite number")
+        where = f"{self.key}: row {self.forgotten + self.rows + self.dropped + 1}"
+        for c in self.text_columns:
+            if not isinstance(row[c], str) or not row[c].strip():
+                raise InputError(where, f"{c} is {reprlib.repr(row[c])}, not a name")
+        bad = next(c for c in self.number_columns if self.cell(c, row[c]) is None)
+        raise InputError(where, f"{bad} is {reprlib.repr(row[bad])}, not a finite number")
 
     def forget(self, d: int) -> None:
         """Drop the first ``d`` rows held (their system forgot as many samples)."""
         d = min(max(d, 0), self.rows)
         self._data.drop_first(d)
+        if self.text_columns:
+            self._text.drop_first(d)
         self._t.drop_first(d)
         self.forgotten += d
 
@@ -173,6 +212,14 @@ class RowBuffer:
         value = np.asarray(columns[self._time_column], dtype=float) if self._time_column is not None else 0.0
         return np.broadcast_to(self._time(value, first + np.arange(n)), (n,))
 
+    def time_of(self, row: Mapping[str, object], k: int) -> float | None:
+        """The time (s) of the stream's row ``k`` with cells ``row`` (None: its time cell is no
+        finite number)."""
+        if self._time_column is None:
+            return float(self._time(0.0, k))
+        value = _finite(row.get(self._time_column))
+        return None if value is None else float(self._time(value, k))
+
     def _time(self, value: float | np.ndarray, row: int | np.ndarray) -> float | np.ndarray:
         """The time (s) of a row (scalars or arrays) as the section defines it: its time column's
         ``value`` × ``time_scale``, or the row number ``row`` / ``rate_hz``."""
@@ -187,9 +234,11 @@ class RowBuffer:
         return float(t[-1] - t[0]) if t.size else 0.0
 
     def table(self) -> dict[str, np.ndarray]:
-        """The rows so far as an in-memory table (column → array)."""
-        data = self._data.view()
-        return {c: data[:, k] for k, c in enumerate(self.columns)}
+        """The rows so far as an in-memory table (column → array; a text column's of str)."""
+        data, text = self._data.view(), self._text.view()
+        out = {c: data[:, k] for k, c in enumerate(self.number_columns)}
+        out.update({c: text[:len(data), k] for k, c in enumerate(self.text_columns)})
+        return {c: out[c] for c in self.columns}
 
 
 class LiveRun:
@@ -235,7 +284,8 @@ class LiveRun:
                     raise ConfigError(f"{key}.time_column", "a live run that keeps a bounded history (--keep) needs "
                                                             "each row's time in a column, not a row count / rate_hz",
                                       loaded.path)
-                self.buffers[self.stream_name(name, None if k == 0 else section_name)] = RowBuffer(section, key, k == 0)
+                self.buffers[self.stream_name(name, None if k == 0 else section_name)] = RowBuffer(
+                    section, key, k == 0 and cls.paces_live)
         self._pacing = [b for b in self.buffers.values() if b.paces]
         self.output = EpochOutput(output_interval_s, sinks)
         self.lookahead_s, self.warmup_s, self.replan_s, self.seed = lookahead_s, warmup_s, replan_s, seed
@@ -322,9 +372,9 @@ class LiveRun:
         """Bind each buffer's rows to its system's section (the section the built system reads) and
         let each system ``read`` them."""
         for b in self.buffers.values():
-            getattr(self.fusion.systems[b.system].config, b.section_name).bind(b.table(), b.key)
-        for system in self.fusion.systems.values():
-            read(system)
+            getattr(self.fusion.built[b.system].config, b.section_name).bind(b.table(), b.key)
+        for plugin in self.fusion.built.values():
+            read(plugin)
 
     def _start_smoothing(self) -> None:
         """With ``smoother.kind: fixed-lag``: every system that smooths live in the smoothed stream

@@ -25,9 +25,9 @@
 
 from __future__ import annotations
 
+import csv
 import heapq
 import json
-import math
 import socket
 import time
 from collections.abc import Callable, Iterator
@@ -56,12 +56,50 @@ def _recording_rows(order: int, name: str, buffer: RowBuffer) -> Iterator[tuple[
         first += len(times)
 
 
+def _text_recording_rows(order: int, name: str, buffer: RowBuffer) -> Iterator[tuple[float, int, str, dict]]:
+    """As :func:`_recording_rows`, for a section with text columns (a UWB tag's ids): its file read
+    a line at a time with :mod:`csv` (the cells as text, which the row buffer reads as its section
+    does), or its in-memory table's rows."""
+    section = buffer.section
+    if section.table is not None:
+        columns = {c: np.asarray(section.table[c]) for c in buffer.columns}
+        lines = (dict(zip(columns, values)) for values in zip(*columns.values()))
+        numbers = ((k, row) for k, row in enumerate(lines, start=1))
+        where = buffer.key
+    else:
+        where = str(section.path)
+        numbers = _csv_rows(section.path, buffer.columns, getattr(section, "delimiter", ","))
+    for k, (line, row) in enumerate(numbers):
+        t = buffer.time_of(row, k)
+        if t is None:
+            raise InputError(where, f"row {line}: its time is no finite number")
+        yield t, order, name, row
+
+
+def _csv_rows(path, columns: list[str], delimiter: str) -> Iterator[tuple[int, dict[str, str]]]:
+    """(line number, column → cell) of every row of a CSV file with a header line."""
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.reader(f, delimiter=delimiter)
+        header = [h.strip() for h in next(reader, [])]
+        missing = [c for c in columns if c not in header]
+        if missing:
+            raise InputError(path, f"missing column(s) {', '.join(missing)}; the header has {', '.join(header)}", 1)
+        idx = [header.index(c) for c in columns]
+        for cells in reader:
+            if not any(cell.strip() for cell in cells):
+                continue
+            if len(cells) <= max(idx):
+                raise InputError(path, f"row has {len(cells)} fields, the header has {len(header)}", reader.line_num)
+            yield reader.line_num, {c: cells[j].strip() for c, j in zip(columns, idx)}
+
+
 def replay_rows(run: LiveRun) -> Iterator[Row]:
     """Every system's recording, row by row in time order (ties: the layout's system order), read
     as its data section reads it (its columns, units, delimiter and header rows) a chunk of the
     file at a time: a replay of a recording of any length holds one chunk of each, not the
     recording."""
-    streams = [_recording_rows(order, name, buffer) for order, (name, buffer) in enumerate(run.buffers.items())]
+    streams = [(_text_recording_rows if buffer.text_columns else _recording_rows)(order, name, buffer)
+               for order, (name, buffer) in enumerate(run.buffers.items())]
     for t, _, name, row in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
         yield t, name, row
 
@@ -150,14 +188,16 @@ class LineReader:
         return name, self.run.buffers[name]
 
     @staticmethod
-    def _numbers(cells: dict, name: str, buffer: RowBuffer, at: str) -> dict[str, float]:
-        """The section's columns of ``cells`` as finite floats, else refused naming them."""
+    def _numbers(cells: dict, name: str, buffer: RowBuffer, at: str) -> dict[str, float | str]:
+        """The section's columns of ``cells``: finite floats (NaN or empty too in a gap column: a
+        failed ranging), text in a text column (an anchor's id); else refused naming them."""
         try:
-            row = {c: float(cells[c]) for c in buffer.columns}
-        except (KeyError, TypeError, ValueError, OverflowError):  # an integer beyond a float's range too
+            row = {c: buffer.cell(c, cells[c]) for c in buffer.columns}
+        except KeyError:  # a column missing
             row = {}
-        if len(row) < len(buffer.columns) or not all(map(math.isfinite, row.values())):
-            raise InputError(at, f"{name} needs finite numbers in columns {', '.join(buffer.columns)}")
+        if len(row) < len(buffer.columns) or None in row.values():
+            raise InputError(at, f"{name} needs finite numbers in columns {', '.join(buffer.number_columns)}"
+                             + (f" and names in {', '.join(buffer.text_columns)}" if buffer.text_columns else ""))
         return row
 
 

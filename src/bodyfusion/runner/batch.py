@@ -109,7 +109,7 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
             raise
         raise NotReady(f"{err} yet") from None  # a live run's first part: its systems may walk on
     if lookahead_s is not None:
-        for s in systems.values():
+        for s in built.values():
             s.start_streaming(lookahead_s)
     tracker = FusionProgress(systems, progress) if progress is not None else None
     monitors = {name: CovarianceMonitor(tracker.track(s) if tracker else s) for name, s in systems.items()}

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
@@ -24,6 +24,14 @@ class RangeFileConfig(TableSection):
         default=None, description="Evaluation only (simulations): column of 0/1 truth NLOS flags; the filter never "
                                   "reads it, metrics.json reports how the gate treated LOS and NLOS ranges.")
     delimiter: str = Field(default=",", description="Field separator.")
+
+    rows_share_times: ClassVar[bool] = True
+
+    def text_columns(self) -> list[str]:
+        return [self.id_column]
+
+    def gap_columns(self) -> list[str]:
+        return [self.range_column]
 
 
 class UwbConfig(StrictModel):

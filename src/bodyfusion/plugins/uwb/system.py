@@ -29,10 +29,8 @@ from bodyfusion.nav.filter_health import NisTally
 from bodyfusion.io.tables import source_name
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
-from bodyfusion.plugins.uwb.ranges import read_ranges
+from bodyfusion.plugins.uwb.streaming import ACCEPTED, LATE, NOT_APPLIED, REJECTED, UNUSED, StreamingUwbTag
 
-UNUSED, ACCEPTED, REJECTED, NOT_APPLIED = 0, 1, 2, 3
-"""Fate of each range, as the fuser recorded it."""
 
 
 def range_and_jacobian(a_n: np.ndarray, b_n: np.ndarray) -> tuple[float, np.ndarray]:
@@ -43,13 +41,14 @@ def range_and_jacobian(a_n: np.ndarray, b_n: np.ndarray) -> tuple[float, np.ndar
     return r, d / max(r, 1e-9)
 
 
-class UwbTag(AidingSource):
+class UwbTag(StreamingUwbTag, AidingSource):
     """A UWB tag on the system ``host`` (see :class:`bodyfusion.plugins.uwb.config.UwbConfig`).
 
     Ranges come from the layout's CSV (:func:`bodyfusion.plugins.uwb.ranges.read_ranges`);
     ``fate`` (K,) records what the fuser did with each (:data:`ACCEPTED`, :data:`REJECTED`
-    by the gate, :data:`NOT_APPLIED`: outside the measured systems' data) and ``nis`` (K,)
-    its normalised innovation squared.
+    by the gate, :data:`NOT_APPLIED`: outside the measured systems' data, :data:`LATE`: arrived
+    after the fuser passed its time in a live run) and ``nis`` (K,) its normalised innovation
+    squared. It runs live (:mod:`bodyfusion.plugins.uwb.streaming`).
     """
 
     plugin_name = "uwb"
@@ -61,9 +60,8 @@ class UwbTag(AidingSource):
         self.ids = [*config.anchors, *config.peers]
         self.n_anchors = len(config.anchors)
         rc = config.ranges
-        self.log = read_ranges(rc, self.ids, time_column=rc.time_column, id_column=rc.id_column,
-                               range_column=rc.range_column, nlos_column=rc.nlos_column, delimiter=rc.delimiter)
-        if len(self.log) == 0:
+        self.log = self.read_log()
+        if len(self.log) == 0 and not context.growing:  # a live run's ranges may not have begun
             self.log.report.warn(f"{name}: no usable range in {source_name(rc)} "
                                  f"(dropped: {', '.join(f'{v} {k}' for k, v in self.log.dropped.items() if v) or 'none'})")
         self._anchor_n = np.array(list(config.anchors.values()), dtype=float).reshape(-1, 3)
@@ -138,11 +136,12 @@ class UwbTag(AidingSource):
         nis = self.nis[mask & (self.fate == ACCEPTED)]
         return {"ranges": int(mask.sum()), "accepted": int((fate == ACCEPTED).sum()),
                 "rejected_by_gate": int((fate == REJECTED).sum()), "not_applied": int((fate == NOT_APPLIED).sum()),
-                "mean_nis_accepted": float(nis.mean()) if nis.size else None}
+                "late": int((fate == LATE).sum()), "mean_nis_accepted": float(nis.mean()) if nis.size else None}
 
     def diagnostics(self) -> dict:
         """Per end (anchor or peer) and for anchors and peers together: ranges, accepted,
-        rejected by the gate, not applied (outside the measured systems' data), mean NIS
+        rejected by the gate, not applied (outside the measured systems' data), late (a live run's
+        ranges that arrived after the fuser passed their time), mean NIS
         of the accepted; the reader's drops; with a truth NLOS column, the gate's
         confusion counts."""
         end = self.log.end
