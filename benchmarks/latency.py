@@ -16,9 +16,12 @@ its defaults (look-ahead 2 s, a pass every 0.5 s of data, a state every 0.1 s):
   latency of every pass, from the arrival of the row that made it due to its last state emitted
   (p50, p99, max), and whether any pass took longer than the data it covers (a backlog).
 
+``--set KEY=VALUE`` overrides the layout (``--set smoother.kind=fixed-lag``: the live fixed-lag
+smoother's stream beside the filtered one; its smoothed states are counted too).
+
 Last line: ``p99_ms=… max_ms=… max_speedup=… sustained_speedup=…`` (p99 and max at the paced speed).
 
-Run: python benchmarks/latency.py [--layout vicon|hand] [--speed 1] [--seconds 120]
+Run: python benchmarks/latency.py [--layout vicon|hand] [--speed 1] [--seconds 120] [--set KEY=VALUE]...
 """
 
 from __future__ import annotations
@@ -48,12 +51,13 @@ def layout(name: str, folder: Path) -> Path:
     return folder / "config.yaml"
 
 
-def live_replay(config: Path, speed: float | None, seconds: float | None) -> tuple[LiveRun, float, float, float]:
+def live_replay(config: Path, speed: float | None, seconds: float | None,
+                overrides: list[str] = ()) -> tuple[LiveRun, float, float, float]:
     """Replay ``seconds`` of the walk (None: all) at ``speed`` (None: ×max); the run, the data's
     span (s), the wall time (s) of the replay and the run's close, and the speed (× real time)
     sustained after the start: the data from the start's to the last row over the wall time from
     the end of the start's pass (building the run: levelling, heading alignment) to the last row's."""
-    run = LiveRun(load_layout(config), replan_s=REPLAN_S if speed is not None else REPLAN_BATCH_S)
+    run = LiveRun(load_layout(config, list(overrides)), replan_s=REPLAN_S if speed is not None else REPLAN_BATCH_S)
     rows = list(replay_rows(run))
     if seconds is not None:
         rows = list(itertools.takewhile(lambda r: r[0] <= rows[0][0] + seconds, rows))
@@ -71,20 +75,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=None, help="seconds of the walk to pace (default all)")
     parser.add_argument("--layout", choices=("vicon", "hand"), default="vicon",
                         help="vicon: the dual-foot Vicon walk; hand: the simulated dual-foot + hand-held phone walk")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override the layout")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as folder:
-        return measure(layout(args.layout, Path(folder)), args.speed, args.seconds)
+        return measure(layout(args.layout, Path(folder)), args.speed, args.seconds, args.set)
 
 
-def measure(config: Path, speed: float, seconds: float | None) -> int:
+def measure(config: Path, speed: float, seconds: float | None, overrides: list[str] = ()) -> int:
     """Both replays of ``config`` (module docstring); prints the figures."""
-    run, span, wall, sustained = live_replay(config, None, None)
+    run, span, wall, sustained = live_replay(config, None, None, overrides)
     max_speedup = span / wall
     fast = np.array(run.latency_s) * 1e3
     print(f"x max: {span:.0f} s of data in {wall:.2f} s: {max_speedup:.1f}x real time, {sustained:.1f}x after the "
-          f"start's pass, {run.emitted} states, {len(fast)} passes; pass p50 {np.percentile(fast, 50):.1f} ms, "
-          f"max {fast.max():.1f} ms (the start)")
-    run, span, wall, _ = live_replay(config, speed, seconds)
+          f"start's pass, {run.emitted} states ({run.output.smoothed_emitted} smoothed), {len(fast)} passes; pass p50 "
+          f"{np.percentile(fast, 50):.1f} ms, max {fast.max():.1f} ms (the start)")
+    run, span, wall, _ = live_replay(config, speed, seconds, overrides)
     lat = np.array(run.latency_s) * 1e3
     budget_ms = REPLAN_S / speed * 1e3
     backlog = int(np.count_nonzero(lat > budget_ms))

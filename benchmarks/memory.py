@@ -127,9 +127,9 @@ def child(config: Path, out: Path, report: Path, trace: bool = True) -> None:
         mark("headings aligned")
         return rotations
 
-    def smooth_marked(systems, cfg):
+    def smooth_marked(systems, cfg, *joint):
         mark("navigation and fusion")
-        result = smooth(systems, cfg)
+        result = smooth(systems, cfg, *joint)
         mark("smoothing")
         return result
 

@@ -149,20 +149,23 @@ class RowBuffer:
         after the newest (before it, where rows share times) is dropped and counted (``dropped``):
         the rows of a live recording come in time order, so that row k is sample k for good. True
         when it was kept."""
-        try:
-            values = [self.cell(c, row[c]) for c in self.number_columns]
-            text = [self.cell(c, row[c]) for c in self.text_columns]
-        except KeyError:
-            values, text = [None], []
-        if None in values or None in text:
+        try:  # the common row: numbers, every one finite
+            values = [float(row[c]) for c in self.number_columns]  # type: ignore[arg-type]
+            plain = all(map(math.isfinite, values))
+        except (KeyError, TypeError, ValueError, OverflowError):
+            plain = False
+        if not plain:
+            values = [self.cell(c, row.get(c)) for c in self.number_columns]  # type: ignore[misc]
+        text = [self.cell(c, row.get(c)) for c in self.text_columns] if self.text_columns else None
+        if not plain and None in values or text is not None and None in text:
             self._refuse(row)
-        t = float(self._time(values[self._time_index], self.forgotten + self.rows)
-                  if self._time_index is not None else self._time(0.0, self.forgotten + self.rows))
+        t = (values[self._time_index] * self._time_scale if self._time_index is not None
+             else float(self._time(0.0, self.forgotten + self.rows)))
         if t < self.newest_t or (t == self.newest_t and not self._share_times):
             self.dropped += 1
             return False
         self._data.append(values)
-        if self.text_columns:
+        if text is not None:
             self._text.append(np.array(text, dtype=object))
         self._t.append(t)
         self.newest_t = t
@@ -329,12 +332,14 @@ class LiveRun:
     def push(self, system: str, row: Mapping[str, float], section: str | None = None) -> None:
         """A row of ``system``'s data section (column → value, as the section names them), or of its
         aiding ``section`` (a phone's ``gnss``), then a pass when one is due (:meth:`pump`)."""
-        buffer = self.buffers.get(self.stream_name(system, section))
+        buffer = self.buffers.get(system if section is None else f"{system}.{section}")
         if buffer is None:
             raise ConfigError("system", f"{self.stream_name(system, section)!r} is no stream of this layout "
                                         f"({', '.join(self.buffers)})")
         arrived = time.perf_counter()
         buffer.add(row)
+        if self.fusion is not None and buffer.newest_t < self._planned_t + self.replan_s:
+            return  # no pass is due before every pacing stream reaches that time, this one included
         if self.pump():
             self.latency_s.append(time.perf_counter() - arrived)
 

@@ -81,7 +81,7 @@ class LiveFixedLag:
         t0 = time.perf_counter_ns()
         last = system._i if final else system._i - 1  # the fuser may correct the last sample again
         s = self.start
-        if last - s < 2:
+        if last - s < (1 if final else 2):  # at the close, the last stretch however short
             return None
         lo = max(s - 1, 0)  # the replay from s takes the mechanisation memory of sample s − 1
         rec = system.smoothing_record(lo)
