@@ -101,3 +101,18 @@ def test_fusion_live_writes_both_streams_to_json_lines_mcap_and_csv_and_scores_t
     for name in ("left_foot", "right_foot"):
         scores = metrics["systems"][name]["whole_run_smoothed"]
         assert scores["scored_epochs"] > 7000 and scores["horizontal_error_m"]["rmse"] < 0.2
+
+
+def test_a_run_that_starts_at_its_close_still_emits_the_smoothed_stream(batch):
+    """A recording too short for the warm-up starts on the whole of it at the close, smoothed all the same."""
+    sink = Collect()
+    sink.run = run = LiveRun(load_layout(VICON, FIXED_LAG), [sink], warmup_s=600.0)
+    for _, name, row in replay_rows(run):
+        run.push(name, row)
+    run.close()
+    smoothed = [s for s in sink.states if s.smoothed_lag_s is not None]
+    assert run.started is None and len(smoothed) == 1200
+    track = batch.trajectories["left_foot"]
+    t = np.array([s.systems["left_foot"].t for s in smoothed])
+    assert np.array_equal(track.pos_n[np.searchsorted(track.t, t)],
+                          np.array([s.systems["left_foot"].position_n for s in smoothed]))

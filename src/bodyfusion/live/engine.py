@@ -439,6 +439,7 @@ class LiveRun:
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
                                              lookahead_s=self.lookahead_s, complete=True)
+                self._start_smoothing()
             self._read_tables(lambda s: s.close_stream())
             result = finish_fusion(self.fusion)
             if self.smoothed is not None:  # the recordings complete: every segment to the end
