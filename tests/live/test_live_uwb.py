@@ -72,3 +72,25 @@ def test_the_tags_row_buffer_keeps_ids_as_text_failed_rangings_and_shared_times(
         buffer.add({"t": 2.0, "id": 7, "range_m": 2.0, "nlos": 0})
     with pytest.raises(InputError, match=r"row 4: range_m is inf, not a finite number"):
         buffer.add({"t": 2.0, "id": "A1", "range_m": math.inf, "nlos": 0})
+
+
+def test_a_bounded_live_run_forgets_the_ranges_taken_and_keeps_what_they_came_to(layout):
+    whole_run, whole = _live(layout)
+    run = LiveRun(load_layout(layout, ["output.plots=false"]), keep_s=10.0)
+    held = 0
+    for _, name, row in replay_rows(run):
+        run.push(name, row)
+        held = max(held, run.buffers["left_tag"].rows)
+    bounded = run.close()
+    tag, whole_tag = bounded.aiding["left_tag"], whole.aiding["left_tag"]
+    forgotten = int(tag.forgotten_tally.fates.sum())
+    assert forgotten + len(tag.log) == len(whole_tag.log) and len(tag.log) < 0.6 * len(whole_tag.log)
+    assert held < 0.7 * len(whole_tag.log)  # the rows the run held of the tag's stream at most
+    diagnostics, whole_diagnostics = tag.diagnostics(), whole_tag.diagnostics()
+    for counts, whole_counts in zip([diagnostics["anchor_ranges"], *diagnostics["per_end"].values()],
+                                    [whole_diagnostics["anchor_ranges"], *whole_diagnostics["per_end"].values()]):
+        assert counts.pop("mean_nis_accepted") == pytest.approx(whole_counts.pop("mean_nis_accepted"), rel=1e-12)
+    assert diagnostics == whole_diagnostics and tag.samples == whole_tag.samples
+    assert tag.health()["nis"]["anchor_ranges"]["count"] == whole_tag.health()["nis"]["anchor_ranges"]["count"]
+    kept, track = bounded.trajectories["left_foot"], whole.trajectories["left_foot"]  # the same ranges applied
+    assert np.array_equal(kept.pos_n, track.pos_n[np.searchsorted(track.t, kept.t)])

@@ -81,6 +81,8 @@ class EventSchedule:
         self.horizon = -math.inf
         """Every event at or before this time (s) has been given."""
         self._next_measurement = [0] * len(self.sources)
+        """Per source, the run's number of its next measurement to give (its first held is its
+        :attr:`~bodyfusion.core.system.AidingSource.measurements_forgotten`)."""
         self._events_config = FuserConfig(epochs="events")
 
     def until(self, horizon: float) -> list[Event]:
@@ -98,14 +100,15 @@ class EventSchedule:
             events += [(float(t), CONSTRAINT, 0, 0) for t in epoch_times(self.constrained, self.config, after, horizon)]
         for i, src in enumerate(self.sources):
             times = src.measurement_times()
-            k0 = self._next_measurement[i]
+            forgotten = src.measurements_forgotten  # measurement k held is the run's k + forgotten
+            k0 = self._next_measurement[i] - forgotten
             late = int(np.searchsorted(times, after, side="right"))  # at or before the last horizon, not given:
             for k in range(k0, late):  # a live source's rows that arrived after the fuser passed their time
                 src.record_late(k)
             k0 = max(k0, late)
             k1 = int(np.searchsorted(times, horizon, side="right"))
             events += [(float(times[k]), MEASUREMENT, i, k) for k in range(k0, k1)]
-            self._next_measurement[i] = max(k0, k1)
+            self._next_measurement[i] = forgotten + max(k0, k1)
         if self.tied:
             events += [(float(t), TIE, 0, 0) for t in epoch_times(self.tied, self._events_config, after, horizon)]
         if self.output_interval_s is not None and self.navigating:

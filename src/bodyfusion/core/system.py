@@ -386,6 +386,9 @@ class AidingSource(Plugin):
     """
 
     navigates = False
+    measurements_forgotten = 0
+    """Measurements dropped from the front (a bounded live run forgetting those taken): measurement
+    k held is the run's k + this, which the fuser's schedule counts in."""
 
     @classmethod
     @abstractmethod

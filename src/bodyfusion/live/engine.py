@@ -420,7 +420,7 @@ class LiveRun:
         if not math.isfinite(decided) or decided - self.keep_s < self._forgot_at + self.keep_s:
             return
         self._forgot_at = decided - self.keep_s
-        for name, system in self.fusion.systems.items():
+        for name, system in self.fusion.built.items():  # the navigation systems and the aiding sources
             for section_name, rows in system.forget_before(self._forgot_at).items():
                 self.buffers[self.stream_name(name, None if section_name == system.data_section else section_name)
                              ].forget(rows)

@@ -12,11 +12,15 @@ behind the feet's data) is not applied: the fuser's schedule tells the tag
 ``late_ranges`` finding). Ranges that arrive in time are applied at the batch run's events, in
 its order, so that a live run is the batch run wherever none is late.
 
-Memory: the tag keeps every range received (about 40 bytes each: a day at 10 Hz is 35 MB); it
-forgets none in a bounded live run (``--keep``).
+Memory: a bounded live run (``--keep``) makes the tag forget the ranges the fuser has taken
+before the time forgotten (:meth:`StreamingUwbTag.forget_before`), their verdicts kept as counts
+(:class:`RangeTally`), so that its diagnostics and health cover the whole run while it holds the
+ranges of the part kept.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,6 +31,47 @@ from bodyfusion.plugins.uwb.ranges import RangeLog, read_ranges
 
 UNUSED, ACCEPTED, REJECTED, NOT_APPLIED, LATE = 0, 1, 2, 3, 4
 """Fate of each range, as the fuser recorded it (:data:`LATE`: arrived after the fuser passed its time)."""
+
+
+@dataclass
+class RangeTally:
+    """What ranges came to, per end (anchor or peer, in the tag's id order): ``fates`` (ends, 5)
+    counts by fate, ``nis_accepted`` and ``nis_applied`` (ends,) the NIS summed over the accepted
+    and over the applied (accepted or refused by the gate), ``nlos`` (2, 2) the applied ranges by
+    their truth NLOS flag (row) and the gate's refusal (column), ``dropped`` the reader's drops."""
+
+    fates: np.ndarray
+    nis_accepted: np.ndarray
+    nis_applied: np.ndarray
+    nlos: np.ndarray
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, ends: int) -> RangeTally:
+        return cls(np.zeros((ends, 5), dtype=np.int64), np.zeros(ends), np.zeros(ends), np.zeros((2, 2), np.int64))
+
+    @classmethod
+    def of(cls, log: RangeLog, fate: np.ndarray, nis: np.ndarray, ends: int) -> RangeTally:
+        """The tally of ranges ``log`` with their ``fate`` and ``nis``."""
+        out = cls.empty(ends)
+        np.add.at(out.fates, (log.end, fate), 1)
+        accepted, applied = fate == ACCEPTED, (fate == ACCEPTED) | (fate == REJECTED)
+        np.add.at(out.nis_accepted, log.end[accepted], nis[accepted])
+        np.add.at(out.nis_applied, log.end[applied], nis[applied])
+        if log.nlos is not None:
+            np.add.at(out.nlos, (log.nlos[applied].astype(np.int64), (fate[applied] == REJECTED).astype(np.int64)), 1)
+        out.dropped = dict(log.dropped)
+        return out
+
+    def __add__(self, other: RangeTally) -> RangeTally:
+        return RangeTally(self.fates + other.fates, self.nis_accepted + other.nis_accepted,
+                          self.nis_applied + other.nis_applied, self.nlos + other.nlos,
+                          {k: self.dropped.get(k, 0) + other.dropped.get(k, 0) for k in {*self.dropped, *other.dropped}})
+
+    def __sub__(self, other: RangeTally) -> RangeTally:
+        return RangeTally(self.fates - other.fates, self.nis_accepted - other.nis_accepted,
+                          self.nis_applied - other.nis_applied, self.nlos - other.nlos,
+                          {k: self.dropped.get(k, 0) - other.dropped.get(k, 0) for k in {*self.dropped, *other.dropped}})
 
 
 class StreamingUwbTag(Streaming):
@@ -60,6 +105,35 @@ class StreamingUwbTag(Streaming):
 
     def close_stream(self) -> None:
         self.extend()
+
+    forgotten_tally: RangeTally | None = None
+    """What the ranges forgotten so far came to (None: none forgotten)."""
+
+    def tally(self) -> RangeTally:
+        """What every range of the run came to: those held and those forgotten."""
+        held = RangeTally.of(self.log, self.fate, self.nis, len(self.ids))
+        return held if self.forgotten_tally is None else held + self.forgotten_tally
+
+    def forget_before(self, t: float) -> dict[str, int]:
+        """Forget the ranges before ``t`` (s) the fuser has taken, and their rows; what they came to
+        is kept (:attr:`forgotten_tally`). Returns the rows of the ``ranges`` table dropped."""
+        section = self.config.ranges
+        if section.table is None:
+            return {}
+        times = np.asarray(section.table[section.time_column], dtype=float)
+        k = int(np.searchsorted(self.log.t, t))
+        if k == 0 or np.any(self.fate[:k] == UNUSED):
+            return {}
+        rows = int(np.searchsorted(times, self.log.t[k - 1], side="right"))  # through the last range forgotten
+        later = read_ranges(section.rows_from(rows), self.ids, time_column=section.time_column,
+                            id_column=section.id_column, range_column=section.range_column,
+                            nlos_column=section.nlos_column, delimiter=section.delimiter)
+        gone = len(self.log) - len(later)
+        before = self.tally()
+        self.log, self.fate, self.nis = later, self.fate[gone:], self.nis[gone:]
+        self.measurements_forgotten += gone
+        self.forgotten_tally = before - RangeTally.of(later, self.fate, self.nis, len(self.ids))
+        return {self.data_section: rows}
 
     def record_late(self, k: int) -> None:
         self.fate[k] = LATE

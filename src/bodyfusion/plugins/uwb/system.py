@@ -29,7 +29,7 @@ from bodyfusion.nav.filter_health import NisTally
 from bodyfusion.io.tables import source_name
 from bodyfusion.nav.measurements import chi2_gate
 from bodyfusion.plugins.uwb.config import UwbConfig
-from bodyfusion.plugins.uwb.streaming import ACCEPTED, LATE, NOT_APPLIED, REJECTED, UNUSED, StreamingUwbTag
+from bodyfusion.plugins.uwb.streaming import ACCEPTED, LATE, NOT_APPLIED, REJECTED, UNUSED, RangeTally, StreamingUwbTag
 
 
 
@@ -125,42 +125,41 @@ class UwbTag(StreamingUwbTag, AidingSource):
     # --- results -----------------------------------------------------------------------
     @property
     def samples(self) -> int:
-        return len(self.log)
+        return int(self.tally().fates.sum())
 
     @property
     def input_report(self) -> InputReport:
         return self.log.report
 
-    def _counts(self, mask: np.ndarray) -> dict:
-        fate = self.fate[mask]
-        nis = self.nis[mask & (self.fate == ACCEPTED)]
-        return {"ranges": int(mask.sum()), "accepted": int((fate == ACCEPTED).sum()),
-                "rejected_by_gate": int((fate == REJECTED).sum()), "not_applied": int((fate == NOT_APPLIED).sum()),
-                "late": int((fate == LATE).sum()), "mean_nis_accepted": float(nis.mean()) if nis.size else None}
+    @staticmethod
+    def _counts(tally: RangeTally, ends: np.ndarray) -> dict:
+        """Ranges, accepted, rejected by the gate, not applied, late and the mean NIS of the
+        accepted, over the ends (indices) ``ends``."""
+        fates = tally.fates[ends].sum(axis=0)
+        accepted = int(fates[ACCEPTED])
+        return {"ranges": int(fates.sum()), "accepted": accepted, "rejected_by_gate": int(fates[REJECTED]),
+                "not_applied": int(fates[NOT_APPLIED]), "late": int(fates[LATE]),
+                "mean_nis_accepted": float(tally.nis_accepted[ends].sum()) / accepted if accepted else None}
 
     def diagnostics(self) -> dict:
         """Per end (anchor or peer) and for anchors and peers together: ranges, accepted,
         rejected by the gate, not applied (outside the measured systems' data), late (a live run's
-        ranges that arrived after the fuser passed their time), mean NIS
-        of the accepted; the reader's drops; with a truth NLOS column, the gate's
-        confusion counts."""
-        end = self.log.end
+        ranges that arrived after the fuser passed their time), mean NIS of the accepted; the
+        reader's drops; with a truth NLOS column, the gate's confusion counts. Of the whole run,
+        the ranges a bounded live run forgot included (:meth:`tally`)."""
+        tally = self.tally()
+        ends = np.arange(len(self.ids))
         out: dict = {"plugin": self.plugin_name, "host": self.config.host,
-                     "gate_nis": self._gate, "sigma_m": self.config.sigma_m,
-                     "dropped": dict(self.log.dropped)}
+                     "gate_nis": self._gate, "sigma_m": self.config.sigma_m, "dropped": dict(tally.dropped)}
         if self.n_anchors:
-            out["anchor_ranges"] = self._counts(end < self.n_anchors)
+            out["anchor_ranges"] = self._counts(tally, ends[:self.n_anchors])
         if len(self.ids) > self.n_anchors:
-            out["peer_ranges"] = self._counts(end >= self.n_anchors)
-        out["per_end"] = {name: self._counts(end == k) for k, name in enumerate(self.ids)}
+            out["peer_ranges"] = self._counts(tally, ends[self.n_anchors:])
+        out["per_end"] = {name: self._counts(tally, ends[k:k + 1]) for k, name in enumerate(self.ids)}
         if self.log.nlos is not None:
-            nlos, applied = self.log.nlos, (self.fate == ACCEPTED) | (self.fate == REJECTED)
-            rejected = self.fate == REJECTED
-            out["gate_vs_truth"] = {
-                "nlos_rejected": int((applied & nlos & rejected).sum()),
-                "nlos_accepted": int((applied & nlos & ~rejected).sum()),
-                "los_rejected": int((applied & ~nlos & rejected).sum()),
-                "los_accepted": int((applied & ~nlos & ~rejected).sum())}
+            (los_accepted, los_rejected), (nlos_accepted, nlos_rejected) = tally.nlos.tolist()
+            out["gate_vs_truth"] = {"nlos_rejected": nlos_rejected, "nlos_accepted": nlos_accepted,
+                                    "los_rejected": los_rejected, "los_accepted": los_accepted}
         return out
 
     def innovations(self) -> dict[str, np.ndarray]:
@@ -174,10 +173,15 @@ class UwbTag(StreamingUwbTag, AidingSource):
 
     def health(self) -> dict:
         """``nis`` of the ranges the fuser applied (1 dof, before the gate; beyond the gate:
-        rejected), ``anchor_ranges`` and ``peer_ranges`` apart where the tag has them."""
-        applied = (self.fate == ACCEPTED) | (self.fate == REJECTED)
-        groups = {"anchor_ranges": self.log.end < self.n_anchors, "peer_ranges": self.log.end >= self.n_anchors}
-        tallies = {kind: NisTally(1, int((mask & applied).sum()), float(self.nis[mask & applied].sum()),
-                                  int((mask & (self.fate == REJECTED)).sum()))
-                   for kind, mask in groups.items() if mask.any()}
+        rejected), ``anchor_ranges`` and ``peer_ranges`` apart where the tag has them; of the
+        whole run (:meth:`tally`)."""
+        tally = self.tally()
+        ends = np.arange(len(self.ids))
+        groups = {"anchor_ranges": ends[:self.n_anchors], "peer_ranges": ends[self.n_anchors:]}
+        tallies = {}
+        for kind, group in groups.items():
+            fates = tally.fates[group].sum(axis=0)
+            if fates.sum():
+                tallies[kind] = NisTally(1, int(fates[ACCEPTED] + fates[REJECTED]),
+                                         float(tally.nis_applied[group].sum()), int(fates[REJECTED]))
         return {"nis": {kind: tally.to_dict() for kind, tally in tallies.items()}}
