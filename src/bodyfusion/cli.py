@@ -195,7 +195,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
         lag = "" if r.fusion is None else f", {t - r.fusion.fuser.schedule.horizon:.1f} s behind the data"
         h = r.output.totals
         held = f", holding {r.held_s:.0f} s of data" if r.keep_s is not None else ""
-        print(f"live: {time.perf_counter() - wall0:.0f} s, {r.emitted} states{lag}{held}; constraint active "
+        smoothed = f" ({r.output.smoothed_emitted} smoothed)" if r.smoothed is not None else ""
+        print(f"live: {time.perf_counter() - wall0:.0f} s, {r.emitted} states{smoothed}{lag}{held}; constraint active "
               f"{h['constraint_active']}/{h['constraint_epochs']}, rejected {h['measurements_rejected']}, "
               f"fights {h['fights']}", file=sys.stderr)
 
@@ -214,7 +215,8 @@ def live(config: Annotated[Path, typer.Argument(help="Layout YAML file.")], *,
     if not CONSOLE.quiet:
         revised = {n: s.revised_inputs for n, s in result.systems.items() if getattr(s, "revised_inputs", 0)}
         dropped = {n: b.dropped for n, b in run.buffers.items() if b.dropped}
-        print(f"live: {run.emitted} states in {time.perf_counter() - wall0:.1f} s"
+        smoothed = f" and {run.output.smoothed_emitted} smoothed" if run.smoothed is not None else ""
+        print(f"live: {run.emitted} states{smoothed} in {time.perf_counter() - wall0:.1f} s"
               + (f"; rows dropped for a time not after the newest: {dropped}" if dropped else "")
               + (f"; samples whose inputs the whole recording would have made otherwise: {revised}" if revised
                  else ""), file=sys.stderr)
