@@ -15,7 +15,11 @@ Prints the samples; last line ``peak_rss_mb=<MB> first_half_growth_mb=<MB> last_
 hours=<h> wall_s=<s>`` (growth: resident memory at the half-way sample to the last, and from the
 first sample after warm-up to the half-way one).
 
+``--set KEY=VALUE`` overrides the layout (``--set smoother.kind=fixed-lag``: the live fixed-lag
+smoother's stream too; the sink counts its states with the others).
+
 Run: python benchmarks/live_memory.py [--hours 24] [--keep 60] [--no-truth] [--no-phone] [--keep-dir DIR]
+     [--set KEY=VALUE]...
 """
 
 from __future__ import annotations
@@ -70,14 +74,14 @@ class Counter:
         pass
 
 
-def replay(config: Path, keep_s: float) -> None:
+def replay(config: Path, keep_s: float, overrides: list[str]) -> None:
     """The live replay, in this process (the child): prints a sample every half hour of data."""
     from bodyfusion.core.layout import load_layout
     from bodyfusion.live.engine import REPLAN_BATCH_S, LiveRun
     from bodyfusion.live.sources import replay_rows
 
     sink = Counter()
-    run = LiveRun(load_layout(config), [sink], replan_s=REPLAN_BATCH_S, keep_s=keep_s)
+    run = LiveRun(load_layout(config, overrides), [sink], replan_s=REPLAN_BATCH_S, keep_s=keep_s)
     wall0 = time.perf_counter()
     t0, next_sample = None, 0.0
     for t, name, row in replay_rows(run):
@@ -100,10 +104,11 @@ def main() -> None:
     parser.add_argument("--keep-dir", type=Path, help="keep the simulated walk in this folder")
     parser.add_argument("--no-truth", action="store_true", help="run the layout without its truth")
     parser.add_argument("--no-phone", action="store_true", help="the feet alone")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override the layout")
     parser.add_argument("--replay", type=Path, help=argparse.SUPPRESS)  # the child: replay this config
     args = parser.parse_args()
     if args.replay is not None:
-        replay(args.replay, args.keep)
+        replay(args.replay, args.keep, args.set)
         return
     work = args.keep_dir or Path(tempfile.mkdtemp(prefix="live_memory_"))
     try:
@@ -119,7 +124,8 @@ def main() -> None:
             (walk / "config.yaml").write_text(yaml.safe_dump(config))
         wall0 = time.perf_counter()
         child = subprocess.run([sys.executable, __file__, "--replay", str(walk / "config.yaml"), "--keep",
-                                str(args.keep)], check=True, capture_output=True, text=True)
+                                str(args.keep), *(f"--set={o}" for o in args.set)], check=True, capture_output=True,
+                               text=True)
         wall = time.perf_counter() - wall0
         print(child.stdout, end="")
         samples = [dict(kv.split("=") for kv in line.split()[1:5]) for line in child.stdout.splitlines()
