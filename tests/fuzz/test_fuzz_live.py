@@ -82,19 +82,31 @@ def vicon_rows() -> list[tuple[float, str, dict]]:
     return [(t, name, dict(row)) for t, name, row in replay_rows(run)]
 
 
-@pytest.fixture(scope="module")
-def phone_walk() -> Iterator[tuple[Path, list[tuple[float, str, dict]]]]:
-    """The fuzzing recording's feet and phone (IMU and GNSS CSVs, no magnetometer, no UWB) as a
-    live layout, and its rows."""
-    folder = Path(tempfile.mkdtemp(prefix="fuzz_live_phone_"))
+def _recording_walk(prefix: str, drop: str | None) -> Iterator[tuple[Path, list[tuple[float, str, dict]]]]:
+    """The fuzzing recording (feet, phone with IMU and GNSS CSVs but no magnetometer, UWB tags on
+    the feet) without system ``drop`` (None: all of them), as a live layout, and its rows."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
     layout = yaml.safe_load(write_recording(folder)["csv"].read_text())
-    del layout["systems"]["feet_tags"]
+    if drop is not None:
+        del layout["systems"][drop]
     layout["systems"]["hand_phone"].pop("magnetometer", None)
     path = folder / "layout_live.yaml"
     path.write_text(yaml.safe_dump(layout, sort_keys=False))
     run = LiveRun(load_layout(path))
     yield path, [(t, name, dict(row)) for t, name, row in replay_rows(run)]
     shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def phone_walk() -> Iterator[tuple[Path, list[tuple[float, str, dict]]]]:
+    """The fuzzing recording's feet and phone (no UWB) as a live layout, and its rows."""
+    yield from _recording_walk("fuzz_live_phone_", "feet_tags")
+
+
+@pytest.fixture(scope="module")
+def tag_walk() -> Iterator[tuple[Path, list[tuple[float, str, dict]]]]:
+    """The whole fuzzing recording (feet, phone, the feet's UWB tags) as a live layout, and its rows."""
+    yield from _recording_walk("fuzz_live_tags_", None)
 
 
 def _push_all(config: Path, rows: list[tuple[float, str, dict]], edits: list[RowEdit], target: str,
@@ -132,3 +144,13 @@ def test_hostile_live_phone_rows_are_refused_in_one_error_or_run_finite(phone_wa
     """The 12 s walk starts after 3 s of data: the phone's GNSS rows ride beside its IMU's."""
     config, rows = phone_walk
     _push_all(config, rows, edits, "live phone rows", warmup_s=3.0)
+
+
+@pytest.mark.slow
+@settings(max_examples=max(EXAMPLES // 3, 5), deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(edits=row_edits, keep_s=st.sampled_from([None, 10.0]))
+def test_hostile_live_uwb_rows_are_refused_in_one_error_or_run_finite(tag_walk, edits, keep_s):
+    """The tags' ranges (an id as text) ride beside the feet's IMU rows, taken as they come."""
+    config, rows = tag_walk
+    _push_all(config, rows, edits, "live uwb rows", warmup_s=3.0, keep_s=keep_s)
