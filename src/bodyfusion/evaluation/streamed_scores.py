@@ -10,6 +10,11 @@ states' span are not made), after the evaluation alignment (``none``: identity; 
 planar fit of :func:`~bodyfusion.evaluation.metrics.fit_first_distance_alignment`, on the states
 of the alignment's first metres). It holds two float32 errors per truth epoch scored and the
 states of the first metres, nothing of the track.
+
+The interpolation between output epochs (0.1 s apart by default) is part of the figure: on a
+foot accurate to centimetres it dominates (the simulated foot + UWB walk: 0.0235 m streamed
+against 0.0118 m scored at every sample by the batch run), so the figure compares live streams
+with each other, and the batch run's scores only with states at the sample period.
 """
 
 from __future__ import annotations
