@@ -26,6 +26,7 @@ import numpy as np
 
 from bodyfusion.base.errors import FusionError
 from bodyfusion.base.findings import Finding
+from bodyfusion.base.sections import TableSection
 from bodyfusion.core.capabilities import Streaming
 from bodyfusion.plugins.uwb.ranges import RangeLog, read_ranges
 
@@ -64,14 +65,17 @@ class RangeTally:
         return out
 
     def __add__(self, other: RangeTally) -> RangeTally:
-        return RangeTally(self.fates + other.fates, self.nis_accepted + other.nis_accepted,
-                          self.nis_applied + other.nis_applied, self.nlos + other.nlos,
-                          {k: self.dropped.get(k, 0) + other.dropped.get(k, 0) for k in {*self.dropped, *other.dropped}})
+        return self._with(other, 1)
 
     def __sub__(self, other: RangeTally) -> RangeTally:
-        return RangeTally(self.fates - other.fates, self.nis_accepted - other.nis_accepted,
-                          self.nis_applied - other.nis_applied, self.nlos - other.nlos,
-                          {k: self.dropped.get(k, 0) - other.dropped.get(k, 0) for k in {*self.dropped, *other.dropped}})
+        return self._with(other, -1)
+
+    def _with(self, other: RangeTally, sign: int) -> RangeTally:
+        """This tally with ``other``'s added (``sign`` 1) or taken away (−1)."""
+        return RangeTally(self.fates + sign * other.fates, self.nis_accepted + sign * other.nis_accepted,
+                          self.nis_applied + sign * other.nis_applied, self.nlos + sign * other.nlos,
+                          {k: self.dropped.get(k, 0) + sign * other.dropped.get(k, 0)
+                           for k in {*self.dropped, *other.dropped}})
 
 
 class StreamingUwbTag(Streaming):
@@ -82,11 +86,13 @@ class StreamingUwbTag(Streaming):
     fate: np.ndarray
     nis: np.ndarray
 
-    def read_log(self) -> RangeLog:
-        """The ranges of the tag's ``ranges`` section (its file, or the table bound to it)."""
+    def read_log(self, section: TableSection | None = None) -> RangeLog:
+        """The ranges of the tag's ``ranges`` section (its file, or the table bound to it), or of
+        ``section``, a copy of it bound to other rows."""
         rc = self.config.ranges
-        return read_ranges(rc, self.ids, time_column=rc.time_column, id_column=rc.id_column,
-                           range_column=rc.range_column, nlos_column=rc.nlos_column, delimiter=rc.delimiter)
+        return read_ranges(rc if section is None else section, self.ids, time_column=rc.time_column,
+                           id_column=rc.id_column, range_column=rc.range_column, nlos_column=rc.nlos_column,
+                           delimiter=rc.delimiter)
 
     def start_streaming(self, lookahead_s: float) -> None:
         """Nothing to decide: the tag's ranges are taken as they come."""
@@ -125,9 +131,7 @@ class StreamingUwbTag(Streaming):
         if k == 0 or np.any(self.fate[:k] == UNUSED):
             return {}
         rows = int(np.searchsorted(times, self.log.t[k - 1], side="right"))  # through the last range forgotten
-        later = read_ranges(section.rows_from(rows), self.ids, time_column=section.time_column,
-                            id_column=section.id_column, range_column=section.range_column,
-                            nlos_column=section.nlos_column, delimiter=section.delimiter)
+        later = self.read_log(section.rows_from(rows))
         gone = len(self.log) - len(later)
         before = self.tally()
         self.log, self.fate, self.nis = later, self.fate[gone:], self.nis[gone:]
