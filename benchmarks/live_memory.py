@@ -8,8 +8,9 @@ own process); ``--no-phone``: the feet alone. A second process replays it throug
 every 0.1 s to a sink that counts them), keeping ``--keep`` s of history (default 60); its rows
 come from ``fusion live``'s replay (:func:`~bodyfusion.live.sources.replay_rows`: each file read
 a chunk of lines at a time and merged in time order), so the source holds no recording. The
-resident memory (``VmRSS``) is sampled every half hour of data. With ``--no-truth`` the layout's
-truth is left out, as in the field (a day's truth track alone holds several hundred MB).
+resident memory (``VmRSS``) is sampled every half hour of data. The layout's truth is read as
+the run goes and every state emitted is scored against it (``whole_run``); with ``--no-truth`` it
+is left out, as in the field.
 
 Prints the samples; last line ``peak_rss_mb=<MB> first_half_growth_mb=<MB> last_half_growth_mb=<MB>
 hours=<h> wall_s=<s>`` (growth: resident memory at the half-way sample to the last, and from the

@@ -8,7 +8,9 @@ lap) goes, in this one process, through
   forward filter (``restart`` + ``advance`` over the whole stream), forward + RTS
   (``smoother.kind=rts``, the whole-run fixed-interval smoother) and forward + FB-RTS, each
   run as a layout with that smoother runs it (``FootIns.plan_smoothing`` first: with RTS the
-  filter records what the smoother's sweep needs as it runs);
+  filter records what the smoother's sweep needs as it runs); forward + FB (the two passes and
+  their fusion without the RTS sweeps) is the floor under FB-RTS's cost: FB-RTS is FB plus two
+  RTS sweeps;
 * gaitmap's ``RtsKalman().estimate`` at its defaults (9-state error-state filter, its own ZUPT
   detector, forward pass and RTS), when gaitmap is installed (``pip install -e ".[bench]"``;
   gaitmap 2.6 pins numpy < 2.1 and pandas < 2.4, so give it its own virtual environment),
@@ -26,8 +28,9 @@ each call timed as ``timeit`` times one: Python's garbage collector run before i
 during it (a collection the objects of one job call for would otherwise fall in another's). Printed: samples/s of each job, the
 distance each estimate walked against the truth's (a check that both did the work), and as
 the last line the ratio of the project's forward + RTS to gaitmap's RtsKalman,
-``rts_vs_gaitmap=<ratio> fbrts_vs_gaitmap=<ratio>`` (the project's forward + RTS and forward +
-FB-RTS to gaitmap's RtsKalman; ``n/a`` when gaitmap is not installed).
+``rts_vs_gaitmap=<ratio> fbrts_vs_gaitmap=<ratio> fb_vs_gaitmap=<ratio>`` (the project's forward +
+RTS, forward + FB-RTS and forward + FB to gaitmap's RtsKalman; ``n/a`` when gaitmap is not
+installed).
 
 With ``--cold`` the first call is timed too, each side in a fresh process on an empty numba
 cache (``NUMBA_CACHE_DIR`` a new folder), so that it compiles everything it runs: the project
@@ -122,7 +125,8 @@ def project_jobs(foot: FootIns) -> dict[str, Callable[[], np.ndarray]]:
 
         return job
 
-    return {"forward": forward, "forward+rts": smoothed("rts"), "forward+fb-rts": smoothed("fb-rts")}
+    return {"forward": forward, "forward+rts": smoothed("rts"), "forward+fb": smoothed("fb"),
+            "forward+fb-rts": smoothed("fb-rts")}
 
 
 def gaitmap_jobs(foot: FootIns) -> dict[str, Callable[[], np.ndarray]]:
@@ -239,12 +243,13 @@ def main() -> None:
         print(f"{name}: {rate[name]:,.0f} samples/s ({seconds * 1e3:.1f} ms), walked {walked_m(jobs[name]()):.1f} m")
     if "gaitmap RtsKalman.estimate" not in rate:
         print('gaitmap not installed (pip install -e ".[bench]" in its own environment): peer skipped')
-        print("rts_vs_gaitmap=n/a fbrts_vs_gaitmap=n/a")
+        print("rts_vs_gaitmap=n/a fbrts_vs_gaitmap=n/a fb_vs_gaitmap=n/a")
         return
     core = rate["forward+rts"] / rate["gaitmap core (no detector, no DataFrames)"]
     print(f"project forward+rts / gaitmap core: {core:.2f}")
     peer = rate["gaitmap RtsKalman.estimate"]
-    print(f"rts_vs_gaitmap={rate['forward+rts'] / peer:.2f} fbrts_vs_gaitmap={rate['forward+fb-rts'] / peer:.2f}")
+    print(f"rts_vs_gaitmap={rate['forward+rts'] / peer:.2f} fbrts_vs_gaitmap={rate['forward+fb-rts'] / peer:.2f} "
+          f"fb_vs_gaitmap={rate['forward+fb'] / peer:.2f}")
 
 
 if __name__ == "__main__":

@@ -12,10 +12,13 @@ from bodyfusion.base.types import TruthTrack
 from bodyfusion.core.epoch_state import EpochState, SystemState
 from bodyfusion.core.layout import load_layout
 from bodyfusion.evaluation.streamed_scores import StreamedScores
+from bodyfusion.io import lines
+from bodyfusion.io.truth import TruthWindow
 from bodyfusion.live.engine import LiveRun
 from bodyfusion.live.sources import replay, replay_rows
 from bodyfusion.outputs.write import metrics_document
 from bodyfusion.runner.batch import run_layout
+from bodyfusion.runner.truth import read_truth
 from tests.paths import CONFIGS
 
 
@@ -29,9 +32,11 @@ def _walk(rotation_rad: float, offset_m: np.ndarray, scorer: StreamedScores) -> 
         scorer.write(EpochState(float(t), {"foot": SystemState(float(t), est, np.zeros(3))}, {}, 0.0))
 
 
-def _truth() -> dict[str, TruthTrack]:
+def _truth(chunk: int = 2000) -> dict[str, TruthWindow]:
+    """The walk's truth at 100 Hz, read ``chunk`` epochs at a time."""
     t = np.arange(0.0, 20.0, 0.01)
-    return {"foot": TruthTrack(t, np.column_stack([0.6 * t, 0.8 * t, np.zeros_like(t)]))}
+    pos = np.column_stack([0.6 * t, 0.8 * t, np.zeros_like(t)])
+    return {"foot": TruthWindow(TruthTrack(t[k:k + chunk], pos[k:k + chunk]) for k in range(0, t.size, chunk))}
 
 
 def test_the_first_metres_alignment_takes_out_a_turned_and_moved_frame():
@@ -65,3 +70,38 @@ def test_a_bounded_live_run_scores_its_whole_track_as_the_batch_run_does():
                                                                     rel=0.01)
         assert whole["scored_epochs"] == pytest.approx(score.metrics["scored_epochs"], rel=0.01)
         assert result.scores[name].metrics["scored_epochs"] < 0.6 * whole["scored_epochs"]  # the kept part's
+
+
+class _Kept:
+    """A sink that keeps every state."""
+
+    def __init__(self) -> None:
+        self.states: list[EpochState] = []
+
+    def write(self, state: EpochState) -> None:
+        self.states.append(state)
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_bounded_run_reads_its_truth_as_it_goes_and_scores_as_with_the_whole_truth(monkeypatch):
+    """The Vicon walk kept 20 s at a time, its truth file read a few kilobytes at a time: the
+    scores of every state emitted are those the same states get against the truth read whole,
+    and the truth held at the close is the part kept, not the walk's."""
+    monkeypatch.setattr(lines, "CHUNK_BYTES", 4096)
+    loaded = load_layout(CONFIGS / "dual_foot_vicon.yaml")
+    kept = _Kept()
+    run = LiveRun(loaded, [kept], keep_s=20.0)
+    replay(run, replay_rows(run))
+    result = run.close()
+    whole = read_truth(loaded.layout.truth, None, list(loaded.layout.systems))
+    again = StreamedScores({name: TruthWindow(iter([track])) for name, track in whole.items()},
+                           loaded.layout.truth.alignment, loaded.layout.truth.alignment_distance_m)
+    for state in kept.states:
+        again.write(state)
+    assert result.whole_run == again.scores()
+    for name, window in run.truth.items():
+        assert window.epochs == whole[name].t.size and window.span == (whole[name].t[0], whole[name].t[-1])
+        assert window.first > 0.6 * window.epochs  # the walk's first 60 % released as the scores passed
+        assert result.truths[name].t[0] >= run.fusion.systems[name].stream.t[0] - 20.0  # the part kept

@@ -12,6 +12,8 @@ together, so the systems' relative geometry is not adjusted.
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -168,6 +170,58 @@ def error_stats(err: np.ndarray) -> dict[str, float]:
     }
     out.update({f"p{p}": float(v) for p, v in zip(PERCENTILES, pct)})
     return out
+
+
+class ErrorSketch:
+    """:func:`error_stats` of absolute errors (m) taken a block at a time, in bounded memory: the
+    sum, sum of squares and largest exactly, the percentiles from a log-binned histogram
+    within ``relative_accuracy`` of their value (DDSketch's bins, C. Masson, J. E. Rim, H. K.
+    Lee, VLDB 2019: bin i holds (γ^(i−1), γ^i], γ = (1 + α)/(1 − α), its value 2γ^i/(γ + 1)),
+    linearly interpolated between the two ranks as :func:`numpy.percentile` does. Errors below
+    ``smallest_m`` count as zero; NaN is ignored. ``count``: errors taken."""
+
+    def __init__(self, relative_accuracy: float = 1e-3, smallest_m: float = 1e-9, largest_m: float = 1e6) -> None:
+        self._log_gamma = math.log((1.0 + relative_accuracy) / (1.0 - relative_accuracy))
+        self._first = math.floor(math.log(smallest_m) / self._log_gamma)
+        self._counts = np.zeros(math.ceil(math.log(largest_m) / self._log_gamma) - self._first + 2, dtype=np.int64)
+        self._smallest = smallest_m
+        self.count = 0
+        self._sum = self._sum_sq = 0.0
+        self._max = -math.inf
+
+    def add(self, err: np.ndarray) -> None:
+        """Take the errors ``err`` (m; their absolute values; NaN ignored)."""
+        e = np.abs(np.asarray(err, dtype=float).ravel())
+        e = e[np.isfinite(e)]
+        if not e.size:
+            return
+        self.count += e.size
+        self._sum += float(np.sum(e))
+        self._sum_sq += float(np.sum(e * e))
+        self._max = max(self._max, float(np.max(e)))
+        bins = np.zeros(e.size, dtype=np.int64)  # bin 0: below the smallest
+        big = e >= self._smallest
+        bins[big] = np.clip(np.ceil(np.log(e[big]) / self._log_gamma).astype(np.int64) - self._first, 1,
+                            self._counts.size - 1)
+        self._counts += np.bincount(bins, minlength=self._counts.size)
+
+    def _value(self, rank: int) -> float:
+        """The value of the error of rank ``rank`` (0-based, ascending): its bin's."""
+        i = int(np.searchsorted(np.cumsum(self._counts), rank, side="right"))
+        return 0.0 if i == 0 else min(2.0 * math.exp((i + self._first) * self._log_gamma) /
+                                      (math.exp(self._log_gamma) + 1.0), self._max)
+
+    def stats(self) -> dict[str, float]:
+        """The figures :func:`error_stats` gives (all NaN before any error)."""
+        if not self.count:
+            return {k: float("nan") for k in _STAT_KEYS}
+        out = {"rmse": math.sqrt(self._sum_sq / self.count), "mean": self._sum / self.count, "max": self._max}
+        for p in PERCENTILES:
+            r = p / 100.0 * (self.count - 1)
+            lo, hi = math.floor(r), math.ceil(r)
+            a, b = self._value(lo), self._value(hi)
+            out[f"p{p}"] = a + (b - a) * (r - lo)
+        return out
 
 
 def error_cdf(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

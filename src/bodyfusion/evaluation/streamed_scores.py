@@ -24,10 +24,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from bodyfusion.base.records import GrowingArray
-from bodyfusion.base.types import Trajectory, TruthTrack
+from bodyfusion.base.types import Trajectory
 from bodyfusion.core.epoch_state import EpochState
-from bodyfusion.evaluation.metrics import PlanarTransform, error_stats, fit_first_distance_alignment
+from bodyfusion.evaluation.metrics import ErrorSketch, PlanarTransform, fit_first_distance_alignment
+from bodyfusion.io.truth import TruthWindow
 
 FIT_WAIT_STATES = 6000
 """States (10 min at the default 0.1 s) the alignment waits for its distance at most: then it is
@@ -35,46 +35,52 @@ fitted on those, as the batch fit takes a whole track that never travels that fa
 
 
 class _Track:
-    """One system's scoring: its truth, the cursor of the next truth epoch, the last state seen
-    and the errors so far."""
+    """One system's scoring: its truth (a window this track reads as ``reader``), the index of
+    the next truth epoch, the last state seen and the horizontal and vertical errors so far."""
 
-    def __init__(self, truth: TruthTrack) -> None:
-        self.t, self.pos = np.asarray(truth.t, dtype=float), np.asarray(truth.pos_n, dtype=float)
+    def __init__(self, truth: TruthWindow, reader: str) -> None:
+        self.truth, self.reader = truth, reader
+        truth.place(reader, 0)  # until the first state: the alignment may fit on any of it
         self.next = 0
         self.last: tuple[float, np.ndarray] | None = None
-        self.errors = GrowingArray((2,), np.float32)
+        self.horizontal, self.vertical = ErrorSketch(), ErrorSketch()
         self.span = [math.inf, -math.inf]
         self.travelled_m = 0.0
 
     def take(self, t1: float, p1: np.ndarray, transform: PlanarTransform) -> None:
         """The state (``t1`` s, ``p1`` ENU m): errors at the truth epochs since the last state."""
         if self.last is None:
-            self.next = int(np.searchsorted(self.t, t1, side="left"))  # epochs before the first state: unscored
+            self.next = self.truth.index(t1, side="left")  # epochs before the first state: unscored
+            self.truth.place(self.reader, self.next)
             self.last = (t1, p1)
             return
         t0, p0 = self.last
         if not t1 > t0:
             return
-        stop = int(np.searchsorted(self.t, t1, side="right"))
+        stop = self.truth.index(t1, side="right")
         if stop > self.next:
-            tk = self.t[self.next:stop]
+            tk, pos = self.truth.epochs_between(self.next, stop)
             est = p0 + np.outer((tk - t0) / (t1 - t0), p1 - p0)
-            d = transform.apply(est) - self.pos[self.next:stop]
-            self.errors.extend(np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])]).astype(np.float32))
+            d = transform.apply(est) - pos
+            self.horizontal.add(np.hypot(d[:, 0], d[:, 1]))
+            self.vertical.add(d[:, 2])
             self.span = [min(self.span[0], float(tk[0])), max(self.span[1], float(tk[-1]))]
             self.next = stop
+            self.truth.place(self.reader, stop)
         self.last = (t1, p1)
 
 
 class StreamedScores:
-    """The sink (module docstring): ``truths`` by system, the layout's truth ``alignment``
-    (``none`` or ``first_3m``) and ``alignment_distance_m``. :meth:`scores` gives the figures."""
+    """The sink (module docstring): the truth ``windows`` by system, the layout's truth
+    ``alignment`` (``none`` or ``first_3m``) and ``alignment_distance_m``. :meth:`scores` gives
+    the figures."""
 
-    def __init__(self, truths: Mapping[str, TruthTrack], alignment: str, alignment_distance_m: float,
+    def __init__(self, windows: Mapping[str, TruthWindow], alignment: str, alignment_distance_m: float,
                  smoothed: bool = False) -> None:
         self.smoothed = smoothed
         """Score the smoothed states (:attr:`~bodyfusion.core.epoch_state.EpochState.smoothed_lag_s`), else the filtered."""
-        self.tracks = {name: _Track(truth) for name, truth in truths.items()}
+        reader = "smoothed scores" if smoothed else "scores"
+        self.tracks = {name: _Track(window, reader) for name, window in windows.items()}
         self.distance_m = alignment_distance_m
         self.transform: PlanarTransform | None = PlanarTransform.identity() if alignment == "none" else None
         self._first: list[EpochState] = []
@@ -106,7 +112,11 @@ class StreamedScores:
             rows = [(e.systems[name].t, *e.systems[name].position_n) for e in self._first if name in e.systems]
             a = np.unique(np.asarray(rows, dtype=float).reshape(-1, 4), axis=0)
             estimates[name] = Trajectory(a[:, 0], a[:, 1:], np.zeros_like(a[:, 1:]))
-        truths = {name: TruthTrack(track.t, track.pos) for name, track in self.tracks.items()}
+        last = max((e.systems[name].t for e in self._first for name in e.systems if name in self.tracks),
+                   default=-math.inf)
+        for track in self.tracks.values():  # the truth through the states' span (nothing read is released yet)
+            track.truth.read_through(last)
+        truths = {name: track.truth.held() for name, track in self.tracks.items()}
         usable = {n: e for n, e in estimates.items() if len(e.t) > 1}
         self.transform = fit_first_distance_alignment(usable, truths, self.distance_m) if usable else \
             PlanarTransform.identity()
@@ -122,15 +132,14 @@ class StreamedScores:
 
     def scores(self) -> dict[str, dict]:
         """Per system: ``horizontal_error_m`` and, where the truth has heights, ``vertical_error_m``
-        (:func:`~bodyfusion.evaluation.metrics.error_stats`), ``scored_epochs``, ``t_start`` and
+        (:func:`~bodyfusion.evaluation.metrics.error_stats`' figures), ``scored_epochs``, ``t_start`` and
         ``t_end`` (s) of the truth epochs scored, and ``epochs`` saying how they were made."""
         self.close()
         out = {}
         for name, track in self.tracks.items():
-            e = track.errors.view().astype(float)
-            vertical = {"vertical_error_m": error_stats(e[:, 1])} if np.isfinite(e[:, 1]).any() else {}
-            out[name] = {"horizontal_error_m": error_stats(e[:, 0]), **vertical,
-                         "scored_epochs": int(np.count_nonzero(np.isfinite(e[:, 0]))),
-                         "t_start": track.span[0] if len(e) else None, "t_end": track.span[1] if len(e) else None,
+            n = track.horizontal.count
+            vertical = {"vertical_error_m": track.vertical.stats()} if track.vertical.count else {}
+            out[name] = {"horizontal_error_m": track.horizontal.stats(), **vertical, "scored_epochs": n,
+                         "t_start": track.span[0] if n else None, "t_end": track.span[1] if n else None,
                          "epochs": "truth epochs; the emitted states interpolated linearly to them"}
         return out

@@ -24,7 +24,7 @@ import itertools
 import math
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -284,23 +284,52 @@ def _table_body(path: Path, columns: list[str], skip_rows: int, delimiter: str
     return header, idx, header_line, n_lines, plain, pending, rows
 
 
-def table_chunks(path: str | Path, columns: Sequence[str], *, skip_rows: int = 0,
-                 delimiter: str = ",") -> Iterator[dict[str, np.ndarray]]:
-    """:func:`read_table`'s columns a chunk of lines at a time (:data:`~bodyfusion.io.lines.CHUNK_BYTES`),
-    for a reader that streams a file of any length (a live replay); a chunk's first bad cell is
-    refused as :func:`read_table` refuses it, once the chunks before it are given."""
+class TableChunk(NamedTuple):
+    """One chunk of :func:`labelled_chunks`: column → (m,) float64, the rows' 1-based file
+    lines (m,), and with a label column its cells' (m,) int32 codes into the names met so far
+    (in order of first appearance; the list grows with later chunks), else None."""
+
+    arrays: dict[str, np.ndarray]
+    lines: np.ndarray
+    codes: np.ndarray | None
+    names: list[str]
+
+
+def labelled_chunks(path: str | Path, columns: Sequence[str], label: str | None = None, *, skip_rows: int = 0,
+                    delimiter: str = ",", allow_missing: Collection[str] = ()) -> Iterator[TableChunk]:
+    """:func:`read_labelled_table` a chunk of lines at a time (:data:`~bodyfusion.io.lines.CHUNK_BYTES`),
+    for a reader that streams a file of any length (a live replay, a truth read as a run goes):
+    the same cells, names and codes as the whole file's; a chunk's first bad cell (or label) is
+    refused as the whole read refuses it, once the chunks before it are given."""
     path = Path(path)
     columns = list(columns)
-    allowed = np.zeros(len(columns), dtype=bool)
-    header, idx, _, _, _, pending, rows = _table_body(path, columns, skip_rows, delimiter)
+    allowed = np.array([c in allow_missing for c in columns], dtype=bool)
+    header, idx, header_line, _, _, pending, rows = _table_body(path, columns, skip_rows, delimiter)
+    if label is not None and label not in header:
+        raise InputError(path, f"missing column {label!r}; the header has {header}", header_line)
+    label_j = header.index(label) if label is not None else None
+    found: dict[str, int] = {}
     while pending is not None:
         chunk, lines_of = pending
         pending = next(rows, None)
-        data = _parse_rows(path, chunk, lines_of, idx, columns, delimiter, (), len(header), pending is None)
+        data = _parse_rows(path, chunk, lines_of, idx, columns, delimiter, allow_missing, len(header), pending is None)
         bad = _non_finite(path, data, columns, allowed, lines_of)
         if bad is not None:
             raise bad
-        yield {name: data[:, c] for c, name in enumerate(columns)}
+        codes = None
+        if label_j is not None:
+            codes = np.empty(len(chunk), dtype=np.int32)
+            bad = _labels(path, chunk, lines_of, label_j, label, len(header), found, codes)
+            if bad is not None:
+                raise bad
+        yield TableChunk({name: data[:, c] for c, name in enumerate(columns)}, lines_of, codes, list(found))
+
+
+def table_chunks(path: str | Path, columns: Sequence[str], *, skip_rows: int = 0,
+                 delimiter: str = ",") -> Iterator[dict[str, np.ndarray]]:
+    """:func:`read_table`'s columns a chunk of lines at a time (:func:`labelled_chunks`)."""
+    for chunk in labelled_chunks(path, columns, skip_rows=skip_rows, delimiter=delimiter):
+        yield chunk.arrays
 
 
 def read_labelled_table(

@@ -16,7 +16,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 
 from bodyfusion.base.errors import InputError
 from bodyfusion.base.types import Trajectory
@@ -47,6 +46,7 @@ def _read_table(path: Path) -> pa.Table:
     """The file as an Arrow table, numbers float64 (an empty CSV cell is null)."""
     try:
         if path.suffix == ".parquet":
+            import pyarrow.parquet as pq  # ~40 MB resident: loaded when Parquet is used
             table = pq.read_table(path)
         else:
             types = {c: pa.string() if c == "system" else pa.float64() for c in (*TRAJECTORY_COLUMNS, COV_EN_COLUMN)}

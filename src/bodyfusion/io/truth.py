@@ -1,10 +1,14 @@
 """Readers of reference (truth) tracks: wide CSVs (one row per epoch, columns per system) and
-the long ``system,t,east_m,north_m,up_m`` files ``fusion simulate`` writes. The layout's truth
-formats (:data:`bodyfusion.runner.truth.TRUTH_FORMATS`) are built on them."""
+the long ``system,t,east_m,north_m,up_m`` files ``fusion simulate`` writes, whole
+(:func:`read_truth_csv`, :func:`read_truth_long_csv`) or one system's a chunk of lines at a time
+(:func:`wide_truth_chunks`, :func:`long_truth_chunks`: a live run that keeps a bounded history
+reads its truth as it goes). The layout's truth formats
+(:data:`bodyfusion.runner.truth.TRUTH_FORMATS`) are built on them."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +19,7 @@ from bodyfusion.base.types import LOG, TruthTrack
 from bodyfusion.io.tables import (
     check_columns,
     has_column,
+    labelled_chunks,
     read_labelled_table,
     read_source,
     source_name,
@@ -165,3 +170,148 @@ def read_truth_long_csv(source: str | Path | TableSection, *, sparse: bool = Fal
         check_truth_positions(where, name, pos, None if line_no is None else line_no[rows])
         out[name] = TruthTrack(t=np.array(columns["t"][sel]), pos_n=pos, sparse=sparse)
     return out
+
+
+def _increasing_after(where: str, t: np.ndarray, lines: np.ndarray, before: tuple[float, int] | None) -> None:
+    """Refuse (naming the line, as the whole file's ``error`` timestamp policy refuses it) a chunk's
+    time ``t`` (s) that does not increase strictly, from the previous chunk's last epoch
+    ``before`` ((time s, line) or None) on."""
+    if before is None:
+        apply_timestamp_policy(t, "error", where, lines=lines)
+    else:
+        apply_timestamp_policy(np.concatenate([[before[0]], t]), "error", where,
+                               lines=np.concatenate([[before[1]], lines]))
+
+
+def long_truth_chunks(path: str | Path, name: str) -> Iterator[TruthTrack]:
+    """System ``name``'s epochs of a long-format truth file (:func:`read_truth_long_csv`'s track,
+    its checks and errors) a chunk of lines at a time (:func:`~bodyfusion.io.tables.labelled_chunks`);
+    nothing for a name without rows."""
+    where = str(path)
+    before: tuple[float, int] | None = None
+    for chunk in labelled_chunks(path, LONG_TRUTH_COLUMNS[1:], "system"):
+        if name not in chunk.names:
+            continue
+        rows = np.flatnonzero(chunk.codes == chunk.names.index(name))
+        if not rows.size:
+            continue
+        t, lines = chunk.arrays["t"][rows], chunk.lines[rows]
+        _increasing_after(where, t, lines, before)
+        pos = np.column_stack([chunk.arrays[c][rows] for c in LONG_TRUTH_COLUMNS[2:]])
+        check_truth_positions(where, name, pos, lines)
+        before = (float(t[-1]), int(lines[-1]))
+        yield TruthTrack(t, pos)
+
+
+def wide_truth_chunks(path: str | Path, name: str, columns: Sequence[str], *, time_column: str | None = None,
+                      time_scale: float = 1.0, rate_hz: float | None = None, skip_rows: int = 0,
+                      delimiter: str = ",") -> Iterator[TruthTrack]:
+    """System ``name``'s epochs of a wide truth file, its ``columns`` (two or three, the file's
+    frame and unit), a chunk of lines at a time: :func:`read_truth_csv`'s track for that system,
+    its checks, skipped rows (counted and warned of once the file is read) and errors."""
+    where = str(path)
+    check_time_source(where, time_column, time_scale, rate_hz)
+    columns = check_columns(where, f"position_columns[{name!r}]", columns, (2, 3))
+    cols = list(dict.fromkeys(([time_column] if time_column is not None else []) + columns))
+    before: tuple[float, int] | None = None
+    rows = skipped = 0
+    first_skipped: int | None = None
+    for chunk in labelled_chunks(path, cols, skip_rows=skip_rows, delimiter=delimiter, allow_missing=columns):
+        m = len(chunk.lines)
+        t = (sample_times(chunk.arrays, m, time_column, time_scale, rate_hz) if time_column is not None
+             else (rows + np.arange(m, dtype=np.float64)) / rate_hz)
+        _increasing_after(where, t, chunk.lines, before)
+        before, rows = (float(t[-1]), int(chunk.lines[-1])), rows + m
+        pos = np.column_stack([chunk.arrays[c] for c in columns])
+        ok = ~np.isnan(pos).any(axis=1)
+        if not ok.all():
+            first_skipped = first_skipped if first_skipped is not None else int(chunk.lines[np.argmin(ok)])
+            skipped += int((~ok).sum())
+        if pos.shape[1] == 2:
+            pos = np.column_stack([pos, np.full(len(pos), np.nan)])
+        check_truth_positions(where, name, pos[ok], chunk.lines[ok])
+        if ok.any():
+            yield TruthTrack(t[ok], pos[ok])
+    if skipped == rows:
+        raise InputError(where, f"system {name!r} has no row with all of {list(columns)} present")
+    if skipped:
+        LOG.warning("%s: %d truth row(s) of %s skipped (empty or NaN cells; the first at line %d)", Path(where).name,
+                    skipped, name, first_skipped)
+
+
+class TruthWindow:
+    """One system's truth read as a run goes (:func:`bodyfusion.runner.truth.truth_stream`): the epochs from the earliest
+    one a reader still needs to the last read. Each reader holds a place (an epoch's index since
+    the track's first, :meth:`place`); :meth:`hold_from` keeps every epoch from a time on besides
+    (the finish of a run that keeps its last part). :meth:`track` is the track held; ``span``
+    the first and last epoch read (s), ``epochs`` the number read."""
+
+    def __init__(self, chunks: Iterator[TruthTrack]) -> None:
+        self._chunks = chunks
+        self._t = np.empty(0)
+        self._pos = np.empty((0, 3))
+        self._offset = 0  # the index of the first epoch held
+        self._places: dict[str, int] = {}
+        self._hold_t = -math.inf
+        self.sparse = False
+        self.epochs = 0
+        self.span = (math.nan, math.nan)
+        self.done = False
+
+    def read_through(self, t: float) -> None:
+        """Read chunks until an epoch after ``t`` (s) is held, or the track ends."""
+        while not self.done and not (self._t.size and self._t[-1] > t):
+            chunk = next(self._chunks, None)
+            if chunk is None:
+                self.done = True
+                break
+            if not chunk.t.size:
+                continue
+            self._t = np.concatenate([self._t, chunk.t])
+            self._pos = np.concatenate([self._pos, chunk.pos_n])
+            self.sparse = chunk.sparse
+            self.span = (float(chunk.t[0]) if not self.epochs else self.span[0], float(chunk.t[-1]))
+            self.epochs += chunk.t.size
+
+    def index(self, t: float, side: str = "left") -> int:
+        """The index (since the track's first epoch) of the first epoch at or after ``t`` (s)
+        (``side="right"``: after it), the epochs through ``t`` read."""
+        self.read_through(t)
+        return self._offset + int(np.searchsorted(self._t, t, side=side))
+
+    def epochs_between(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """The times (s) and positions (ENU m) of epochs a … b − 1 (indices since the first; held)."""
+        if a < self._offset:
+            raise ValueError(f"truth epoch {a} was forgotten (the window holds from {self._offset})")
+        return self._t[a - self._offset:b - self._offset], self._pos[a - self._offset:b - self._offset]
+
+    def place(self, reader: str, index: int) -> None:
+        """Reader ``reader`` needs the epochs from ``index`` on (the earlier ones go)."""
+        self._places[reader] = index
+        self._forget()
+
+    def hold_from(self, t: float) -> None:
+        """Keep every epoch from ``t`` (s) on besides what the readers need (the earlier ones go)."""
+        self._hold_t = t
+        self._forget()
+
+    @property
+    def first(self) -> int:
+        """The index (since the track's first epoch) of the first epoch held."""
+        return self._offset
+
+    def held(self) -> TruthTrack:
+        """The epochs held so far."""
+        return TruthTrack(self._t.copy(), self._pos.copy(), self.sparse)
+
+    def track(self) -> TruthTrack | None:
+        """The epochs held, the track read to its end first (None: none)."""
+        self.read_through(math.inf)
+        return TruthTrack(self._t.copy(), self._pos.copy(), self.sparse) if self._t.size else None
+
+    def _forget(self) -> None:
+        """Drop the epochs before every reader's place and the time held from."""
+        keep = min([*self._places.values(), self._offset + int(np.searchsorted(self._t, self._hold_t))])
+        if keep > self._offset:
+            self._t, self._pos = self._t[keep - self._offset:], self._pos[keep - self._offset:]
+            self._offset = keep

@@ -41,7 +41,11 @@ pass the samples its fixed-lag smoother now decides, merged into a second stream
 (:mod:`bodyfusion.live.smoothed`); the other smoothers need the whole run and are refused.
 
 Scores: with ``keep_s`` and a truth, every state emitted is scored as it passes
-(:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`, the result's ``whole_run``).
+(:class:`~bodyfusion.evaluation.streamed_scores.StreamedScores`, the result's ``whole_run``),
+and the truth is read as the run goes (:func:`~bodyfusion.runner.truth.truth_stream`, a
+:class:`~bodyfusion.io.truth.TruthWindow` per system): held from the earliest epoch the scores
+or the part kept still need, so that a scored run of any length holds a bounded truth too. The
+finished result is scored against the truth of the part kept.
 """
 
 from __future__ import annotations
@@ -63,9 +67,11 @@ from bodyfusion.core.epoch_state import EpochOutput, EpochSink
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.registry import get_registry
 from bodyfusion.evaluation.streamed_scores import StreamedScores
+from bodyfusion.io.truth import TruthWindow
 from bodyfusion.live.smoothed import SmoothedEpochs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.batch import Fusion, finish_fusion, prepare_fusion
+from bodyfusion.runner.truth import truth_stream
 
 LOOKAHEAD_S = 2.0
 """Default look-ahead (s) behind the newest sample at which a system's decisions are final: a
@@ -301,6 +307,9 @@ class LiveRun:
         self.started: tuple[float, float] | None = None
         """When the run started: the data's time (s) and the wall time (s, :func:`time.perf_counter`)
         at the end of its first pass (None: not yet, or only at the close)."""
+        self.truth: dict[str, TruthWindow] = {}
+        """The truth by system as the scores read it: with ``keep_s``, read as the run goes; else the
+        tracks read whole (module docstring)."""
         self.scorer: StreamedScores | None = None
         """With ``keep_s`` and a truth: the scores of every state emitted (the finished result's
         ``whole_run``; its ``scores`` cover the part kept)."""
@@ -353,14 +362,15 @@ class LiveRun:
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 try:
                     self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
-                                                 lookahead_s=self.lookahead_s)
+                                                 lookahead_s=self.lookahead_s, read_truth=self.keep_s is None)
                 except NotReady as err:  # not enough yet: no rest ended, no system travelled far enough to align
                     self.not_started = err
                     self._start_after_s += RETRY_S
                     return False
-                if self.keep_s is not None and self.fusion.truths:  # the result will cover the last part only
+                self._open_truth()
+                if self.keep_s is not None and self.truth:  # the result will cover the last part only
                     truth = self.loaded.layout.truth
-                    self.scorer = StreamedScores(self.fusion.truths, truth.alignment, truth.alignment_distance_m)
+                    self.scorer = StreamedScores(self.truth, truth.alignment, truth.alignment_distance_m)
                     self.output.sinks = [*self.output.sinks, self.scorer]
                 self._start_smoothing()
                 self._advance(newest)
@@ -372,6 +382,22 @@ class LiveRun:
             self._advance(newest)
             return True
         return False
+
+    def _open_truth(self) -> None:
+        """The truth windows (:attr:`truth`): with ``keep_s`` each system's track read as the run
+        goes, a first chunk read now (a system without one has no truth); else the tracks read
+        whole."""
+        if self.keep_s is None:
+            self.truth = {name: TruthWindow(iter([track])) for name, track in self.fusion.truths.items()}
+            return
+        cfg = self.loaded.layout.truth
+        if cfg is None or (cfg.path is None and cfg.table is None):
+            return
+        for name in self.loaded.layout.systems:
+            window = TruthWindow(truth_stream(cfg, self.fusion.origin, name))
+            window.read_through(-math.inf)
+            if window.epochs:
+                self.truth[name] = window
 
     def _read_tables(self, read) -> None:
         """Bind each buffer's rows to its system's section (the section the built system reads) and
@@ -397,7 +423,7 @@ class LiveRun:
             except FusionError as err:
                 self.not_smoothed[name] = str(err)
         self.smoothed = SmoothedEpochs(smoothers, self.output, cfg.lag_s)
-        truths = {name: track for name, track in self.fusion.truths.items() if name in smoothers}
+        truths = {name: window for name, window in self.truth.items() if name in smoothers}
         if truths:
             truth = self.loaded.layout.truth
             self.smoothed_scorer = StreamedScores(truths, truth.alignment, truth.alignment_distance_m, smoothed=True)
@@ -420,6 +446,8 @@ class LiveRun:
         if not math.isfinite(decided) or decided - self.keep_s < self._forgot_at + self.keep_s:
             return
         self._forgot_at = decided - self.keep_s
+        for window in self.truth.values():  # the finish scores the part kept
+            window.hold_from(self._forgot_at)
         for name, system in self.fusion.built.items():  # the navigation systems and the aiding sources
             for section_name, rows in system.forget_before(self._forgot_at).items():
                 self.buffers[self.stream_name(name, None if section_name == system.data_section else section_name)
@@ -438,8 +466,12 @@ class LiveRun:
                         n for n, b in self.buffers.items() if b.paces and not b.rows))
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
                 self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
-                                             lookahead_s=self.lookahead_s, complete=True)
+                                             lookahead_s=self.lookahead_s, complete=True, read_truth=self.keep_s is None)
+                self._open_truth()
                 self._start_smoothing()
+            if self.keep_s is not None and self.truth:  # the truth of the part kept, and the spans read
+                self.fusion.truths = {name: window.track() for name, window in self.truth.items()}
+                self.fusion.truth_spans = {name: window.span for name, window in self.truth.items()}
             self._read_tables(lambda s: s.close_stream())
             result = finish_fusion(self.fusion)
             if self.smoothed is not None:  # the recordings complete: every segment to the end

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from bodyfusion.core.system import CovarianceHistory, SensorSystem
 from bodyfusion.outputs.trajectories import ROWS, arrow_numbers, arrow_strings, epoch_pieces
@@ -48,6 +47,7 @@ def write_covariances_parquet(path: Path, systems: Mapping[str, SensorSystem], d
     meta = {"bodyfusion.format_version": COVARIANCE_FORMAT_VERSION,
             "bodyfusion.stored": json.dumps({name: h.stored for name, h in histories.items()})}
     schema = pa.schema([(k, pa.string() if k == "system" else pa.float64()) for k in names]).with_metadata(meta)
+    import pyarrow.parquet as pq  # ~40 MB resident: loaded when Parquet is used
     with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=["system"]) as writer:
         for name, history in histories.items():
             held = set(kept[name])

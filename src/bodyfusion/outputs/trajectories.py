@@ -40,7 +40,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
 from bodyfusion.base.types import NavigationFrame, Trajectory, TruthTrack
@@ -216,6 +215,7 @@ def write_trajectories_parquet(path: Path, trajectories: Mapping[str, Trajectory
         for piece in _trajectory_pieces(trajectories, decimate):
             if writer is None:
                 schema = _trajectory_schema(piece).with_metadata(meta)
+                import pyarrow.parquet as pq  # ~40 MB resident: loaded when Parquet is used
                 writer = pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=["system"])
             writer.write_batch(pa.RecordBatch.from_arrays(piece, schema=schema))
     finally:

@@ -63,11 +63,14 @@ class Fusion:
     growing: bool = False
     """Built on the first part of a live run's recordings (the truth is checked against them at
     the finish)."""
+    truth_spans: dict | None = None
+    """The truth tracks' own spans (first, last epoch, s) where ``truths`` hold a part of them (a
+    live run that read its truth as it went and kept the last part)."""
 
 
 def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallback | None = None,
                    output: EpochOutput | None = None, lookahead_s: float | None = None,
-                   complete: bool = False) -> Fusion:
+                   complete: bool = False, read_truth: bool = True) -> Fusion:
     """Build a validated layout's systems (the layout validated again as a whole first:
     :meth:`~bodyfusion.core.layout.LoadedLayout.checked`), read its truth, align the systems'
     headings and hand them to a :class:`~bodyfusion.core.fuser.Fuser` (emitting ``output`` epochs
@@ -77,7 +80,9 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     samples that far behind its newest (:meth:`~bodyfusion.core.capabilities.Streaming.start_streaming`);
     ``complete``: the live run's recordings are whole already (a system may not refuse them).
     On a live run's first part, a heading alignment without enough travel is
-    :class:`~bodyfusion.base.errors.NotReady` and the truth is checked at the finish."""
+    :class:`~bodyfusion.base.errors.NotReady` and the truth is checked at the finish. Without
+    ``read_truth`` the truth is left to the caller (a live run that reads it as it goes sets
+    ``truths`` before the finish)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     loaded = loaded.checked()
@@ -92,7 +97,7 @@ def prepare_fusion(loaded: LoadedLayout, seed: int = 0, progress: ProgressCallba
     systems = {name: s for name, s in built.items() if name not in aiding}
     plan_smoothing(systems, loaded.layout.smoother)
     origin = geodetic_origin(loaded, systems)
-    truths = load_truth(loaded, origin)
+    truths = load_truth(loaded, origin) if read_truth else {}
     growing = lookahead_s is not None and not complete
     if not growing:  # a live run's recordings are checked against the truth once complete (finish_fusion)
         check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
@@ -140,7 +145,8 @@ def finish_fusion(fusion: Fusion) -> RunResult:
     timings = fusion.timings
     report = fusion.fuser.finish()
     if fusion.growing:
-        check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path)
+        check_truth_overlap(truths, {name: (s.t_start, s.t_end) for name, s in systems.items()}, loaded.path,
+                            fusion.truth_spans)
     for monitor in fusion.monitors.values():
         monitor.flush()
     if fusion.tracker is not None:
