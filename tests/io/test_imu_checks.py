@@ -111,6 +111,43 @@ def test_checks_work_on_arrays_alone():
     assert checks.to_dict()["warnings"] == 1 and checks.rate_hz == pytest.approx(RATE)
 
 
+@pytest.mark.parametrize("g", [9.80665, 1.0])  # in m/s^2, and g declared as m/s^2 (a plausibility warning)
+def test_without_plausibility_the_gaps_and_clipping_are_the_full_checks_and_nothing_is_reported_of_units(g):
+    """A live pass's checks: what shapes the inputs (gaps, clipping) as the full checks find it;
+    the units, rate and rest checks (which only report) left out."""
+    t, acc, gyro = walking_imu()
+    keep = np.ones(t.size, dtype=bool)
+    keep[300:340] = False
+    acc[:, 0] = np.clip(acc[:, 0], -2.0, 2.0)
+    t, acc, gyro = t[keep], acc[keep] * g / 9.80665, gyro[keep]
+    full = check_imu(t, acc, gyro, source="array", acc_unit="m/s^2", gyro_unit="rad/s", declared_rate_hz=50.0)
+    inputs = check_imu(t, acc, gyro, source="array", acc_unit="m/s^2", gyro_unit="rad/s", declared_rate_hz=50.0,
+                       plausibility=False)
+    assert inputs.gap_index.tolist() == full.gap_index.tolist() == [300]
+    np.testing.assert_array_equal(inputs.gap_missing_s, full.gap_missing_s)
+    assert inputs.clipping.keys() == full.clipping.keys() == {"acc"}
+    assert inputs.clipped_acc_samples == full.clipped_acc_samples > 10
+    assert inputs.rate_hz == full.rate_hz
+    assert math.isnan(inputs.rest_specific_force_mps2) and math.isnan(inputs.max_angular_rate_radps)
+    assert inputs.warnings == [w for w in full.warnings if "gap(s)" in w or "saturated" in w]
+    assert len(full.warnings) > len(inputs.warnings)  # the declared rate (and g as m/s^2) only in the full
+
+
+def test_a_reader_asked_for_fewer_checks_reads_the_same_samples(tmp_path):
+    """``checks="inputs"``: the gaps and clipping of the full checks, no unit warning; ``"none"``:
+    no checks at all; the samples the same bits in every case; an unknown choice refused."""
+    t, acc, gyro = walking_imu()
+    path = write_csv(tmp_path / "imu.csv", t, acc / 9.80665, gyro)  # g declared as m/s^2: a unit warning
+    full, inputs, none = (read(path, checks=c) for c in ("all", "inputs", "none"))
+    for stream in (inputs, none):
+        for name in ("t", "acc_b", "gyro_b"):
+            np.testing.assert_array_equal(getattr(stream, name), getattr(full, name))
+    assert any("acc_unit" in w for w in full.report.warnings) and not inputs.report.warnings
+    assert inputs.checks.gap_index.size == full.checks.gap_index.size and none.checks is None
+    with pytest.raises(ValueError, match="checks must be"):
+        read(path, checks="some")
+
+
 def test_warnings_reach_metrics_json_and_the_console(tmp_path, write_yaml):
     t, acc, gyro = walking_imu(seconds=6.0)
     write_csv(tmp_path / "imu.csv", t, acc / 9.80665, gyro)

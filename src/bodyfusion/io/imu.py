@@ -98,6 +98,7 @@ def read_imu_csv(
     declared_rate_hz: float | None = None,
     max_step_samples: float = 5.0,
     max_gap_s: float = MAX_GAP_S,
+    checks: Literal["all", "inputs", "none"] = "all",
 ) -> ImuStream:
     """Read a body-frame IMU CSV into an :class:`ImuStream` in SI units: the file ``source``, or a
     table section's data (:func:`bodyfusion.io.tables.read_source`: its in-memory table, every
@@ -112,10 +113,15 @@ def read_imu_csv(
     ``timestamp_policy`` (see :func:`apply_timestamp_policy`); what was changed is
     in ``stream.report``.  The stream is then checked
     (:func:`bodyfusion.io.imu_checks.check_imu`, against ``declared_rate_hz`` and with gaps
-    longer than ``max_step_samples`` periods): ``stream.checks``, and one warning
-    each in ``stream.report``. Refused with the line: a reading beyond :data:`ACC_LIMIT_MPS2`
-    or :data:`GYRO_LIMIT_RADPS` (corrupt, not a sensor's), a gap longer than ``max_gap_s``.
+    longer than ``max_step_samples`` periods): ``stream.checks``, and one warning each in
+    ``stream.report``; ``checks="inputs"``: the gaps and clipping only (what shapes a navigation
+    system's inputs), ``"none"``: no checks (``stream.checks`` None) — a live run's pass over the
+    last seconds of a recording whose whole is checked at its close. Refused with the line: a
+    reading beyond :data:`ACC_LIMIT_MPS2` or :data:`GYRO_LIMIT_RADPS` (corrupt, not a sensor's), a
+    gap longer than ``max_gap_s``.
     """
+    if checks not in ("all", "inputs", "none"):
+        raise ValueError(f"checks must be all, inputs or none, got {checks!r}")
     where = source_name(source)
     if acc_unit not in ACC_UNITS:
         raise InputError(where, f"unknown acc_unit {acc_unit!r}; allowed: " + ", ".join(ACC_UNITS))
@@ -189,9 +195,11 @@ def read_imu_csv(
         source=where,
         report=report,
     )
+    if checks == "none":
+        return stream
     stream.checks = check_imu(stream.t, stream.acc_b, stream.gyro_b, source=Path(where).name if line_no is not None
                               else where, acc_unit=acc_unit, gyro_unit=gyro_unit, declared_rate_hz=declared_rate_hz,
-                              max_step_samples=max_step_samples)
+                              max_step_samples=max_step_samples, plausibility=checks == "all")
     for message in stream.checks.warnings:
         report.warn(message)
     return stream
@@ -208,11 +216,11 @@ def _body_frame(axes: tuple[str, str, str], columns: list[np.ndarray], unit: flo
     return out
 
 
-def read_imu(section: ImuCsvConfig) -> ImuStream:
+def read_imu(section: ImuCsvConfig, checks: Literal["all", "inputs", "none"] = "all") -> ImuStream:
     """The stream a layout's IMU section describes (its file, or its in-memory table), in SI units
     and the body frame, checked
     (:func:`read_imu_csv`; with both a time column and ``rate_hz``, the rate is the nominal
-    one the timestamps are checked against)."""
+    one the timestamps are checked against; ``checks``: which, as :func:`read_imu_csv`'s)."""
     timed = section.time_column is not None
     return read_imu_csv(
         section, acc_columns=section.acc_columns, gyro_columns=section.gyro_columns,
@@ -220,4 +228,4 @@ def read_imu(section: ImuCsvConfig) -> ImuStream:
         time_column=section.time_column, time_scale=section.time_scale, rate_hz=None if timed else section.rate_hz,
         skip_rows=section.skip_rows, delimiter=section.delimiter, timestamp_policy=section.timestamp_policy,
         axes=section.axes, declared_rate_hz=section.rate_hz if timed else None,
-        max_step_samples=section.max_step_samples, max_gap_s=section.max_gap_s)
+        max_step_samples=section.max_step_samples, max_gap_s=section.max_gap_s, checks=checks)

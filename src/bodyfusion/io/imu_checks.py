@@ -48,12 +48,21 @@ RATE_TOLERANCE = 0.02
 
 
 def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: str, acc_unit: str,
-              gyro_unit: str, declared_rate_hz: float | None = None, max_step_samples: float = 5.0) -> ImuChecks:
+              gyro_unit: str, declared_rate_hz: float | None = None, max_step_samples: float = 5.0,
+              plausibility: bool = True) -> ImuChecks:
     """Check a stream already converted to SI (t s, acc_b m/s^2, gyro_b rad/s) against what
-    physics and the declaration (units, nominal rate) allow; see the module docstring."""
+    physics and the declaration (units, nominal rate) allow; see the module docstring. Without
+    ``plausibility`` only what shapes a navigation system's inputs is looked for (gaps,
+    clipping): the units, rate and rest checks, which only report, are left out (the rest's
+    specific force and the largest rate are then NaN): a live run's pass over the last seconds of
+    a recording whose whole is checked at its close."""
     dt = np.diff(t)
     nominal_dt = float(np.median(dt)) if dt.size else float("nan")
     rate = 1.0 / nominal_dt if nominal_dt > 0 else float("nan")
+    if not plausibility:
+        out = ImuChecks(source, rate, float("nan"), float("nan"))
+        _inputs_checks(out, t, dt, nominal_dt, acc_b, gyro_b, max_step_samples)
+        return out
     f = np.linalg.norm(acc_b, axis=1)
     w = np.linalg.norm(gyro_b, axis=1)
     length = int(min(len(t), max(10, round(0.25 * rate)) if np.isfinite(rate) else 10))
@@ -89,6 +98,16 @@ def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: s
              "check time_scale or rate_hz")
     elif not 1.0 <= rate <= 1e4:
         warn(f"{source}: timestamps give a sample rate of {rate:.4g} Hz; check time_scale (seconds per unit)")
+    _inputs_checks(out, t, dt, nominal_dt, acc_b, gyro_b, max_step_samples)
+    return out
+
+
+def _inputs_checks(out: ImuChecks, t: np.ndarray, dt: np.ndarray, nominal_dt: float, acc_b: np.ndarray,
+                   gyro_b: np.ndarray, max_step_samples: float) -> None:
+    """The checks whose findings shape a navigation system's inputs, into ``out``: the gaps
+    (steps longer than ``max_step_samples`` nominal periods ``nominal_dt`` s) and the clipped
+    runs of each sensor."""
+    source, warn = out.source, out.warnings.append
     gaps = np.flatnonzero(dt > max_step_samples * nominal_dt) + 1
     if gaps.size:
         out.gap_index = gaps.astype(np.int64)
@@ -104,4 +123,3 @@ def check_imu(t: np.ndarray, acc_b: np.ndarray, gyro_b: np.ndarray, *, source: s
             warn(f"{source}: {clipping.describe(what, unit)}")
     out.clipped_acc_samples = out.clipping["acc"].samples if "acc" in out.clipping else 0
     out.clipped_gyro_samples = out.clipping["gyro"].samples if "gyro" in out.clipping else 0
-    return out

@@ -235,7 +235,8 @@ class StreamingFootIns(Streaming):
         a = max(0, n0 - int(CONTEXT_S * self._rate_hz))
         a -= a % hop  # the stride period's windows on the whole recording's grid
         with log_silenced():  # what the reader finds in the context it said on an earlier pass
-            derived = self._derive(read_imu(self.config.data.rows_from(a)))
+            # the gaps and clipping only: the units, rate and rest checks report, and the close checks the whole
+            derived = self._derive(read_imu(self.config.data.rows_from(a), checks="inputs"))
         self._splice(derived, a)
         self._decide(float(self.stream.t[-1]) - self._lookahead_s)
 

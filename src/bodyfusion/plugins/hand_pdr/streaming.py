@@ -131,7 +131,8 @@ class StreamingHandPdr(Streaming):
         first = max(self._open_fix() - 1, 0)
         with log_silenced():  # what the readers find in the context they said on an earlier pass
             fixes = (first, self._read_fixes(first)) if self.config.gnss is not None else None
-            return a, read_imu(self.config.imu.rows_from(a)), fixes
+            # no checks: its derivation reads none, and the close checks the whole recording
+            return a, read_imu(self.config.imu.rows_from(a), checks="none"), fixes
 
     def _splice(self, t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, a: int) -> None:
         """Keep the final samples' derivations and take every later sample's from the derivation
