@@ -110,6 +110,28 @@ def test_a_window_gives_the_epochs_it_is_asked_for_and_holds_no_more_than_its_re
         reader = b
         window.place("scores", reader)
         assert window.first == min(reader, int(np.searchsorted(t, hold)))  # what the reader or the hold needs
-    held = window.track()
-    assert held.t[-1] == t[-1] and window.span == (t[0], t[-1]) and window.epochs == t.size
-    assert window.done and math.isfinite(held.t[0])
+    held = window.track()  # read to the end: what is held from the first epoch still needed on
+    first = window.first
+    assert first <= min(reader, int(np.searchsorted(t, hold)))
+    if first < t.size:
+        np.testing.assert_array_equal(held.t, t[first:])
+    else:  # every epoch read was passed by the reader and the hold
+        assert held is None
+    assert window.span == (t[0], t[-1]) and window.epochs == t.size and window.done and window.error is None
+
+
+def test_a_file_refused_hours_in_ends_the_window_there_and_says_so(tmp_path, caplog):
+    """A bad cell past the first chunks: the window holds the track up to the chunk before it,
+    keeps the reader's error and warns once; a run reading its truth as it goes scores to there."""
+    path = _long_file(tmp_path / "truth.csv", blocks=True)
+    text = path.read_text().splitlines()
+    text[250] = text[250].rsplit(",", 1)[0] + ",oops"  # line 251: a height that is not a number
+    path.write_text("\n".join(text) + "\n")
+    window = TruthWindow(long_truth_chunks(path, "left"), "left")
+    with caplog.at_level("WARNING"):
+        window.read_through(math.inf)
+    assert window.done and isinstance(window.error, InputError) and "truth.csv:251:" in str(window.error)
+    assert 0 < window.epochs < 249 and window.span[1] < 2.49
+    assert sum("the truth of left ends at" in r.getMessage() for r in caplog.records) == 1
+    window.read_through(math.inf)  # no second warning, no second read
+    assert sum("the truth of left ends at" in r.getMessage() for r in caplog.records) == 1

@@ -133,13 +133,16 @@ class StreamedScores:
     def scores(self) -> dict[str, dict]:
         """Per system: ``horizontal_error_m`` and, where the truth has heights, ``vertical_error_m``
         (:func:`~bodyfusion.evaluation.metrics.error_stats`' figures), ``scored_epochs``, ``t_start`` and
-        ``t_end`` (s) of the truth epochs scored, and ``epochs`` saying how they were made."""
+        ``t_end`` (s) of the truth epochs scored, ``epochs`` saying how they were made, and
+        ``truth_error`` where the truth's reader refused a later part of its file (the scores end
+        there: :class:`~bodyfusion.io.truth.TruthWindow`)."""
         self.close()
         out = {}
         for name, track in self.tracks.items():
             n = track.horizontal.count
             vertical = {"vertical_error_m": track.vertical.stats()} if track.vertical.count else {}
+            ended = {"truth_error": str(track.truth.error)} if track.truth.error is not None else {}
             out[name] = {"horizontal_error_m": track.horizontal.stats(), **vertical, "scored_epochs": n,
                          "t_start": track.span[0] if n else None, "t_end": track.span[1] if n else None,
-                         "epochs": "truth epochs; the emitted states interpolated linearly to them"}
+                         "epochs": "truth epochs; the emitted states interpolated linearly to them", **ended}
         return out

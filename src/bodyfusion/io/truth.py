@@ -244,10 +244,16 @@ class TruthWindow:
     one a reader still needs to the last read. Each reader holds a place (an epoch's index since
     the track's first, :meth:`place`); :meth:`hold_from` keeps every epoch from a time on besides
     (the finish of a run that keeps its last part). :meth:`track` is the track held; ``span``
-    the first and last epoch read (s), ``epochs`` the number read."""
+    the first and last epoch read (s), ``epochs`` the number read. A chunk the reader refuses
+    (:class:`~bodyfusion.base.errors.InputError`: a bad cell, a time that goes back) ends the
+    track there: ``error`` keeps it and it is warned of once (a run that reads its truth as it
+    goes meets it hours in; the scores then cover the track up to it, and say so).
+    ``name``: the system's, for the warning."""
 
-    def __init__(self, chunks: Iterator[TruthTrack]) -> None:
+    def __init__(self, chunks: Iterator[TruthTrack], name: str = "") -> None:
         self._chunks = chunks
+        self.name = name
+        self.error: InputError | None = None
         self._t = np.empty(0)
         self._pos = np.empty((0, 3))
         self._offset = 0  # the index of the first epoch held
@@ -261,7 +267,12 @@ class TruthWindow:
     def read_through(self, t: float) -> None:
         """Read chunks until an epoch after ``t`` (s) is held, or the track ends."""
         while not self.done and not (self._t.size and self._t[-1] > t):
-            chunk = next(self._chunks, None)
+            try:
+                chunk = next(self._chunks, None)
+            except InputError as err:
+                self.error, chunk = err, None
+                LOG.warning("truth: %s: %s; the truth of %s ends at t = %.6g s: scored up to there", self.name, err,
+                            self.name, self.span[1])
             if chunk is None:
                 self.done = True
                 break

@@ -385,8 +385,8 @@ class LiveRun:
 
     def _open_truth(self) -> None:
         """The truth windows (:attr:`truth`): with ``keep_s`` each system's track read as the run
-        goes, a first chunk read now (a system without one has no truth); else the tracks read
-        whole."""
+        goes, a first chunk read now (a system without one has no truth; a file refused there is
+        refused now); else the tracks read whole."""
         if self.keep_s is None:
             self.truth = {name: TruthWindow(iter([track])) for name, track in self.fusion.truths.items()}
             return
@@ -394,8 +394,10 @@ class LiveRun:
         if cfg is None or (cfg.path is None and cfg.table is None):
             return
         for name in self.loaded.layout.systems:
-            window = TruthWindow(truth_stream(cfg, self.fusion.origin, name))
+            window = TruthWindow(truth_stream(cfg, self.fusion.origin, name), name)
             window.read_through(-math.inf)
+            if window.error is not None and not window.epochs:  # refused from its start, as a batch run refuses it
+                raise window.error
             if window.epochs:
                 self.truth[name] = window
 
