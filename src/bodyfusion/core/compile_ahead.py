@@ -25,6 +25,7 @@ from bodyfusion.core.constraints.kernels import _all_finite
 from bodyfusion.core.constraints.truncation import DensityTruncation
 from bodyfusion.core.constraints.solvers import constraint_solver, distance_constraints
 from bodyfusion.core.layout import Layout
+from bodyfusion.nav.kalman import gated_update
 from bodyfusion.nav.filter_health import CovarianceHealth
 
 log = logging.getLogger(__name__)
@@ -39,9 +40,12 @@ def compile_fuser_kernels(layout: Layout) -> None:
     (``fuser.method``) on stacked positions that put every pair of constrained systems 2 d + 1 m
     apart (d: the largest limit; every maximum separation violated) and on coincident ones
     (every minimum violated), the density truncation of each solution when the fuser truncates,
-    and the covariance checks."""
+    the covariance checks and the gated update of an aiding measurement or a heading tie. On a
+    filled cache this loads them (~10 ms each): a live run does so at its start
+    (:mod:`bodyfusion.live.engine`), not in the pass that first needs one."""
     health = CovarianceHealth()
     health.add_many(np.stack([np.eye(15), 2.0 * np.eye(15)]), np.array([0.0, 1.0]))
+    gated_update(np.eye(3), np.array([1.0, 0.0, 0.0]), 1.0, 0.5, 10.0)
     if layout.fuser.method == "none" or not layout.constraints:
         return
     order = list(dict.fromkeys(name for c in layout.constraints for name in c.between))

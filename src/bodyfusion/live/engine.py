@@ -63,6 +63,7 @@ from bodyfusion.base.errors import ConfigError, FusionError, InputError, NotRead
 from bodyfusion.base.records import GrowingArray
 from bodyfusion.base.sections import TableSection
 from bodyfusion.core.capabilities import Smoothing, Streaming, offers
+from bodyfusion.core.compile_ahead import compile_fuser_kernels
 from bodyfusion.core.epoch_state import EpochOutput, EpochSink
 from bodyfusion.core.layout import LoadedLayout
 from bodyfusion.core.registry import get_registry
@@ -367,6 +368,7 @@ class LiveRun:
                     self.not_started = err
                     self._start_after_s += RETRY_S
                     return False
+                compile_fuser_kernels(self.loaded.layout)  # loaded now: no later pass waits ~10 ms for one
                 self._open_truth()
                 if self.keep_s is not None and self.truth:  # the result will cover the last part only
                     truth = self.loaded.layout.truth
