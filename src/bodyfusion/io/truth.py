@@ -240,15 +240,15 @@ def wide_truth_chunks(path: str | Path, name: str, columns: Sequence[str], *, ti
 
 
 class TruthWindow:
-    """One system's truth read as a run goes (:func:`bodyfusion.runner.truth.truth_stream`): the epochs from the earliest
-    one a reader still needs to the last read. Each reader holds a place (an epoch's index since
-    the track's first, :meth:`place`); :meth:`hold_from` keeps every epoch from a time on besides
-    (the finish of a run that keeps its last part). :meth:`track` is the track held; ``span``
-    the first and last epoch read (s), ``epochs`` the number read. A chunk the reader refuses
-    (:class:`~bodyfusion.base.errors.InputError`: a bad cell, a time that goes back) ends the
-    track there: ``error`` keeps it and it is warned of once (a run that reads its truth as it
-    goes meets it hours in; the scores then cover the track up to it, and say so).
-    ``name``: the system's, for the warning."""
+    """One system's truth read as a run goes (:func:`bodyfusion.runner.truth.truth_stream`): the
+    epochs from the earliest one a reader still needs to the last read. Each reader holds a
+    place (an epoch's index since the track's first, :meth:`place`); :meth:`hold_from` keeps
+    every epoch from a time on besides (the finish of a run that keeps its last part).
+    :meth:`track` is the track held; ``span`` the first and last epoch read (s), ``epochs`` the
+    number read. A chunk the reader refuses (:class:`~bodyfusion.base.errors.InputError`: a bad
+    cell, a time that goes back) ends the track there: ``error`` keeps it and it is warned of
+    once (a run that reads its truth as it goes meets it hours in; the scores then cover the
+    track up to it, and say so). ``name``: the system's, for the warning."""
 
     def __init__(self, chunks: Iterator[TruthTrack], name: str = "") -> None:
         self._chunks = chunks

@@ -469,8 +469,8 @@ class LiveRun:
                     raise ConfigError("--source", "no rows arrived for " + ", ".join(
                         n for n, b in self.buffers.items() if b.paces and not b.rows))
                 self.loaded.tables.update({b.key: b.table() for b in self.buffers.values()})
-                self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output,
-                                             lookahead_s=self.lookahead_s, complete=True, read_truth=self.keep_s is None)
+                self.fusion = prepare_fusion(self.loaded, self.seed, output=self.output, lookahead_s=self.lookahead_s,
+                                             complete=True, read_truth=self.keep_s is None)
                 self._open_truth()
                 self._start_smoothing()
             if self.keep_s is not None and self.truth:  # the truth of the part kept, and the spans read
