@@ -104,16 +104,29 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
 
 
-def _flank_cubic(x: np.ndarray, start: int, stop: int, excluded: np.ndarray) -> np.ndarray | None:
-    """The least-squares cubic through the unexcluded samples of ``x`` within
-    :data:`FIT_SAMPLES` of run [start, stop), evaluated on the run; None without 4 of them."""
-    n = x.size
-    flanks = np.concatenate([np.arange(max(0, start - FIT_SAMPLES), start), np.arange(stop, min(n, stop + FIT_SAMPLES))])
-    flanks = flanks[~excluded[flanks]]
-    if flanks.size < 4:
-        return None
-    centre = 0.5 * (start + stop - 1)
-    return _cubic_through((flanks - centre).tobytes(), x[flanks].tobytes(), stop - start).copy()
+class _Flanks:
+    """The flanks of every candidate run [starts[r], stops[r]) of ``x``: the unexcluded samples
+    within :data:`FIT_SAMPLES` before and after each (in that order), found for all runs at once;
+    :meth:`cubic` fits one run's."""
+
+    def __init__(self, x: np.ndarray, starts: np.ndarray, stops: np.ndarray, excluded: np.ndarray) -> None:
+        k = np.arange(FIT_SAMPLES)
+        idx = np.concatenate([starts[:, None] - FIT_SAMPLES + k, stops[:, None] + k], axis=1)
+        inside = np.clip(idx, 0, x.size - 1)
+        self.usable = (idx >= 0) & (idx < x.size) & ~excluded[inside]
+        self.count = self.usable.sum(axis=1)
+        self.offsets = idx - 0.5 * (starts + stops - 1)[:, None]  # from each run's centre
+        self.values = x[inside]
+        self.lengths = stops - starts
+
+    def cubic(self, r: int) -> np.ndarray | None:
+        """The least-squares cubic through run r's flank samples, evaluated on the run; None
+        without 4 of them."""
+        if self.count[r] < 4:
+            return None
+        use = self.usable[r]
+        return _cubic_through(self.offsets[r][use].tobytes(), self.values[r][use].tobytes(),
+                              int(self.lengths[r])).copy()
 
 
 @functools.lru_cache(maxsize=FITS_KEPT)
@@ -138,11 +151,14 @@ def find_clipping(signal: np.ndarray, dt: float) -> Clipping:
                 continue
             candidate = col >= level * (1.0 - RAIL_TOLERANCE)
             starts, stops = _runs(candidate)
+            if starts.size < MIN_CLIPPED_RUNS:  # too few runs to make a rail
+                continue
+            flanks = _Flanks(col, starts, stops, candidate)
             clipped = []
             for k, (a, b) in enumerate(zip(starts, stops)):
                 if len(clipped) + starts.size - k < MIN_CLIPPED_RUNS:  # too few runs left to make a rail
                     break
-                fit = _flank_cubic(col, a, b, candidate)
+                fit = flanks.cubic(k)
                 if fit is not None and fit.max() > level * (1.0 + MIN_EXCESS):
                     beyond = np.maximum(fit, level)
                     clipped.append(ClippedRun(axis, int(a), int(b), float(np.sum(beyond - level) * dt), sign * beyond))
