@@ -8,9 +8,10 @@ own process); ``--no-phone``: the feet alone. A second process replays it throug
 every 0.1 s to a sink that counts them), keeping ``--keep`` s of history (default 60); its rows
 come from ``fusion live``'s replay (:func:`~bodyfusion.live.sources.replay_rows`: each file read
 a chunk of lines at a time and merged in time order), so the source holds no recording. The
-resident memory (``VmRSS``) is sampled every half hour of data. The layout's truth is read as
-the run goes and every state emitted is scored against it (``whole_run``); with ``--no-truth`` it
-is left out, as in the field.
+resident memory (``VmRSS``) is sampled every half hour of data; the peak is the process's
+high-water mark (``VmHWM``), which also holds what a pass or the close took between samples. The
+layout's truth is read as the run goes and every state emitted is scored against it
+(``whole_run``); with ``--no-truth`` it is left out, as in the field.
 
 Prints the samples; last line ``peak_rss_mb=<MB> first_half_growth_mb=<MB> last_half_growth_mb=<MB>
 hours=<h> wall_s=<s>`` (growth: resident memory at the half-way sample to the last, and from the
@@ -54,10 +55,10 @@ def scenario(hours: float, phone: bool) -> dict:
     return out
 
 
-def rss_mb() -> float:
-    """Resident memory of this process (MB)."""
+def rss_mb(key: str = "VmRSS") -> float:
+    """Resident memory of this process (MB): now (``VmRSS``) or its high-water mark (``VmHWM``)."""
     for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{key}:"):
             return float(line.split()[1]) / 1024.0
     return float("nan")
 
@@ -96,6 +97,7 @@ def replay(config: Path, keep_s: float, overrides: list[str]) -> None:
     run.close()
     print(f"sample data_h={(t - t0) / 3600:.2f} rss_mb={rss_mb():.1f} states={sink.states} "
           f"wall_s={time.perf_counter() - wall0:.0f} closed", flush=True)
+    print(f"high_water rss_mb={rss_mb('VmHWM'):.1f}", flush=True)
 
 
 def main() -> None:
@@ -133,9 +135,11 @@ def main() -> None:
                    if line.startswith("sample")]
         hours = [float(s["data_h"]) for s in samples]
         rss = [float(s["rss_mb"]) for s in samples]
+        high_water = next(float(line.split("=")[1]) for line in child.stdout.splitlines()
+                          if line.startswith("high_water"))
         warm = next(k for k, h in enumerate(hours) if h >= 0.5)  # after the first half hour
         half = min(range(len(hours)), key=lambda k: abs(hours[k] - hours[-1] / 2))
-        print(f"peak_rss_mb={max(rss):.1f} first_half_growth_mb={rss[half] - rss[warm]:.1f} "
+        print(f"peak_rss_mb={high_water:.1f} first_half_growth_mb={rss[half] - rss[warm]:.1f} "
               f"last_half_growth_mb={rss[-1] - rss[half]:.1f} hours={hours[-1]:.2f} wall_s={wall:.0f}")
     finally:
         if args.keep_dir is None:

@@ -30,7 +30,6 @@ from bodyfusion.evaluation.figure_process import FigureProcess
 from bodyfusion.evaluation.consistency_findings import nees_findings, nis_findings
 from bodyfusion.evaluation.findings import large_error_findings, sensor_alone_findings, truth_separation_findings
 from bodyfusion.evaluation.metrics import PlanarTransform, score_systems, sensor_alone_score
-from bodyfusion.outputs.write import check_output_folder, write_outputs
 from bodyfusion.results.run_result import RunResult
 from bodyfusion.runner.assemble import build_systems, geodetic_origin, layout_context, load_truth, navigation_frame
 from bodyfusion.runner.truth import check_truth_overlap
@@ -209,6 +208,10 @@ def run(config_path: str | Path, overrides: list[str] | None = None, out_dir: st
     the command line), one line each; returns the result and the output folder. A folder already
     holding outputs is refused before the run (:func:`~bodyfusion.outputs.write.check_output_folder`;
     ``overwrite``: replace them)."""
+    # imported here: the writers bring Arrow (~30 MB resident), which a live run without files
+    # never needs
+    from bodyfusion.outputs.write import check_output_folder, write_outputs
+
     t0 = time.perf_counter()
     log.info("loading %s", config_path)
     loaded = load_layout(config_path, overrides)
