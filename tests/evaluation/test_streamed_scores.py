@@ -7,10 +7,13 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bodyfusion.base.types import TruthTrack
 from bodyfusion.core.epoch_state import EpochState, SystemState
 from bodyfusion.core.layout import load_layout
+from bodyfusion.evaluation import streamed_scores
 from bodyfusion.evaluation.streamed_scores import StreamedScores
 from bodyfusion.io import lines
 from bodyfusion.io.truth import TruthWindow
@@ -105,3 +108,28 @@ def test_a_bounded_run_reads_its_truth_as_it_goes_and_scores_as_with_the_whole_t
         assert window.epochs == whole[name].t.size and window.span == (whole[name].t[0], whole[name].t[-1])
         assert window.first > 0.6 * window.epochs  # the walk's first 60 % released as the scores passed
         assert result.truths[name].t[0] >= run.fusion.systems[name].stream.t[0] - 20.0  # the part kept
+
+
+@settings(max_examples=40, deadline=None)
+@given(steps=st.lists(st.floats(-0.05, 0.3), min_size=2, max_size=700), block=st.integers(1, 600),
+       seed=st.integers(0, 2**31 - 1))
+def test_states_scored_a_block_at_a_time_make_the_errors_of_one_at_a_time(steps, block, seed):
+    """Irregular state times (repeated, going back: those are passed over), a wandering track: the
+    errors made a block of ``block`` states at a time are those made state by state."""
+    rng = np.random.default_rng(seed)
+    t = 0.3 + np.cumsum(steps)
+    pos = np.cumsum(rng.normal(0.0, 0.1, (t.size, 3)), axis=0)
+    figures = []
+    for size in (1, block):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(streamed_scores, "BLOCK_STATES", size)
+            scorer = StreamedScores(_truth(chunk=150), "none", 3.0)
+            for tk, p in zip(t, pos):
+                scorer.write(EpochState(float(tk), {"foot": SystemState(float(tk), p, np.zeros(3))}, {}, 0.0))
+            figures.append(scorer.scores()["foot"])
+    one, blocks = figures
+    assert blocks["scored_epochs"] == one["scored_epochs"]
+    assert (blocks["t_start"], blocks["t_end"]) == (one["t_start"], one["t_end"])
+    for key in ("horizontal_error_m", "vertical_error_m"):
+        if one["scored_epochs"]:
+            assert blocks[key] == pytest.approx(one[key], rel=1e-12, abs=1e-15)

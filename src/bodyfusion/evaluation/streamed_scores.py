@@ -8,8 +8,9 @@ batch scoring's rule applied to the states' track: the errors at the truth epoch
 interpolated linearly to them between two consecutive states (errors at truth epochs outside the
 states' span are not made), after the evaluation alignment (``none``: identity; ``first_3m``: the
 planar fit of :func:`~bodyfusion.evaluation.metrics.fit_first_distance_alignment`, on the states
-of the alignment's first metres). It holds two float32 errors per truth epoch scored and the
-states of the first metres, nothing of the track.
+of the alignment's first metres). It holds each system's errors as sketches
+(:class:`~bodyfusion.evaluation.metrics.ErrorSketch`), the states not yet scored (a block of
+:data:`BLOCK_STATES`) and those of the first metres, nothing of the track.
 
 The interpolation between output epochs (0.1 s apart by default) is part of the figure: on a
 foot accurate to centimetres it dominates (the simulated foot + UWB walk: 0.0235 m streamed
@@ -34,40 +35,68 @@ FIT_WAIT_STATES = 6000
 fitted on those, as the batch fit takes a whole track that never travels that far."""
 
 
+BLOCK_STATES = 512
+"""States a track collects before it scores them together (51 s at the default 0.1 s): the
+errors are those of one state at a time, made by array operations instead of a call each."""
+
+
 class _Track:
     """One system's scoring: its truth (a window this track reads as ``reader``), the index of
-    the next truth epoch, the last state seen and the horizontal and vertical errors so far."""
+    the next truth epoch, the last state scored, the states not yet scored and the horizontal
+    and vertical errors so far."""
 
     def __init__(self, truth: TruthWindow, reader: str) -> None:
         self.truth, self.reader = truth, reader
         truth.place(reader, 0)  # until the first state: the alignment may fit on any of it
         self.next = 0
         self.last: tuple[float, np.ndarray] | None = None
+        self._t: list[float] = []
+        self._p: list[np.ndarray] = []
         self.horizontal, self.vertical = ErrorSketch(), ErrorSketch()
         self.span = [math.inf, -math.inf]
         self.travelled_m = 0.0
 
-    def take(self, t1: float, p1: np.ndarray, transform: PlanarTransform) -> None:
-        """The state (``t1`` s, ``p1`` ENU m): errors at the truth epochs since the last state."""
+    def take(self, t: float, p: np.ndarray, transform: PlanarTransform) -> None:
+        """The state (``t`` s, ``p`` ENU m), scored with the states after it
+        (:data:`BLOCK_STATES`; :meth:`score` scores those taken)."""
         if self.last is None:
-            self.next = self.truth.index(t1, side="left")  # epochs before the first state: unscored
+            self.next = self.truth.index(t, side="left")  # epochs before the first state: unscored
             self.truth.place(self.reader, self.next)
-            self.last = (t1, p1)
+            self.last = (t, p)
+            return
+        self._t.append(t)
+        self._p.append(p)
+        if len(self._t) >= BLOCK_STATES:
+            self.score(transform)
+
+    def score(self, transform: PlanarTransform) -> None:
+        """Errors at the truth epochs through the states taken: each epoch t_k between two
+        consecutive states t_0 < t_k ≤ t_1 (a state not after the one before it is passed over)
+        gets the estimate p_0 + (t_k − t_0)/(t_1 − t_0) (p_1 − p_0)."""
+        if self.last is None or not self._t:
             return
         t0, p0 = self.last
-        if not t1 > t0:
+        t = np.array([t0, *self._t])
+        p = np.array([p0, *self._p])
+        self._t, self._p = [], []
+        later = np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1]))
+        t, p = t[later], p[later]
+        self.last = (float(t[-1]), p[-1])
+        if t.size < 2:
             return
-        stop = self.truth.index(t1, side="right")
-        if stop > self.next:
-            tk, pos = self.truth.epochs_between(self.next, stop)
-            est = p0 + np.outer((tk - t0) / (t1 - t0), p1 - p0)
-            d = transform.apply(est) - pos
-            self.horizontal.add(np.hypot(d[:, 0], d[:, 1]))
-            self.vertical.add(d[:, 2])
-            self.span = [min(self.span[0], float(tk[0])), max(self.span[1], float(tk[-1]))]
-            self.next = stop
-            self.truth.place(self.reader, stop)
-        self.last = (t1, p1)
+        stop = self.truth.index(t[-1], side="right")
+        if stop <= self.next:
+            return
+        tk, pos = self.truth.epochs_between(self.next, stop)
+        j = np.maximum(np.searchsorted(t, tk, side="left"), 1)  # t[j − 1] < t_k ≤ t[j] (t_k = t[0]: j = 1)
+        before = p[j - 1]
+        est = before + ((tk - t[j - 1]) / (t[j] - t[j - 1]))[:, None] * (p[j] - before)
+        d = transform.apply(est) - pos
+        self.horizontal.add(np.hypot(d[:, 0], d[:, 1]))
+        self.vertical.add(d[:, 2])
+        self.span = [min(self.span[0], float(tk[0])), max(self.span[1], float(tk[-1]))]
+        self.next = stop
+        self.truth.place(self.reader, stop)
 
 
 class StreamedScores:
@@ -125,10 +154,13 @@ class StreamedScores:
             self.write(state)
 
     def close(self) -> None:
-        """A run that ended before its systems travelled the alignment's distance is fitted on what
-        it has."""
+        """Score the states taken; a run that ended before its systems travelled the alignment's
+        distance is fitted on what it has first."""
         if self.transform is None and self._first:
             self._fit()
+        if self.transform is not None:
+            for track in self.tracks.values():
+                track.score(self.transform)
 
     def scores(self) -> dict[str, dict]:
         """Per system: ``horizontal_error_m`` and, where the truth has heights, ``vertical_error_m``
