@@ -79,3 +79,29 @@ def test_the_runs_of_a_recordings_tail_are_repaired_as_in_the_whole_from_the_cac
         [(r.start, r.stop, r.excess_integral) for r in tail.runs]
     for r, s in zip(later, tail.runs):
         np.testing.assert_array_equal(r.values, s.values)
+
+
+@settings(max_examples=30, deadline=None)
+@given(sides=st.lists(st.booleans(), min_size=6, max_size=6), seed=st.integers(0, 10_000))
+def test_each_side_of_each_axis_is_judged_on_its_own(sides, seed):
+    """Swings on every axis, each of the six sides (axis, sign) clipped or not on its own: the
+    rails found are those of the sides clipped, at their limits, and every run is on one of them."""
+    rng = np.random.default_rng(seed)
+    pulses = [swings(peak, 20, rng)[:, 1] for peak in (8.0, 10.0, 12.0)]  # negative ones, a stride apart
+    x = np.column_stack([p - 0.7 * np.roll(p, 110) for p in pulses])  # and positive ones between them
+    limits = np.empty((3, 2))
+    for axis in range(3):
+        for side, sign in enumerate((-1.0, 1.0)):
+            extreme = float((sign * x[:, axis]).max())
+            limits[axis, side] = 0.8 * extreme if sides[2 * axis + side] else np.inf
+    clipped = np.clip(x, -limits[:, 0], limits[:, 1])
+    found = find_clipping(clipped, 1.0 / RATE)
+    for axis in range(3):
+        for side in range(2):
+            if sides[2 * axis + side]:
+                assert found.rail[axis, side] == pytest.approx(limits[axis, side])
+            else:
+                assert np.isnan(found.rail[axis, side])
+    for run in found.runs:
+        side = 1 if clipped[run.start, run.axis] > 0 else 0
+        assert sides[2 * run.axis + side]

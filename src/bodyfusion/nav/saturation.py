@@ -143,16 +143,25 @@ def find_clipping(signal: np.ndarray, dt: float) -> Clipping:
     repair (module docstring)."""
     x = np.asarray(signal, dtype=float)
     found = Clipping()
+    if not x.size:
+        return found
+    # every side of every axis at once, axis by row (contiguous): its level, its candidate samples
+    # and the runs they make; a side's own pass below only where they could make a rail
+    # (−x ≥ L ⇔ x ≤ −L, exactly)
+    xt = np.ascontiguousarray(x.T)
+    levels = np.concatenate([-xt.min(axis=1), xt.max(axis=1)])  # row 3·side + axis
+    candidates = np.concatenate([xt <= -(levels[:3] * (1.0 - RAIL_TOLERANCE))[:, None],
+                                 xt >= (levels[3:] * (1.0 - RAIL_TOLERANCE))[:, None]])
+    run_counts = candidates[:, 0] + np.count_nonzero(candidates[:, 1:] & ~candidates[:, :-1], axis=1)
     for axis in range(3):
         for side, sign in ((0, -1.0), (1, 1.0)):
+            row = 3 * side + axis
+            level = float(levels[row])
+            if not level > 0.0 or run_counts[row] < MIN_CLIPPED_RUNS:  # too few runs to make a rail
+                continue
             col = sign * x[:, axis]
-            level = float(col.max()) if col.size else 0.0
-            if not level > 0.0:
-                continue
-            candidate = col >= level * (1.0 - RAIL_TOLERANCE)
+            candidate = candidates[row]
             starts, stops = _runs(candidate)
-            if starts.size < MIN_CLIPPED_RUNS:  # too few runs to make a rail
-                continue
             flanks = _Flanks(col, starts, stops, candidate)
             clipped = []
             for k, (a, b) in enumerate(zip(starts, stops)):
