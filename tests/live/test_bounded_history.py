@@ -100,3 +100,16 @@ def test_a_section_timed_by_row_count_cannot_keep_a_bounded_history():
 def test_a_history_beyond_sense_is_refused_naming_it(value):
     with pytest.raises(ConfigError, match=r"keep_s \(fusion live --keep\)"):
         LiveRun(load_layout(VICON), keep_s=value)
+
+
+def test_the_fusers_records_keep_the_part_held(whole, bounded):
+    """What the fuser keeps per epoch is forgotten with the samples: the heading ties' measurements
+    (their summary then covers the part kept) and each system's covariance-check times."""
+    run, _, _, _ = bounded
+    forgot = run._forgot_at
+    ties = run.fusion.fuser.ties
+    assert ties and all(m[0] >= forgot for tie in ties for m in tie.log)
+    assert all(len(tie.log) < len(w.log) for tie, w in zip(ties, whole[0].fusion.fuser.ties))
+    held = [len(m._stride_t) for m in run.fusion.monitors.values()]
+    every = [len(m._stride_t) for m in whole[0].fusion.monitors.values()]
+    assert max(held) < min(every) / 2  # a check time a second: 120 s whole, the part kept

@@ -312,9 +312,11 @@ class Fuser:
         return self.schedule.horizon
 
     def forget_before(self, t: float) -> None:
-        """Drop what the fuser keeps of the epochs before ``t`` (s): the constraint log's rows and
-        the feet's sync times the limits have passed (a live run that keeps a bounded history;
-        the report's counts stay whole)."""
+        """Drop what the fuser keeps of the epochs before ``t`` (s): the constraint log's rows, the
+        heading ties' measurements and the feet's sync times the limits have passed (a live run
+        that keeps a bounded history; the report's counts stay whole)."""
+        for tie in self.ties:
+            tie.forget_before(t)
         if self.report.constraint_log is not None:
             self.report.constraint_log.forget_before(t)
         if self.report.limits is not None:

@@ -221,6 +221,11 @@ class HeadingTie:
         """After a correction: the stretch's last points are these positions."""
         self.points[-1] = (np.array(p_ref[:2], dtype=float), np.array(p_sys[:2], dtype=float))
 
+    def forget_before(self, t: float) -> None:
+        """Drop the measurements before ``t`` (s) from :attr:`log` (a live run that keeps a
+        bounded history: its summary then covers the part kept)."""
+        self.log = [m for m in self.log if m[0] >= t]
+
     def summary(self) -> dict:
         """metrics.json figures: measurements, accepted, mean NIS, the largest and RMS |z| (degrees)."""
         if not self.log:

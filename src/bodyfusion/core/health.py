@@ -77,12 +77,11 @@ class CovarianceMonitor:
         if not math.isfinite(decided):
             self._t_end = self.monitored.t_end
 
-    def forget_before(self, t: float) -> dict[str, int]:
-        """The system's ``forget_before(t)`` (:class:`~bodyfusion.core.capabilities.Streaming`),
-        and the stride times passed dropped."""
+    def forget_passed(self) -> None:
+        """Drop the stride times the system has passed (a live run that keeps a bounded history,
+        as its system forgets: :meth:`~bodyfusion.core.capabilities.Streaming.forget_before`)."""
         del self._stride_t[:self._next]
         self._next = 0
-        return self.monitored.forget_before(t)
 
     def advance(self, t: float) -> None:
         """The system's ``advance(t)``, split and checked at the stride times up to t, and checked

@@ -456,6 +456,8 @@ class LiveRun:
             for section_name, rows in system.forget_before(self._forgot_at).items():
                 self.buffers[self.stream_name(name, None if section_name == system.data_section else section_name)
                              ].forget(rows)
+        for monitor in self.fusion.monitors.values():
+            monitor.forget_passed()
         self.fusion.fuser.forget_before(self._forgot_at)
 
     def close(self) -> RunResult:

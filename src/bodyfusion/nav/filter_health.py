@@ -184,6 +184,10 @@ class NisRecord:
     def __len__(self) -> int:
         return len(self._rows)
 
+    def forget_before(self, t: float) -> None:
+        """Drop the updates before ``t`` (s) (they are in time order)."""
+        self._rows.drop_first(int(np.searchsorted(self._rows.view()[:, 0], t)))
+
     def tally(self) -> NisTally:
         """Count, NIS total and the updates beyond the gate."""
         rows = self._rows.view()

@@ -69,6 +69,8 @@ def test_a_bounded_history_with_the_phone_emits_the_same_states(walk, live):
     hand = result.systems["hand_phone"]
     assert hand.forgotten > 1000 and run.buffers["hand_phone.gnss"].forgotten > 10
     assert "live_window" in {f.kind for f in hand.findings()}
+    nis_t = np.concatenate([r.columns()["t"] for r in run.fusion.built["hand_phone"].nis_records.values()])
+    assert nis_t.size and nis_t.min() >= hand.t[0]  # its updates' NIS forgotten with its samples
 
 
 def test_fixes_that_arrive_after_their_time_was_decided_are_counted_and_said(walk):

@@ -229,6 +229,8 @@ class StreamingHandPdr(Streaming):
         rows = int(np.searchsorted(self._hist_x.view()[:, 0], self.t[0]))
         self._hist_x.drop_first(rows)
         self._hist_P.drop_first(rows)
+        for record in self.nis_records.values():
+            record.forget_before(float(self.t[0]))
         self.forgotten += d
         return {"imu": d, **({"gnss": fixes} if fixes else {})}
 
